@@ -1,0 +1,20 @@
+//! Clips in and out, preprocessing, the dataset store and burn batches (SPEC §2).
+//!
+//! Formats: DyMesh `.bin` (restricted unpickler, never executes), OBJ sequences, glTF/GLB.
+//! Preprocessing: welding, frame-0 normalisation (D1)–(D3), vertex filter, windows, FPS, padding.
+
+pub mod clip;
+pub mod error;
+pub mod formats;
+pub mod preprocess;
+pub mod fps;
+pub mod synth;
+pub mod store;
+pub mod inspect;
+pub mod render;
+pub mod batch;
+pub mod keyframes;
+pub mod rng;
+
+pub use clip::Clip;
+pub use error::{DataError, Result};

@@ -1,0 +1,12 @@
+//! Networks of CompletionAny4D (SPEC §3–§5): frame-wise mesh VAE, keyframe-conditioned rectified-flow MMDiT,
+//! the sequence-wise DyMeshVAE ablation, text encoders. No file IO except weight loading.
+
+pub mod attention;
+pub mod point_embed;
+pub mod frame_vae;
+pub mod dymesh_vae;
+pub mod latent_stats;
+pub mod mmdit;
+pub mod rectified_flow;
+pub mod text;
+pub mod summary;
