@@ -1,1 +1,322 @@
-//! TODO(owner): see module list in lib.rs.
+//! Summaries of a dataset store (its `index.parquet`, SPEC §2.2) or of one clip file (SPEC §2.1), as a text table
+//! or JSON.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::clip::object_uid;
+use crate::error::{DataError, Result};
+use crate::formats::{self, Format};
+use crate::store::{CLIPS_FILE, IndexRow, Split, Status, read_index};
+
+/// Lower edge of the vertex histogram (SPEC §2.2 filter).
+pub const HIST_MIN: u32 = 512;
+/// Upper edge of the vertex histogram (SPEC §2.2 filter, inclusive).
+pub const HIST_MAX: u32 = 4096;
+/// Bins between [`HIST_MIN`] and [`HIST_MAX`].
+pub const HIST_BINS: u32 = 8;
+
+/// One bin of the vertex-count histogram: `lo ≤ N_v < hi` (the last bin includes `hi`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Bin {
+    pub lo: u32,
+    pub hi: u32,
+    pub count: usize,
+}
+
+/// Counts and distributions of a store.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Summary {
+    /// The store folder.
+    pub dir: String,
+    /// Index rows: stored clips plus rejected files.
+    pub clips: usize,
+    /// Stored clips (status "ok").
+    pub ok: usize,
+    /// Rejected source files.
+    pub rejected: usize,
+    /// Stored clips per split.
+    pub train: usize,
+    pub val: usize,
+    /// Distinct object uids among the stored clips.
+    pub objects: usize,
+    /// Stored clips whose caption is empty (unconditional).
+    pub empty_captions: usize,
+    /// Vertex counts of stored clips in [`HIST_BINS`] bins over [`HIST_MIN`]..=[`HIST_MAX`].
+    pub vertex_histogram: Vec<Bin>,
+    /// Stored clips below [`HIST_MIN`] / above [`HIST_MAX`] vertices.
+    pub vertices_below: usize,
+    pub vertices_above: usize,
+    /// Frames T → number of stored clips.
+    pub frames: BTreeMap<u32, usize>,
+    /// Source format → number of index rows.
+    pub formats: BTreeMap<String, usize>,
+    /// `<shape>-<motion>` → stored clips, for ids of the form `synth-<shape>-<motion>-<seed>-<index>…`.
+    pub synthetic_families: BTreeMap<String, usize>,
+    /// Field of the reject reason (the text before its first ':') → rejected files.
+    pub reject_reasons: BTreeMap<String, usize>,
+    /// Every rejected file with its full reason.
+    pub rejected_files: Vec<(String, String)>,
+}
+
+/// Facts about one clip file.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FileSummary {
+    pub path: String,
+    pub format: String,
+    pub id: String,
+    pub object: String,
+    pub frames: usize,
+    pub vertices: usize,
+    pub faces: usize,
+    pub caption: String,
+    /// Bounding box over all frames.
+    pub bbox_min: [f32; 3],
+    pub bbox_max: [f32; 3],
+}
+
+/// What [`inspect`] found.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Inspection {
+    Store(Summary),
+    File(FileSummary),
+}
+
+impl Inspection {
+    /// A human-readable table.
+    pub fn to_table(&self) -> String {
+        match self {
+            Self::Store(s) => s.to_table(),
+            Self::File(f) => f.to_table(),
+        }
+    }
+
+    /// Pretty JSON.
+    pub fn to_json(&self) -> String {
+        // Serialising plain structs of strings, numbers and maps with string keys cannot fail.
+        serde_json::to_string_pretty(self).expect("summary serialises")
+    }
+}
+
+/// Inspect a store folder (one holding `clips.bin`) or a clip file / OBJ-sequence folder.
+pub fn inspect(path: &Path) -> Result<Inspection> {
+    if path.is_dir() && path.join(CLIPS_FILE).exists() {
+        return summarize(path).map(Inspection::Store);
+    }
+    if !path.exists() {
+        return Err(DataError::new(path, "file", "not found"));
+    }
+    summarize_file(path).map(Inspection::File)
+}
+
+/// Summarise the store in `dir` from its index.
+pub fn summarize(dir: &Path) -> Result<Summary> {
+    Ok(summarize_rows(dir, &read_index(dir)?))
+}
+
+/// Summarise index rows (the pure part of [`summarize`]).
+pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
+    let width = (HIST_MAX - HIST_MIN) / HIST_BINS;
+    let mut vertex_histogram: Vec<Bin> = (0..HIST_BINS)
+        .map(|b| Bin { lo: HIST_MIN + b * width, hi: if b + 1 == HIST_BINS { HIST_MAX } else { HIST_MIN + (b + 1) * width }, count: 0 })
+        .collect();
+    let mut s = Summary {
+        dir: dir.display().to_string(),
+        clips: rows.len(),
+        ok: 0,
+        rejected: 0,
+        train: 0,
+        val: 0,
+        objects: 0,
+        empty_captions: 0,
+        vertex_histogram: Vec::new(),
+        vertices_below: 0,
+        vertices_above: 0,
+        frames: BTreeMap::new(),
+        formats: BTreeMap::new(),
+        synthetic_families: BTreeMap::new(),
+        reject_reasons: BTreeMap::new(),
+        rejected_files: Vec::new(),
+    };
+    let mut objects = std::collections::HashSet::new();
+    for r in rows {
+        *s.formats.entry(r.format.clone()).or_default() += 1;
+        match r.status {
+            Status::Rejected => {
+                s.rejected += 1;
+                let field = r.reason.split_once(':').map_or(r.reason.as_str(), |(f, _)| f).trim().to_owned();
+                *s.reject_reasons.entry(field).or_default() += 1;
+                s.rejected_files.push((r.source.clone(), r.reason.clone()));
+            }
+            Status::Ok => {
+                s.ok += 1;
+                match r.split {
+                    Some(Split::Train) => s.train += 1,
+                    Some(Split::Val) => s.val += 1,
+                    None => {}
+                }
+                objects.insert(r.object.as_str());
+                s.empty_captions += usize::from(r.caption.is_empty());
+                if let Some(t) = r.frames {
+                    *s.frames.entry(t).or_default() += 1;
+                }
+                if let Some(n) = r.vertices {
+                    if n < HIST_MIN {
+                        s.vertices_below += 1;
+                    } else if n > HIST_MAX {
+                        s.vertices_above += 1;
+                    } else {
+                        vertex_histogram[((n - HIST_MIN) / width).min(HIST_BINS - 1) as usize].count += 1;
+                    }
+                }
+                if let Some(family) = synthetic_family(&r.id) {
+                    *s.synthetic_families.entry(family.to_owned()).or_default() += 1;
+                }
+            }
+        }
+    }
+    s.objects = objects.len();
+    s.vertex_histogram = vertex_histogram;
+    s
+}
+
+/// `<shape>-<motion>` of a synthetic id `synth-<shape>-<motion>-<seed>-<index>[_offset…]`.
+pub fn synthetic_family(id: &str) -> Option<&str> {
+    let rest = object_uid(id).strip_prefix("synth-")?;
+    let mut parts = rest.rsplitn(3, '-');
+    let (_index, _seed, family) = (parts.next()?, parts.next()?, parts.next()?);
+    Some(family)
+}
+
+/// Read one clip file (or OBJ-sequence folder) and describe it.
+pub fn summarize_file(path: &Path) -> Result<FileSummary> {
+    let format = Format::from_path(path)?;
+    let clip = formats::read_clip(path)?;
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in &clip.vertices {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    Ok(FileSummary {
+        path: path.display().to_string(),
+        format: format!("{format:?}"),
+        object: clip.object_uid().to_owned(),
+        id: clip.id,
+        frames: clip.frames,
+        vertices: clip.n_vertices,
+        faces: clip.faces.len(),
+        caption: clip.caption,
+        bbox_min: lo,
+        bbox_max: hi,
+    })
+}
+
+fn map_line(out: &mut String, label: &str, m: &BTreeMap<impl std::fmt::Display, usize>) {
+    if m.is_empty() {
+        return;
+    }
+    let items: Vec<String> = m.iter().map(|(k, v)| format!("{k}: {v}")).collect();
+    let _ = writeln!(out, "{label:<18} {}", items.join(", "));
+}
+
+impl Summary {
+    /// A human-readable table.
+    pub fn to_table(&self) -> String {
+        let mut o = String::new();
+        // Writing into a String cannot fail.
+        let _ = writeln!(o, "store              {}", self.dir);
+        let _ = writeln!(o, "index rows         {} ({} ok, {} rejected)", self.clips, self.ok, self.rejected);
+        let _ = writeln!(o, "split              {} train, {} val ({} objects)", self.train, self.val, self.objects);
+        let _ = writeln!(o, "empty captions     {}", self.empty_captions);
+        map_line(&mut o, "frames", &self.frames);
+        map_line(&mut o, "formats", &self.formats);
+        let _ = writeln!(o, "vertices           below {}: {}, above {}: {}", HIST_MIN, self.vertices_below, HIST_MAX, self.vertices_above);
+        let max = self.vertex_histogram.iter().map(|b| b.count).max().unwrap_or(0).max(1);
+        for b in &self.vertex_histogram {
+            let bar = "#".repeat(b.count * 40 / max);
+            let _ = writeln!(o, "  {:>4}–{:<4} {:>8} {bar}", b.lo, b.hi, b.count);
+        }
+        map_line(&mut o, "synthetic", &self.synthetic_families);
+        map_line(&mut o, "reject reasons", &self.reject_reasons);
+        for (source, reason) in &self.rejected_files {
+            let _ = writeln!(o, "  rejected {source}: {reason}");
+        }
+        o
+    }
+}
+
+impl FileSummary {
+    /// A human-readable table.
+    pub fn to_table(&self) -> String {
+        let mut o = String::new();
+        let _ = writeln!(o, "file      {} ({})", self.path, self.format);
+        let _ = writeln!(o, "id        {} (object {})", self.id, self.object);
+        let _ = writeln!(o, "frames    {}", self.frames);
+        let _ = writeln!(o, "vertices  {}", self.vertices);
+        let _ = writeln!(o, "faces     {}", self.faces);
+        let _ = writeln!(o, "caption   {:?}", self.caption);
+        let _ = writeln!(o, "bbox      {:?} – {:?}", self.bbox_min, self.bbox_max);
+        o
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(id: &str, vertices: u32, split: Option<Split>, status: Status, reason: &str) -> IndexRow {
+        IndexRow {
+            id: id.into(),
+            source: format!("/data/{id}.bin"),
+            format: "bin".into(),
+            frames: (status == Status::Ok).then_some(16),
+            vertices: (status == Status::Ok).then_some(vertices),
+            faces: (status == Status::Ok).then_some(10),
+            caption: if id.ends_with('0') { String::new() } else { "a cat".into() },
+            split,
+            status,
+            reason: reason.into(),
+            object: object_uid(id).into(),
+        }
+    }
+
+    #[test]
+    fn counts_histogram_and_families() {
+        let rows = vec![
+            row("synth-sphere-wave-1-0_offset0_0-15", 512, Some(Split::Train), Status::Ok, ""),
+            row("synth-sphere-wave-1-1_offset0_0-15", 959, Some(Split::Train), Status::Ok, ""),
+            row("synth-torus-twist-1-2_offset0_0-15", 4096, Some(Split::Val), Status::Ok, ""),
+            row("big", 5000, Some(Split::Train), Status::Ok, ""),
+            row("bad", 0, None, Status::Rejected, "vertices: has 100 vertices"),
+        ];
+        let s = summarize_rows(Path::new("d"), &rows);
+        assert_eq!((s.clips, s.ok, s.rejected, s.train, s.val), (5, 4, 1, 3, 1));
+        assert_eq!(s.empty_captions, 1);
+        assert_eq!(s.vertex_histogram.len(), 8);
+        assert_eq!(s.vertex_histogram[0], Bin { lo: 512, hi: 960, count: 2 });
+        assert_eq!(s.vertex_histogram[7].count, 1);
+        assert_eq!(s.vertices_above, 1);
+        assert_eq!(s.synthetic_families.get("sphere-wave"), Some(&2));
+        assert_eq!(s.synthetic_families.get("torus-twist"), Some(&1));
+        assert_eq!(s.reject_reasons.get("vertices"), Some(&1));
+        let json: serde_json::Value = serde_json::from_str(&Inspection::Store(s.clone()).to_json()).unwrap();
+        for key in ["clips", "ok", "rejected", "train", "val"] {
+            assert!(json[key].is_u64(), "missing {key} in {json}");
+        }
+        assert!(s.to_table().contains("rejected /data/bad.bin: vertices"), "{}", s.to_table());
+    }
+
+    #[test]
+    fn synthetic_family_needs_the_synth_form() {
+        assert_eq!(synthetic_family("synth-a-b-7-3_offset0_0-15"), Some("a-b"));
+        assert_eq!(synthetic_family("cat_offset0_0-15"), None);
+        assert_eq!(synthetic_family("synth-x"), None);
+    }
+}

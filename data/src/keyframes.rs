@@ -1,1 +1,224 @@
-//! TODO(owner): see module list in lib.rs.
+//! Keyframe samplers: which frames of a T-frame window are observed (SPEC §1.3 masks, §4.5 training, §6.1 eval).
+//!
+//! **Mask polarity (stated once, tested once): 1 / `true` = frame f is an observed keyframe whose clean latent is
+//! given; 0 / `false` = frame f is generated.** This is the `m` of SPEC §1.3; the RF input is
+//! `m ⊙ clean + (1 − m) ⊙ state` (R3).
+//!
+//! Every sampler is deterministic given its generator, and [`keyframe_mask_batch`] derives its generator from a
+//! seed only, so a manifest can be rebuilt from `(strategy, B, T, seed)`.
+
+use rand::Rng;
+use rand::seq::SliceRandom;
+
+use crate::error::{DataError, Result};
+use crate::rng::{DataRng, rng};
+
+/// Stream label of the keyframe generator (see [`crate::rng::rng`]), so keyframe draws never share a stream with
+/// other users of the same seed.
+pub const KEYFRAME_STREAM: u64 = 0x6b66;
+
+/// How the keyframe set 𝒦 ⊂ {0..T−1} is chosen.
+#[derive(Debug, Clone, PartialEq)]
+pub enum KeyframeStrategy {
+    /// RF training (SPEC §4.5): k ~ Unif{0..=k_max}, then a uniform k-subset of {0..T−1} without replacement;
+    /// first and last frames are not forced. The paper uses k_max = 5; k = 0 is the keyframe-free case.
+    Random { k_max: usize },
+    /// Evaluation (SPEC §6.1): {0, T−1} ∪ K_x distinct frames drawn from {1..T−2}. For one generator state the
+    /// sets are nested across K_x: the set for K_x is a subset of the set for K_x + 1.
+    FirstLastPlus(usize),
+    /// Every r-th frame: f ∈ 𝒦 iff f mod r = 0 (r ≥ 1). The last frame is included only when r divides T − 1.
+    Uniform(usize),
+    /// A fixed set of frame indices (each < T; duplicates allowed and collapse).
+    Fixed(Vec<usize>),
+    /// Each frame independently observed with probability p ∈ [0, 1].
+    Bernoulli(f32),
+}
+
+impl KeyframeStrategy {
+    /// The training default of SPEC §4.5: `Random { k_max: 5 }`.
+    pub const PAPER_TRAINING: KeyframeStrategy = KeyframeStrategy::Random { k_max: 5 };
+
+    /// Checks that the strategy can be sampled for windows of `t` frames. Call it when a config is loaded:
+    /// [`sample_keyframes`] panics on a strategy that fails this check.
+    pub fn check(&self, t: usize) -> Result<()> {
+        let err = |reason: String| Err(DataError::new("keyframes", format!("{self:?}"), reason));
+        if t == 0 {
+            return err("a window needs at least one frame".into());
+        }
+        match self {
+            Self::Random { .. } => Ok(()),
+            Self::FirstLastPlus(kx) => {
+                if t < 2 {
+                    return err(format!("first and last frames need T ≥ 2, got T = {t}"));
+                }
+                if *kx > t - 2 {
+                    return err(format!("{kx} extra keyframes do not fit in the {} inner frames of T = {t}", t - 2));
+                }
+                Ok(())
+            }
+            Self::Uniform(0) => err("the stride r must be at least 1".into()),
+            Self::Uniform(_) => Ok(()),
+            Self::Fixed(frames) => match frames.iter().find(|&&f| f >= t) {
+                Some(f) => err(format!("frame {f} is outside 0..{t}")),
+                None => Ok(()),
+            },
+            Self::Bernoulli(p) if !(0.0..=1.0).contains(p) => err(format!("probability {p} is outside [0, 1]")),
+            Self::Bernoulli(_) => Ok(()),
+        }
+    }
+}
+
+/// Draw the keyframe mask of one window of `t` frames; `true` = observed keyframe.
+///
+/// # Shapes
+/// Output `[T]`.
+///
+/// # Panics
+/// If `strategy.check(t)` fails (validate configs with [`KeyframeStrategy::check`] first).
+pub fn sample_keyframes(strategy: &KeyframeStrategy, t: usize, rng: &mut impl Rng) -> Vec<bool> {
+    if let Err(e) = strategy.check(t) {
+        panic!("invalid keyframe strategy: {e}");
+    }
+    let mut mask = vec![false; t];
+    match strategy {
+        KeyframeStrategy::Random { k_max } => {
+            // SPEC §4.5 step 1: k ~ Unif{0..=k_max} (capped at T), step 2: uniform subset without replacement.
+            let k = rng.random_range(0..=*k_max).min(t);
+            let mut frames: Vec<usize> = (0..t).collect();
+            let (chosen, _) = frames.partial_shuffle(rng, k);
+            for &f in chosen.iter() {
+                mask[f] = true;
+            }
+        }
+        KeyframeStrategy::FirstLastPlus(kx) => {
+            mask[0] = true;
+            mask[t - 1] = true;
+            // A full shuffle of the inner frames consumes the same draws for every K_x, so taking a prefix of it
+            // makes the sets nested across K_x (SPEC §6.1).
+            let mut inner: Vec<usize> = (1..t - 1).collect();
+            inner.shuffle(rng);
+            for &f in &inner[..*kx] {
+                mask[f] = true;
+            }
+        }
+        KeyframeStrategy::Uniform(r) => {
+            for f in (0..t).step_by(*r) {
+                mask[f] = true;
+            }
+        }
+        KeyframeStrategy::Fixed(frames) => {
+            for &f in frames {
+                mask[f] = true;
+            }
+        }
+        KeyframeStrategy::Bernoulli(p) => {
+            for m in mask.iter_mut() {
+                *m = rng.random_bool(f64::from(*p));
+            }
+        }
+    }
+    mask
+}
+
+/// Masks for a batch of `b` windows of `t` frames, drawn in order from the generator `rng(seed, KEYFRAME_STREAM)`;
+/// 1.0 = observed keyframe, 0.0 = generated. Row i is the mask of sample i.
+///
+/// # Shapes
+/// Output `[B * T]`, row-major `[B, T]`.
+///
+/// # Panics
+/// As [`sample_keyframes`].
+pub fn keyframe_mask_batch(strategy: &KeyframeStrategy, b: usize, t: usize, seed: u64) -> Vec<f32> {
+    let mut r: DataRng = rng(seed, KEYFRAME_STREAM);
+    (0..b)
+        .flat_map(|_| sample_keyframes(strategy, t, &mut r))
+        .map(|m| if m { 1.0 } else { 0.0 })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn count(mask: &[bool]) -> usize {
+        mask.iter().filter(|&&m| m).count()
+    }
+
+    #[test]
+    fn random_draws_k_uniformly_in_0_to_k_max_without_forcing_ends() {
+        let mut r = rng(666, 1);
+        let mut hist = [0usize; 6];
+        let mut ends_free = false;
+        for _ in 0..6000 {
+            let m = sample_keyframes(&KeyframeStrategy::PAPER_TRAINING, 16, &mut r);
+            let k = count(&m);
+            assert!(k <= 5, "k = {k} > 5");
+            hist[k] += 1;
+            ends_free |= k > 0 && !m[0] && !m[15];
+        }
+        // Each k has probability 1/6 = 1000 of 6000 draws; 4.5 standard deviations is about 130.
+        for (k, &n) in hist.iter().enumerate() {
+            assert!((870..=1130).contains(&n), "k = {k} drawn {n} times of 6000: {hist:?}");
+        }
+        assert!(ends_free, "first/last must not be forced in Random");
+    }
+
+    #[test]
+    fn random_subsets_cover_every_frame() {
+        let mut r = rng(3, 1);
+        let mut seen = [0usize; 16];
+        for _ in 0..2000 {
+            for (f, m) in sample_keyframes(&KeyframeStrategy::Random { k_max: 5 }, 16, &mut r).iter().enumerate() {
+                seen[f] += usize::from(*m);
+            }
+        }
+        // Expected 2000 · 2.5 / 16 ≈ 312 per frame.
+        assert!(seen.iter().all(|&n| (200..=430).contains(&n)), "{seen:?}");
+    }
+
+    #[test]
+    fn first_last_plus_always_has_ends_and_is_nested() {
+        for seed in 0..50 {
+            let mut prev: Option<Vec<bool>> = None;
+            for kx in 0..=3 {
+                let m = sample_keyframes(&KeyframeStrategy::FirstLastPlus(kx), 16, &mut rng(seed, 9));
+                assert!(m[0] && m[15], "ends missing for seed {seed}, kx {kx}");
+                assert_eq!(count(&m), kx + 2);
+                if let Some(p) = &prev {
+                    assert!(p.iter().zip(&m).all(|(a, b)| !a || *b), "not nested at seed {seed}, kx {kx}");
+                }
+                prev = Some(m);
+            }
+        }
+    }
+
+    #[test]
+    fn mask_polarity_is_one_for_observed_frames() {
+        let m = keyframe_mask_batch(&KeyframeStrategy::Fixed(vec![0, 7]), 2, 8, 1);
+        assert_eq!(m, vec![1., 0., 0., 0., 0., 0., 0., 1., 1., 0., 0., 0., 0., 0., 0., 1.]);
+        let u = sample_keyframes(&KeyframeStrategy::Uniform(3), 8, &mut rng(0, 0));
+        assert_eq!(u, vec![true, false, false, true, false, false, true, false]);
+    }
+
+    #[test]
+    fn batches_are_deterministic_by_seed() {
+        let s = KeyframeStrategy::Random { k_max: 5 };
+        let a = keyframe_mask_batch(&s, 32, 16, 42);
+        assert_eq!(a, keyframe_mask_batch(&s, 32, 16, 42));
+        assert_ne!(a, keyframe_mask_batch(&s, 32, 16, 43));
+        assert_eq!(a.len(), 32 * 16);
+        let b = keyframe_mask_batch(&KeyframeStrategy::Bernoulli(0.5), 64, 16, 7);
+        let frac = b.iter().sum::<f32>() / b.len() as f32;
+        assert!((0.4..0.6).contains(&frac), "{frac}");
+    }
+
+    #[test]
+    fn invalid_strategies_are_reported() {
+        assert!(KeyframeStrategy::FirstLastPlus(15).check(16).is_err());
+        assert!(KeyframeStrategy::FirstLastPlus(14).check(16).is_ok());
+        assert!(KeyframeStrategy::Uniform(0).check(16).is_err());
+        let e = KeyframeStrategy::Fixed(vec![16]).check(16).unwrap_err();
+        assert!(e.reason.contains("frame 16"), "{e}");
+        assert!(KeyframeStrategy::Bernoulli(1.5).check(16).is_err());
+    }
+}

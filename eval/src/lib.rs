@@ -2,3 +2,10 @@
 
 pub mod metrics;
 pub mod baselines;
+pub mod protocol;
+pub mod rollout;
+pub mod tables;
+pub mod plot;
+pub mod methods;
+pub mod render;
+pub mod run;

@@ -1,1 +1,327 @@
-//! TODO(owner): see lib.rs.
+//! Rectified flow with keyframes (SPEC §1.4, §4.2, §4.6, §5.1, §5.4): interpolant (R1), target (R2), loss (R5),
+//! ODE sampling (R6) with CFG, the sampling-time replacement baseline (R7)–(R8) and impute-until-τ* (R9).
+//!
+//! **Convention, stated once:** τ = 0 is pure Gaussian noise, τ = 1 is data. X_τ = (1 − τ) ε + τ X₁, the target
+//! velocity is X₁ − ε, and sampling integrates from τ = 0 to τ = 1. This is the reverse of SD3's σ and of DDPM step
+//! indices. Keyframe masks are "observed = 1". All latent tensors are token-major `[B, P, T, C]` (the layout of the
+//! network output; see `mmdit::build_input`).
+
+use burn::prelude::*;
+use burn::tensor::Distribution;
+use serde::{Deserialize, Serialize};
+
+use crate::mmdit::{KfMode, Mmdit, assemble_input, build_input, replace_keyframes, split_output};
+
+// ---------------------------------------------------------------------------------------------------------------
+// Training: interpolant, target, τ sampling, loss
+
+/// (R1) X_τ = (1 − τ) ε + τ X₁, per sample τ.
+///
+/// # Shapes
+/// - eps, x1: `[B, P, T, C]`; tau: `[B]`; output `[B, P, T, C]`
+pub fn interpolant(eps: Tensor<4>, x1: Tensor<4>, tau: Tensor<1>) -> Tensor<4> {
+    let [b] = tau.dims();
+    let tau = tau.reshape([b, 1, 1, 1]);
+    // (R1)
+    eps * tau.clone().neg().add_scalar(1.0) + x1 * tau
+}
+
+/// (R2) target velocity v* = X₁ − ε (constant along the straight path).
+///
+/// # Shapes
+/// - eps, x1: `[B, P, T, C]`; output `[B, P, T, C]`
+pub fn target_velocity(eps: Tensor<4>, x1: Tensor<4>) -> Tensor<4> {
+    x1 - eps // (R2)
+}
+
+/// Distribution of the training time τ (SPEC §4.5 step 4, §8 X7).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TauSampler {
+    /// τ ~ U(0, 1) (paper).
+    Uniform,
+    /// τ = 1 − 1/(tan(πu/2) + 1), u ~ U(0, 1) (SD3 "cosmap", AAM code).
+    Cosmap,
+}
+
+impl TauSampler {
+    /// Maps uniform draws u ∈ [0, 1) to τ.
+    ///
+    /// # Shapes
+    /// - u, output: `[B]`
+    pub fn map(self, u: Tensor<1>) -> Tensor<1> {
+        match self {
+            TauSampler::Uniform => u,
+            TauSampler::Cosmap => {
+                let half_pi_u = u.mul_scalar(std::f64::consts::FRAC_PI_2);
+                let (s, c) = (half_pi_u.clone().sin(), half_pi_u.cos());
+                s.clone() / (s + c) // = 1 − 1/(tan(πu/2) + 1), without the pole of tan at u = 1
+            }
+        }
+    }
+
+    /// Draws B times from the device's random stream (seed it with `device.seed`).
+    pub fn sample(self, batch: usize, device: &Device) -> Tensor<1> {
+        self.map(Tensor::random([batch], Distribution::Uniform(0.0, 1.0), device))
+    }
+}
+
+/// Which slots enter the loss (SPEC §4.2, `rf.loss_on_keyframes`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum KeyframeLoss {
+    /// All T slots, keyframes included (paper, P-Eq. 10 unchanged).
+    All,
+    /// Only m = 0 slots (CondMDI variant).
+    NonKeyframesOnly,
+}
+
+/// (R5) L_RF = mean of (v_θ − v*)² over B, P, T, C — or over the m = 0 slots only.
+///
+/// # Shapes
+/// - v_pred, v_target: `[B, P, T, C]`; mask: `[B, T]` (1 = keyframe); output `[1]`
+pub fn rf_loss(v_pred: Tensor<4>, v_target: Tensor<4>, mask: Tensor<2>, keyframe_loss: KeyframeLoss) -> Tensor<1> {
+    let se = (v_pred - v_target).square();
+    match keyframe_loss {
+        KeyframeLoss::All => se.mean(), // (R5)
+        KeyframeLoss::NonKeyframesOnly => {
+            let [b, p, t, c] = se.dims();
+            let keep = mask.neg().add_scalar(1.0).reshape([b, 1, t, 1]);
+            let count = keep.clone().sum().mul_scalar((p * c) as f64).clamp_min(1.0);
+            (se * keep).sum() / count
+        }
+    }
+}
+
+/// Replacement mask of (R9): m where τ < τ*, 0 after the cutoff (per sample).
+///
+/// # Shapes
+/// - mask: `[B, T]`; tau: `[B]`; output `[B, T]`
+pub fn impute_mask(mask: Tensor<2>, tau: Tensor<1>, tau_star: f64) -> Tensor<2> {
+    let [b] = tau.dims();
+    let before = tau.lower_elem(tau_star).float().reshape([b, 1]);
+    mask * before
+}
+
+/// One training batch of the keyframe RF (SPEC §4.5), standardized latents.
+pub struct RfBatch {
+    /// Shape latent z₀, `[B, P, C]`.
+    pub z0: Tensor<3>,
+    /// Trajectory latents Z (slots 1..T), `[B, P, T, C]`.
+    pub z: Tensor<4>,
+    /// Keyframe latents given to the network, `[B, P, T, C]`: Z itself for `InputMask`, the noisy keyframes for
+    /// `ImputeUntil`; ignored for `ReplaceNoised` / `None` (trained without keyframes).
+    pub z_key: Tensor<4>,
+    /// Keyframe mask m, `[B, T]`, 1 = observed.
+    pub mask: Tensor<2>,
+    /// Text token states, `[B, L, D_txt]`.
+    pub text: Tensor<3>,
+    /// 1 = keep the caption, 0 = dropped (CFG training), `[B]`.
+    pub keep_txt: Tensor<1>,
+}
+
+/// Options of the RF objective.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RfLossOptions {
+    /// Keyframe mode of the network.
+    pub kf_mode: KfMode,
+    /// Which slots enter (R5).
+    pub keyframe_loss: KeyframeLoss,
+    /// τ* of (R9), used by `KfMode::ImputeUntil` only.
+    pub tau_star: f64,
+}
+
+/// The RF loss of one batch for given noise ε and times τ: (R1), (R3), (R4), (R2), (R5).
+///
+/// # Shapes
+/// - eps: `[B, P, T, C]`; tau: `[B]`; output `[1]`
+pub fn rf_training_loss(model: &Mmdit, batch: &RfBatch, eps: Tensor<4>, tau: Tensor<1>, opts: &RfLossOptions) -> Tensor<1> {
+    let [_, _, frames, _] = batch.z.dims();
+    let x_tau = interpolant(eps.clone(), batch.z.clone(), tau.clone()); // (R1)
+    let mask = match opts.kf_mode {
+        KfMode::InputMask => batch.mask.clone(),
+        KfMode::ImputeUntil => impute_mask(batch.mask.clone(), tau.clone(), opts.tau_star),
+        KfMode::ReplaceNoised | KfMode::None => batch.mask.zeros_like(),
+    };
+    let input = match opts.kf_mode {
+        // (R9): replacement before τ* only, but the mask channel carries m throughout.
+        KfMode::ImputeUntil => {
+            let state = replace_keyframes(x_tau, batch.z_key.clone(), mask);
+            assemble_input(batch.z0.clone(), state, batch.mask.clone(), opts.kf_mode)
+        }
+        _ => build_input(batch.z0.clone(), x_tau, mask.clone(), batch.z_key.clone(), opts.kf_mode), // (R3)
+    };
+    let v = split_output(model.forward(input, batch.text.clone(), batch.keep_txt.clone(), tau), frames); // (R4)
+    rf_loss(v, target_velocity(eps, batch.z.clone()), batch.mask.clone(), opts.keyframe_loss)
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Sampling
+
+/// ODE solver on a uniform grid (SPEC §4.6, §9.7).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Solver {
+    /// X ← X + Δ v(X, τ) (P-Eq. 6 / 12).
+    Euler,
+    /// X ← X + Δ v(X + Δ/2 · v(X, τ), τ + Δ/2) (P-Table S3, `torchdiffeq` "midpoint").
+    Midpoint,
+}
+
+/// Noise that re-noises the keyframes of the replacement sampler (SPEC §5.1, §8 X9).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ReplaceNoise {
+    /// ε_key = the initial noise ε of those slots, fixed for the trajectory.
+    Fixed,
+    /// New N(0, I) noise at every evaluation (device random stream).
+    Fresh,
+}
+
+/// Sampler settings.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleOptions {
+    /// Grid points over [0, 1], n_grid − 1 steps (64 in the paper).
+    pub n_grid: usize,
+    /// Solver.
+    pub solver: Solver,
+    /// How the keyframes enter: decides (R3), (R7) or (R9) and the input width.
+    pub kf_mode: KfMode,
+    /// Noise of (R7), for `KfMode::ReplaceNoised`.
+    pub replace_noise: ReplaceNoise,
+    /// τ* of (R9), for `KfMode::ImputeUntil`.
+    pub tau_star: f64,
+}
+
+impl SampleOptions {
+    /// Paper defaults: midpoint, 64 grid points, fixed replacement noise, τ* = 0.98.
+    pub fn paper(kf_mode: KfMode) -> Self {
+        Self { n_grid: 64, solver: Solver::Midpoint, kf_mode, replace_noise: ReplaceNoise::Fixed, tau_star: 0.98 }
+    }
+}
+
+/// What stays fixed during sampling: the shape latent, the keyframe latents and the mask (also for the
+/// unconditional CFG branch).
+#[derive(Clone, Debug)]
+pub struct Conditioning {
+    /// Shape latent z₀, `[B, P, C]`.
+    pub z0: Tensor<3>,
+    /// Keyframe latents Z_key (anything where mask = 0), `[B, P, T, C]`.
+    pub z_key: Tensor<4>,
+    /// Keyframe mask m, `[B, T]`, 1 = observed.
+    pub mask: Tensor<2>,
+}
+
+/// The network input at one evaluation: (R3), (R7) or (R9) depending on the mode.
+///
+/// # Shapes
+/// - x: `[B, P, T, C]` ODE state; eps: `[B, P, T, C]` the initial noise; output `[B, P, in_channels]`
+pub fn sampler_input(cond: &Conditioning, x: Tensor<4>, eps: &Tensor<4>, tau: f64, opts: &SampleOptions) -> Tensor<3> {
+    let (z0, mask) = (cond.z0.clone(), cond.mask.clone());
+    match opts.kf_mode {
+        KfMode::InputMask => build_input(z0, x, mask, cond.z_key.clone(), KfMode::InputMask), // (R3)
+        KfMode::ReplaceNoised => {
+            let eps_key = match opts.replace_noise {
+                ReplaceNoise::Fixed => eps.clone(),
+                ReplaceNoise::Fresh => Tensor::random(eps.dims(), Distribution::Normal(0.0, 1.0), &eps.device()),
+            };
+            // (R7) keyframe latent noised to the state's level: (1 − τ) ε_key + τ Z_key
+            let key_tau = eps_key.mul_scalar(1.0 - tau) + cond.z_key.clone().mul_scalar(tau);
+            build_input(z0, x, mask, key_tau, KfMode::ReplaceNoised)
+        }
+        KfMode::ImputeUntil => {
+            // (R9) clean (or noisy-observed) keyframes imputed only while τ < τ*; the mask channel stays.
+            let state = if tau < opts.tau_star { replace_keyframes(x, cond.z_key.clone(), mask.clone()) } else { x };
+            assemble_input(z0, state, mask, KfMode::ImputeUntil)
+        }
+        KfMode::None => assemble_input(z0, x, mask, KfMode::None),
+    }
+}
+
+/// Integrates (R6) from τ = 0 (X = ε) to τ = 1 with a velocity closure `velocity(input [B, P, in], τ [B]) →
+/// [B, P, T·C]`, rebuilding the input at **every** evaluation; then overwrites keyframe slots with Z_key
+/// (`InputMask`, `ReplaceNoised`; `ImputeUntil` keeps its denoised keyframes, `None` has none).
+///
+/// # Shapes
+/// - eps: `[B, P, T, C]` initial noise; output `[B, P, T, C]` (standardized latents X₁)
+///
+/// # Panics
+/// If `opts.n_grid < 2`.
+pub fn sample<F>(mut velocity: F, cond: &Conditioning, eps: Tensor<4>, opts: &SampleOptions) -> Tensor<4>
+where
+    F: FnMut(Tensor<3>, Tensor<1>) -> Tensor<3>,
+{
+    assert!(opts.n_grid >= 2, "sample: n_grid must be at least 2, got {}", opts.n_grid);
+    let [b, _, frames, _] = eps.dims();
+    let device = eps.device();
+    let mut eval = |x: Tensor<4>, tau: f64| -> Tensor<4> {
+        let input = sampler_input(cond, x, &eps, tau, opts);
+        let tau_b = Tensor::<1>::full([b], tau, &device);
+        split_output(velocity(input, tau_b), frames)
+    };
+    let steps = opts.n_grid - 1;
+    let dt = 1.0 / steps as f64;
+    let mut x = eps.clone(); // X_0 = ε
+    for i in 0..steps {
+        let tau = i as f64 * dt;
+        x = match opts.solver {
+            Solver::Euler => x.clone() + eval(x, tau).mul_scalar(dt),
+            Solver::Midpoint => {
+                let k1 = eval(x.clone(), tau);
+                let x_mid = x.clone() + k1.mul_scalar(dt / 2.0);
+                x + eval(x_mid, tau + dt / 2.0).mul_scalar(dt)
+            }
+        };
+    }
+    match opts.kf_mode {
+        KfMode::InputMask | KfMode::ReplaceNoised => replace_keyframes(x, cond.z_key.clone(), cond.mask.clone()),
+        KfMode::ImputeUntil | KfMode::None => x,
+    }
+}
+
+/// Classifier-free guidance v = v_u + w (v_c − v_u).
+pub fn cfg_combine(v_cond: Tensor<3>, v_uncond: Tensor<3>, guidance: f64) -> Tensor<3> {
+    v_uncond.clone() + (v_cond - v_uncond).mul_scalar(guidance)
+}
+
+/// The MMDiT as a velocity closure for [`sample`], with CFG. For w = 1 only the conditional branch runs
+/// (keep_txt = 1); otherwise both branches run as one batch of 2B, the unconditional one with keep_txt = 0 and the
+/// same input (same z₀, keyframes and mask).
+///
+/// # Shapes
+/// - text: `[B, L, D_txt]`; the closure maps `[B, P, in]`, `[B]` to `[B, P, T·C]`
+pub fn mmdit_velocity(model: &Mmdit, text: Tensor<3>, guidance: f64) -> impl FnMut(Tensor<3>, Tensor<1>) -> Tensor<3> + '_ {
+    move |input: Tensor<3>, tau: Tensor<1>| {
+        let [b, _, _] = input.dims();
+        let device = input.device();
+        if guidance == 1.0 {
+            return model.forward(input, text.clone(), Tensor::ones([b], &device), tau);
+        }
+        let keep = Tensor::cat(vec![Tensor::ones([b], &device), Tensor::zeros([b], &device)], 0);
+        let v = model.forward(
+            Tensor::cat(vec![input.clone(), input], 0),
+            Tensor::cat(vec![text.clone(), text.clone()], 0),
+            keep,
+            Tensor::cat(vec![tau.clone(), tau], 0),
+        );
+        let v_cond = v.clone().narrow(0, 0, b);
+        let v_uncond = v.narrow(0, b, b);
+        cfg_combine(v_cond, v_uncond, guidance)
+    }
+}
+
+/// Samples trajectory latents with the MMDiT (SPEC §4.6): [`sample`] over [`mmdit_velocity`].
+///
+/// # Shapes
+/// - text: `[B, L, D_txt]`; eps: `[B, P, T, C]`; output `[B, P, T, C]`
+pub fn sample_mmdit(
+    model: &Mmdit,
+    cond: &Conditioning,
+    text: Tensor<3>,
+    eps: Tensor<4>,
+    guidance: f64,
+    opts: &SampleOptions,
+) -> Tensor<4> {
+    sample(mmdit_velocity(model, text, guidance), cond, eps, opts)
+}
+

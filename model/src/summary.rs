@@ -1,1 +1,112 @@
-//! TODO(owner): see lib.rs.
+//! Parameter counts of a network per top-level submodule (checks SPEC §4.3 "≈ 78M trainable"; used by
+//! `any4d model summary`).
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::prelude::*;
+
+/// Name of the last row of [`param_report`].
+pub const TOTAL: &str = "total";
+
+/// Collects element counts keyed by the first path component.
+#[derive(Default)]
+struct TopLevelCounter {
+    path: Vec<String>,
+    rows: Vec<(String, usize)>,
+}
+
+impl TopLevelCounter {
+    fn add(&mut self, count: usize) {
+        let name = self.path.first().cloned().unwrap_or_else(|| "(root)".to_string());
+        match self.rows.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, total)) => *total += count,
+            None => self.rows.push((name, count)),
+        }
+    }
+}
+
+impl ModuleVisitor for TopLevelCounter {
+    fn enter_module(&mut self, name: &str, _container_type: &str) {
+        self.path.push(name.to_string());
+    }
+
+    fn exit_module(&mut self, _name: &str, _container_type: &str) {
+        self.path.pop();
+    }
+
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        self.add(param.lazy_shape().num_elements());
+    }
+}
+
+/// Float parameter counts per top-level submodule, in declaration order, followed by `("total", sum)`.
+/// Vectors of blocks count as one submodule (e.g. `blocks`).
+pub fn param_report<M: Module>(module: &M) -> Vec<(String, usize)> {
+    let mut counter = TopLevelCounter::default();
+    module.visit(&mut counter);
+    let total = counter.rows.iter().map(|(_, n)| n).sum();
+    let mut rows = counter.rows;
+    rows.push((TOTAL.to_string(), total));
+    rows
+}
+
+/// Renders a report as aligned text lines (name, count, share of the total).
+pub fn format_report(title: &str, rows: &[(String, usize)]) -> String {
+    let total = rows.iter().find(|(n, _)| n == TOTAL).map_or(0, |(_, n)| *n).max(1);
+    let width = rows.iter().map(|(n, _)| n.len()).max().unwrap_or(0).max(8);
+    let mut out = format!("{title}\n");
+    for (name, count) in rows {
+        let share = 100.0 * *count as f64 / total as f64;
+        out.push_str(&format!("  {name:<width$}  {count:>12}  {share:6.2}%\n"));
+    }
+    out
+}
+
+/// Wall-clock time of RF training steps.
+#[derive(Clone, Debug)]
+pub struct StepTiming {
+    /// Median over the timed steps, milliseconds per step.
+    pub median_ms: f64,
+    /// Every timed step, milliseconds.
+    pub steps_ms: Vec<f64>,
+}
+
+/// Times (R4)–(R5) forward + backward of a freshly initialised RF on random inputs: one warm-up step, then
+/// `iters` timed steps (each ends with a device sync).
+///
+/// # Shapes
+/// - the batch is `[batch, tokens, in_channels]` with text `[batch, text_len, text_dim]`
+pub fn time_rf_step(
+    cfg: &crate::mmdit::MmditConfig,
+    batch: usize,
+    tokens: usize,
+    text_len: usize,
+    iters: usize,
+    device: &Device,
+) -> StepTiming {
+    use burn::tensor::Distribution;
+    let ad = device.clone().autodiff();
+    let model = cfg.init(&ad);
+    let normal = Distribution::Normal(0.0, 1.0);
+    let step = || {
+        let input = Tensor::<3>::random([batch, tokens, cfg.in_channels()], normal, &ad);
+        let text = Tensor::<3>::random([batch, text_len, cfg.text_dim], normal, &ad);
+        let target = Tensor::<3>::random([batch, tokens, cfg.out_channels()], normal, &ad);
+        let tau = Tensor::<1>::random([batch], Distribution::Uniform(0.0, 1.0), &ad);
+        let keep = Tensor::<1>::ones([batch], &ad);
+        let start = std::time::Instant::now();
+        let loss = (model.forward(input, text, keep, tau) - target).square().mean();
+        let grads = loss.backward();
+        drop(grads);
+        if let Err(e) = ad.sync() {
+            panic!("device sync failed: {e:?}");
+        }
+        start.elapsed().as_secs_f64() * 1e3
+    };
+    step();
+    let mut steps_ms: Vec<f64> = (0..iters).map(|_| step()).collect();
+    let mut sorted = steps_ms.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median_ms = sorted[sorted.len() / 2];
+    steps_ms.shrink_to_fit();
+    StepTiming { median_ms, steps_ms }
+}

@@ -1,24 +1,127 @@
-//! `any4d model …` (owner: see ARCHITECTURE.md). Parses arguments, calls the library.
+//! `any4d model …` and `any4d bench model`: parameter counts of the network a config describes, and RF
+//! forward+backward time per clip. Parses arguments and the `[model]` table, calls `any4d_model::summary`.
 
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use clap::{Args, Subcommand};
+use anyhow::{Context, bail};
+use any4d_model::mmdit::{KfMode, MmditConfig};
+use any4d_model::summary::{format_report, param_report, time_rf_step};
+use burn::prelude::Device;
+use clap::{Args, Subcommand, ValueEnum};
+use serde::Deserialize;
 
 #[derive(Subcommand, Debug)]
 pub enum ModelCmd {
-    /// Placeholder until the subcommands land.
-    Todo,
+    /// Parameter counts per submodule of the network in a config's `[model]` table.
+    Summary(SummaryArgs),
 }
 
 #[derive(Args, Debug)]
-pub struct BenchArgs {}
+pub struct SummaryArgs {
+    /// A run config (e.g. configs/rf/paper.toml).
+    #[arg(long)]
+    pub config: PathBuf,
+}
+
+/// Network size benchmarked by `any4d bench model`.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum BenchSize {
+    /// configs/rf/paper.toml sizes (W 512, 12 blocks, P 512, L 77).
+    Paper,
+    /// MmditConfig::tiny() with P 64, L 8.
+    Tiny,
+}
+
+/// CPU backend of the benchmark.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum CpuBackend {
+    Flex,
+    Ndarray,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Network size.
+    #[arg(long, value_enum, default_value = "paper")]
+    pub size: BenchSize,
+    /// Clips per step.
+    #[arg(long, default_value_t = 1)]
+    pub batch: usize,
+    /// Timed steps (after one warm-up step).
+    #[arg(long, default_value_t = 3)]
+    pub iters: usize,
+    /// CPU backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    pub backend: CpuBackend,
+}
 
 pub fn run(cmd: ModelCmd) -> anyhow::Result<ExitCode> {
     match cmd {
-        ModelCmd::Todo => anyhow::bail!("not implemented yet"),
+        ModelCmd::Summary(args) => summary(&args.config),
     }
 }
 
-pub fn bench(_args: BenchArgs) -> anyhow::Result<ExitCode> {
-    anyhow::bail!("not implemented yet")
+/// Reads the `[model]` table of a config file as an RF backbone config; errors name the file and field.
+pub fn load_rf_model_config(path: &Path) -> anyhow::Result<MmditConfig> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let table: toml::Table = toml::from_str(&text).with_context(|| format!("{}: invalid TOML", path.display()))?;
+    let Some(model) = table.get("model") else {
+        bail!("{}: no [model] table", path.display());
+    };
+    let Some(model_table) = model.as_table() else {
+        bail!("{}: `model` must be a table", path.display());
+    };
+    if !model_table.contains_key("kf_mode") {
+        bail!(
+            "{}: [model] has no `kf_mode`, so it is not a rectified-flow config (VAE summaries are not wired yet)",
+            path.display()
+        );
+    }
+    let cfg = MmditConfig::deserialize(model.clone()).with_context(|| format!("{}: [model]", path.display()))?;
+    cfg.validate().map_err(|msg| anyhow::anyhow!("{}: {msg}", path.display()))?;
+    Ok(cfg)
+}
+
+fn summary(path: &Path) -> anyhow::Result<ExitCode> {
+    let cfg = load_rf_model_config(path)?;
+    let device = Device::flex();
+    let model = cfg.init(&device);
+    let title = format!(
+        "{}: rectified-flow MMDiT, kf_mode {:?}, {} input / {} output channels per token",
+        path.display(),
+        cfg.kf_mode,
+        cfg.in_channels(),
+        cfg.out_channels()
+    );
+    print!("{}", format_report(&title, &param_report(&model)));
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
+    if args.batch == 0 || args.iters == 0 {
+        bail!("--batch and --iters must be positive");
+    }
+    let (cfg, tokens, text_len) = match args.size {
+        BenchSize::Paper => (MmditConfig::paper(KfMode::InputMask, 768), 512, 77),
+        BenchSize::Tiny => (MmditConfig::tiny(), 64, 8),
+    };
+    let device = match args.backend {
+        CpuBackend::Flex => Device::flex(),
+        CpuBackend::Ndarray => Device::ndarray(),
+    };
+    let timing = time_rf_step(&cfg, args.batch, tokens, text_len, args.iters, &device);
+    println!(
+        "bench model: RF forward+backward, {:?} size (W {}, {} blocks, P {tokens}, L {text_len}), {:?}, batch {}, {} iters: \
+         median {:.1} ms/step, {:.1} ms/clip",
+        args.size,
+        cfg.width,
+        cfg.blocks,
+        args.backend,
+        args.batch,
+        args.iters,
+        timing.median_ms,
+        timing.median_ms / args.batch as f64
+    );
+    Ok(ExitCode::SUCCESS)
 }

@@ -1,0 +1,335 @@
+//! The `clips.bin` container of a dataset store: a streaming writer and a random-access reader (SPEC §2.1–§2.5
+//! record; layout in the [`crate::store`] module doc).
+//!
+//! Every read is bounds-checked against the file: a corrupt or truncated file gives a [`DataError`] naming the
+//! file, the clip, the field and the byte offset, never a panic and never an allocation larger than the file.
+
+use std::fs::File;
+use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use crate::clip::Clip;
+use crate::error::{DataError, Result};
+use crate::preprocess::Normalization;
+
+use super::{Split, StoredClip};
+
+/// First 8 bytes of `clips.bin`.
+pub const MAGIC: &[u8; 8] = b"A4DSTORE";
+/// Last 8 bytes of `clips.bin` (a missing end magic means a truncated or unfinished file).
+pub const END_MAGIC: &[u8; 8] = b"A4DTABLE";
+/// Layout version written in the header.
+pub const VERSION: u32 = 1;
+/// Header: magic (8) + version, T, P, reserved (4 × u32).
+pub const HEADER_LEN: u64 = 24;
+/// Trailer: table offset (u64) + clip count (u64) + end magic (8).
+pub const TRAILER_LEN: u64 = 24;
+/// One table entry: record offset (u64) + split (u8).
+pub const ENTRY_LEN: u64 = 9;
+
+/// Appends encoded clips to a temporary file next to `clips.bin`; [`StoreWriter::finish`] writes the table and
+/// renames it into place (atomic on one file system).
+pub struct StoreWriter {
+    tmp: PathBuf,
+    dest: PathBuf,
+    out: BufWriter<File>,
+    pos: u64,
+    entries: Vec<(u64, Split)>,
+    frames: u32,
+    p: u32,
+}
+
+impl StoreWriter {
+    /// Start `dest` (written as `dest` + `.tmp` until [`StoreWriter::finish`]) for clips of `frames` frames and
+    /// `p` FPS indices.
+    pub fn create(dest: &Path, frames: usize, p: usize) -> Result<Self> {
+        let tmp = dest.with_extension("bin.tmp");
+        let file = File::create(&tmp).map_err(|e| DataError::io(&tmp, e))?;
+        let frames = u32_field(frames, dest, "header.frames")?;
+        let p = u32_field(p, dest, "header.p")?;
+        let mut w = Self { tmp, dest: dest.to_path_buf(), out: BufWriter::new(file), pos: 0, entries: Vec::new(), frames, p };
+        let mut header = Vec::with_capacity(HEADER_LEN as usize);
+        header.extend_from_slice(MAGIC);
+        for v in [VERSION, frames, p, 0] {
+            header.extend_from_slice(&v.to_le_bytes());
+        }
+        w.write(&header)?;
+        Ok(w)
+    }
+
+    /// Number of clips appended so far.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// True when no clip has been appended.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Append one clip; its frame count and FPS length must match the header.
+    pub fn append(&mut self, clip: &StoredClip) -> Result<()> {
+        if clip.clip.frames != self.frames as usize || clip.fps.len() != self.p as usize {
+            return Err(DataError::new(
+                &clip.clip.source,
+                "store",
+                format!(
+                    "clip {} has T = {}, P = {}; this store holds T = {}, P = {}",
+                    clip.clip.id,
+                    clip.clip.frames,
+                    clip.fps.len(),
+                    self.frames,
+                    self.p
+                ),
+            ));
+        }
+        let bytes = encode(clip, &self.dest)?;
+        self.append_encoded(&bytes, clip.split)
+    }
+
+    /// Append a record already encoded by [`encode`] (used to copy clips from an older store unchanged).
+    pub fn append_encoded(&mut self, record: &[u8], split: Split) -> Result<()> {
+        // `pos` counts every byte written so far, header included, so the record starts there.
+        self.entries.push((self.pos, split));
+        self.write(record)
+    }
+
+    /// Write the entry table and trailer, flush to disk and rename over `dest`.
+    pub fn finish(mut self) -> Result<()> {
+        let table_offset = self.pos;
+        let mut table = Vec::with_capacity(self.entries.len() * ENTRY_LEN as usize + TRAILER_LEN as usize);
+        for &(offset, split) in &self.entries {
+            table.extend_from_slice(&offset.to_le_bytes());
+            table.push(split.code());
+        }
+        table.extend_from_slice(&table_offset.to_le_bytes());
+        table.extend_from_slice(&(self.entries.len() as u64).to_le_bytes());
+        table.extend_from_slice(END_MAGIC);
+        self.write(&table)?;
+        let file = self.out.into_inner().map_err(|e| DataError::io(&self.tmp, e.into_error()))?;
+        file.sync_all().map_err(|e| DataError::io(&self.tmp, e))?;
+        std::fs::rename(&self.tmp, &self.dest).map_err(|e| DataError::io(&self.dest, e))
+    }
+
+    fn write(&mut self, bytes: &[u8]) -> Result<()> {
+        self.out.write_all(bytes).map_err(|e| DataError::io(&self.tmp, e))?;
+        self.pos += bytes.len() as u64;
+        Ok(())
+    }
+}
+
+fn u32_field(v: usize, path: &Path, field: &str) -> Result<u32> {
+    u32::try_from(v).map_err(|_| DataError::new(path, field, format!("{v} does not fit in u32")))
+}
+
+/// Encode one clip as a record (layout in the module doc of [`crate::store`]); `path` only labels errors.
+pub fn encode(c: &StoredClip, path: &Path) -> Result<Vec<u8>> {
+    let clip = &c.clip;
+    let mut b = Vec::with_capacity(64 + clip.vertices.len() * 12 + clip.faces.len() * 12 + c.fps.len() * 4);
+    for (field, s) in [("id", &clip.id), ("caption", &clip.caption), ("source", &clip.source)] {
+        b.extend_from_slice(&u32_field(s.len(), path, field)?.to_le_bytes());
+        b.extend_from_slice(s.as_bytes());
+    }
+    for (field, v) in [("frames", clip.frames), ("vertices", clip.n_vertices), ("faces", clip.faces.len()), ("fps", c.fps.len())] {
+        b.extend_from_slice(&u32_field(v, path, field)?.to_le_bytes());
+    }
+    for p in &clip.vertices {
+        for x in p {
+            b.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    for f in &clip.faces {
+        for i in f {
+            b.extend_from_slice(&i.to_le_bytes());
+        }
+    }
+    for i in &c.fps {
+        b.extend_from_slice(&i.to_le_bytes());
+    }
+    for x in c.normalization.center.iter().chain([&c.normalization.scale]) {
+        b.extend_from_slice(&x.to_le_bytes());
+    }
+    Ok(b)
+}
+
+/// Where one record lives in `clips.bin`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Entry {
+    /// Byte offset of the record.
+    pub offset: u64,
+    /// Record length in bytes.
+    pub len: u64,
+    /// Train or validation.
+    pub split: Split,
+}
+
+/// The parsed header and table of a `clips.bin`.
+#[derive(Debug, Clone)]
+pub struct Catalog {
+    /// Frames per clip T.
+    pub frames: usize,
+    /// FPS indices per clip P.
+    pub p: usize,
+    /// One entry per clip, in file order.
+    pub entries: Vec<Entry>,
+}
+
+/// Read and check the header, trailer and entry table of `path`.
+pub fn read_catalog(path: &Path) -> Result<Catalog> {
+    let mut file = File::open(path).map_err(|e| DataError::io(path, e))?;
+    let size = file.metadata().map_err(|e| DataError::io(path, e))?.len();
+    let err = |field: &str, reason: String| DataError::new(path, field, reason);
+    if size < HEADER_LEN + TRAILER_LEN {
+        return Err(err("file", format!("{size} bytes is shorter than header + trailer ({} bytes)", HEADER_LEN + TRAILER_LEN)));
+    }
+    let header = read_at(&mut file, path, 0, HEADER_LEN as usize, "header")?;
+    if &header[..8] != MAGIC {
+        return Err(err("header.magic at byte 0", format!("expected {:?}, found {:?}: not an any4d store", as_text(MAGIC), as_text(&header[..8]))));
+    }
+    let word = |i: usize| u32::from_le_bytes([header[8 + 4 * i], header[9 + 4 * i], header[10 + 4 * i], header[11 + 4 * i]]);
+    if word(0) != VERSION {
+        return Err(err("header.version at byte 8", format!("version {} is not supported (this build reads {VERSION})", word(0))));
+    }
+    let (frames, p) = (word(1) as usize, word(2) as usize);
+    let trailer_at = size - TRAILER_LEN;
+    let trailer = read_at(&mut file, path, trailer_at, TRAILER_LEN as usize, "trailer")?;
+    if &trailer[16..] != END_MAGIC {
+        return Err(err(
+            &format!("trailer.magic at byte {}", trailer_at + 16),
+            format!("expected {:?}, found {:?}: the file is truncated or was not finished", as_text(END_MAGIC), as_text(&trailer[16..])),
+        ));
+    }
+    let table_offset = u64_at(&trailer, 0);
+    let count = u64_at(&trailer, 8);
+    let table_len = count.checked_mul(ENTRY_LEN);
+    if table_offset < HEADER_LEN || table_len.is_none_or(|l| table_offset.checked_add(l) != Some(trailer_at)) {
+        return Err(err(
+            &format!("trailer at byte {trailer_at}"),
+            format!("table offset {table_offset} and clip count {count} do not fit a {size}-byte file"),
+        ));
+    }
+    let table = read_at(&mut file, path, table_offset, (trailer_at - table_offset) as usize, "table")?;
+    let mut entries = Vec::with_capacity(count as usize);
+    for i in 0..count as usize {
+        let at = i * ENTRY_LEN as usize;
+        let offset = u64_at(&table, at);
+        let end = if i + 1 < count as usize { u64_at(&table, at + ENTRY_LEN as usize) } else { table_offset };
+        let entry_at = table_offset + at as u64;
+        if offset < HEADER_LEN || end < offset || end > table_offset {
+            return Err(err(
+                &format!("table entry {i} at byte {entry_at}"),
+                format!("record offsets {offset}..{end} are outside the records area {HEADER_LEN}..{table_offset}"),
+            ));
+        }
+        let split = Split::from_code(table[at + 8]).ok_or_else(|| {
+            err(&format!("table entry {i} split at byte {}", entry_at + 8), format!("unknown split code {}", table[at + 8]))
+        })?;
+        entries.push(Entry { offset, len: end - offset, split });
+    }
+    Ok(Catalog { frames, p, entries })
+}
+
+fn as_text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    let mut w = [0u8; 8];
+    w.copy_from_slice(&b[at..at + 8]);
+    u64::from_le_bytes(w)
+}
+
+/// Read `len` bytes at `offset`; the caller has checked the range against the file size.
+pub fn read_at(file: &mut File, path: &Path, offset: u64, len: usize, field: &str) -> Result<Vec<u8>> {
+    let mut buf = vec![0u8; len];
+    file.seek(SeekFrom::Start(offset))
+        .and_then(|_| file.read_exact(&mut buf))
+        .map_err(|e| DataError::new(path, format!("{field} at byte {offset}"), e.to_string()))?;
+    Ok(buf)
+}
+
+/// A bounds-checked little-endian reader over one record that names the field and absolute offset on error.
+struct Cursor<'a> {
+    bytes: &'a [u8],
+    at: usize,
+    base: u64,
+    path: &'a Path,
+    clip: usize,
+}
+
+impl Cursor<'_> {
+    fn take(&mut self, n: usize, field: &str) -> Result<&[u8]> {
+        if self.bytes.len() - self.at < n {
+            return Err(self.error(
+                field,
+                format!("needs {n} bytes but the record has {} left (corrupt or truncated)", self.bytes.len() - self.at),
+            ));
+        }
+        self.at += n;
+        Ok(&self.bytes[self.at - n..self.at])
+    }
+
+    fn error(&self, field: &str, reason: String) -> DataError {
+        DataError::new(self.path, format!("clip {} {field} at byte {}", self.clip, self.base + self.at as u64), reason)
+    }
+
+    fn u32(&mut self, field: &str) -> Result<u32> {
+        let b = self.take(4, field)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    fn string(&mut self, field: &str) -> Result<String> {
+        let n = self.u32(field)? as usize;
+        let start = self.at;
+        let b = self.take(n, field)?.to_vec();
+        String::from_utf8(b).map_err(|e| {
+            DataError::new(self.path, format!("clip {} {field} at byte {}", self.clip, self.base + start as u64), e.to_string())
+        })
+    }
+
+    /// `count` little-endian 4-byte words; the length is checked before anything is allocated.
+    fn words(&mut self, count: Option<usize>, field: &str) -> Result<&[u8]> {
+        let n = count.and_then(|c| c.checked_mul(4)).ok_or_else(|| self.error(field, "element count overflows".into()))?;
+        self.take(n, field)
+    }
+}
+
+/// Decode record `index` (bytes `record`, starting at absolute `offset` of `path`) with its `split`.
+pub fn decode(record: &[u8], offset: u64, path: &Path, index: usize, split: Split, frames: usize, p: usize) -> Result<StoredClip> {
+    let mut c = Cursor { bytes: record, at: 0, base: offset, path, clip: index };
+    let id = c.string("id")?;
+    let caption = c.string("caption")?;
+    let source = c.string("source")?;
+    let t = c.u32("frames")? as usize;
+    let n = c.u32("vertices")? as usize;
+    let m = c.u32("faces")? as usize;
+    let np = c.u32("fps")? as usize;
+    if t != frames || np != p {
+        return Err(c.error("frames/fps", format!("clip {id} has T = {t}, P = {np}; the header says T = {frames}, P = {p}")));
+    }
+    let vertices: Vec<[f32; 3]> = c
+        .words(t.checked_mul(n).and_then(|x| x.checked_mul(3)), "vertices")?
+        .chunks_exact(12)
+        .map(|b| [0, 4, 8].map(|k| f32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
+        .collect();
+    let faces: Vec<[u32; 3]> = c
+        .words(m.checked_mul(3), "faces")?
+        .chunks_exact(12)
+        .map(|b| [0, 4, 8].map(|k| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
+        .collect();
+    let fps_at = c.at;
+    let fps: Vec<u32> =
+        c.words(Some(np), "fps")?.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    if let Some(bad) = fps.iter().find(|&&i| i as usize >= n) {
+        return Err(DataError::new(path, format!("clip {index} fps at byte {}", offset + fps_at as u64), format!("index {bad} ≥ {n} vertices")));
+    }
+    let norm: Vec<f32> =
+        c.words(Some(4), "normalization")?.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    if c.at != record.len() {
+        return Err(c.error("end", format!("{} unread bytes after the record", record.len() - c.at)));
+    }
+    let clip = Clip::new(id, vertices, t, n, faces, caption, source)
+        .map_err(|e| DataError::new(path, format!("clip {index} at byte {offset}: {}", e.field), e.reason))?;
+    let normalization = Normalization { center: [norm[0], norm[1], norm[2]], scale: norm[3] };
+    Ok(StoredClip { clip, fps, normalization, split })
+}

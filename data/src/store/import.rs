@@ -1,0 +1,460 @@
+//! Import clip files (or procedural clips) into a dataset store: find sources, preprocess each window
+//! (weld, filter, normalise (D1)–(D3), FPS of SPEC §2.5), split by object (SPEC §2.2), write atomically.
+//!
+//! One bad file never aborts an import: it becomes a "rejected" row of the index with its reason. Only problems
+//! with the output folder or an existing store abort.
+
+use std::collections::HashSet;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use crate::clip::{Clip, object_uid};
+use crate::error::{DataError, Result};
+use crate::formats::{self, Format};
+use crate::fps::farthest_point_sampling;
+use crate::preprocess::{self, VertexFilter};
+use crate::synth::{self, SynthConfig};
+
+use super::{CLIPS_FILE, DEFAULT_P, IndexRow, SPLIT_SEED, Split, Status, Store, StoreWriter, StoredClip, read_index, write_index};
+
+/// Vertex welding before anything else (SPEC §2.1 sources with split seams).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Weld {
+    /// Keep the file's vertices as they are (default).
+    #[default]
+    Off,
+    /// Merge vertices closer than this distance (in file units).
+    Eps(f32),
+}
+
+/// How files become store clips.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImportOptions {
+    /// Accepted vertex counts (SPEC §2.2: 512..=4096).
+    pub filter: VertexFilter,
+    /// Window length T (SPEC §2.6: 16).
+    pub frames: usize,
+    /// Frames between window starts (SPEC §2.6: 1).
+    pub stride: usize,
+    /// Welding (default off).
+    pub weld: Weld,
+    /// FPS tokens P (SPEC §2.5: 512). A clip with fewer vertices gets its FPS order repeated cyclically
+    /// (see [`farthest_point_sampling`]); the default filter rules that out.
+    pub p: usize,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        Self { filter: VertexFilter::default(), frames: 16, stride: 1, weld: Weld::Off, p: DEFAULT_P }
+    }
+}
+
+/// Progress callback: `(sources done, sources total)`, called after each parallel chunk.
+pub type Progress<'a> = Option<&'a (dyn Fn(usize, usize) + Sync)>;
+
+/// A source that produced no clip, and why.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Rejected {
+    pub source: String,
+    pub reason: String,
+}
+
+/// What an import (or synth) did.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ImportReport {
+    /// The store folder.
+    pub dir: PathBuf,
+    /// Sources processed by this run.
+    pub sources: usize,
+    /// Clips (windows) written from this run's sources.
+    pub added: usize,
+    /// Clips kept from an earlier import of other sources.
+    pub kept: usize,
+    /// Clips in the store now, and how they split.
+    pub total: usize,
+    pub train: usize,
+    pub val: usize,
+    /// This run's rejected sources.
+    pub rejected: Vec<Rejected>,
+}
+
+impl fmt::Display for ImportReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "{}: {} sources → {} clips added, {} kept; store holds {} clips ({} train, {} val); {} rejected",
+            self.dir.display(),
+            self.sources,
+            self.added,
+            self.kept,
+            self.total,
+            self.train,
+            self.val,
+            self.rejected.len()
+        )?;
+        for r in &self.rejected {
+            writeln!(f, "  rejected {}: {}", r.source, r.reason)?;
+        }
+        Ok(())
+    }
+}
+
+/// What one source turned into.
+enum Outcome {
+    Clips(Vec<(StoredClip, String)>),
+    Rejected(String),
+}
+
+/// One unit of work: a file or folder found under the sources, or one procedural clip.
+enum Job {
+    File { source: String, path: PathBuf, format: Result<Format> },
+    Synth { source: String, index: usize },
+}
+
+impl Job {
+    fn source(&self) -> &str {
+        match self {
+            Job::File { source, .. } | Job::Synth { source, .. } => source,
+        }
+    }
+
+    fn format_name(&self) -> &'static str {
+        match self {
+            Job::File { format: Ok(f), .. } => format_name(f),
+            Job::File { format: Err(_), .. } => "",
+            Job::Synth { .. } => "synth",
+        }
+    }
+}
+
+fn format_name(f: &Format) -> &'static str {
+    match f {
+        Format::Bin => "bin",
+        Format::ObjSeq => "obj-seq",
+        Format::Gltf => "gltf",
+        Format::Glb => "glb",
+    }
+}
+
+/// Import `sources` (files, or folders searched recursively for `.bin`/`.pkl`/`.pickle`/`.gltf`/`.glb` files and folders of
+/// `.obj` frames) into the store folder `out`; see the [`crate::store`] module doc for re-imports.
+pub fn import(sources: &[PathBuf], out: &Path, opts: &ImportOptions) -> Result<ImportReport> {
+    import_with_progress(sources, out, opts, None)
+}
+
+/// [`import`] with a progress callback.
+pub fn import_with_progress(sources: &[PathBuf], out: &Path, opts: &ImportOptions, progress: Progress) -> Result<ImportReport> {
+    check_options(opts)?;
+    let existing = prepare_out(out, opts.frames, opts.p)?;
+    let jobs = discover(sources, out)?;
+    run_jobs(out, existing, &jobs, opts.frames, opts.p, progress, |job| process_file(job, opts))
+}
+
+/// Write `cfg.clips` procedural clips into the store `out` with P = [`DEFAULT_P`].
+pub fn write_synth(cfg: &SynthConfig, out: &Path) -> Result<ImportReport> {
+    write_synth_with(cfg, out, DEFAULT_P, None)
+}
+
+/// [`write_synth`] with P FPS tokens and a progress callback. Each procedural clip is one window; its source is
+/// `synth:<seed>:<index>`, so synth runs with other seeds add to the store and the same seed replaces.
+pub fn write_synth_with(cfg: &SynthConfig, out: &Path, p: usize, progress: Progress) -> Result<ImportReport> {
+    if p == 0 {
+        return Err(DataError::new(out, "p", "needs at least 1 FPS token"));
+    }
+    cfg.validate()?;
+    let existing = prepare_out(out, cfg.frames, p)?;
+    let jobs: Vec<Job> =
+        (0..cfg.clips).map(|index| Job::Synth { source: format!("synth:{}:{index}", cfg.seed), index }).collect();
+    run_jobs(out, existing, &jobs, cfg.frames, p, progress, |job| match job {
+        Job::Synth { source, index } => {
+            match synth::generate_one(cfg, *index) {
+                Ok(mut clip) => {
+                    clip.source = source.clone();
+                    Outcome::Clips(preprocess_windows(&clip, cfg.frames, 1, p))
+                }
+                Err(e) => Outcome::Rejected(reason(&e, source)),
+            }
+        }
+        Job::File { .. } => Outcome::Rejected("not a procedural clip".into()),
+    })
+}
+
+fn check_options(opts: &ImportOptions) -> Result<()> {
+    let err = |field: &str, reason: String| Err(DataError::new("import options", field, reason));
+    if opts.frames < 2 {
+        return err("frames", format!("a window needs at least 2 frames, got {}", opts.frames));
+    }
+    if opts.stride == 0 {
+        return err("stride", "must be at least 1".into());
+    }
+    if opts.p == 0 {
+        return err("p", "needs at least 1 FPS token".into());
+    }
+    if opts.filter.min > opts.filter.max {
+        return err("vertex filter", format!("min {} > max {}", opts.filter.min, opts.filter.max));
+    }
+    if let Weld::Eps(e) = opts.weld
+        && !(e.is_finite() && e >= 0.0)
+    {
+        return err("weld", format!("epsilon {e} must be finite and ≥ 0"));
+    }
+    Ok(())
+}
+
+/// Create `out`, or open the store already in it (checking that T and P agree); refuse a non-empty folder that
+/// holds no store.
+fn prepare_out(out: &Path, frames: usize, p: usize) -> Result<Option<(Store, Vec<IndexRow>)>> {
+    if out.join(CLIPS_FILE).exists() {
+        let store = Store::open(out)?;
+        if store.frames() != frames || store.p() != p {
+            return Err(DataError::new(
+                out,
+                "store",
+                format!(
+                    "holds clips with T = {}, P = {}; this run makes T = {frames}, P = {p}: use another folder",
+                    store.frames(),
+                    store.p()
+                ),
+            ));
+        }
+        let rows = read_index(out)?;
+        let ok = rows.iter().filter(|r| r.status == Status::Ok).count();
+        if ok != store.len() {
+            return Err(DataError::new(
+                out,
+                "index.parquet",
+                format!("lists {ok} stored clips but clips.bin holds {}: the store is inconsistent", store.len()),
+            ));
+        }
+        return Ok(Some((store, rows)));
+    }
+    if out.exists() {
+        let mut entries = std::fs::read_dir(out).map_err(|e| DataError::io(out, e))?;
+        if let Some(entry) = entries.next() {
+            let name = entry.map_err(|e| DataError::io(out, e))?.file_name();
+            return Err(DataError::new(
+                out,
+                CLIPS_FILE,
+                format!("the folder is not empty (holds {name:?}) and holds no any4d store: refusing to write into it"),
+            ));
+        }
+    }
+    std::fs::create_dir_all(out).map_err(|e| DataError::io(out, e))?;
+    Ok(None)
+}
+
+/// Find import jobs under `sources`, sorted and deduplicated by canonical path; skips the output folder and any
+/// folder that holds a store.
+fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
+    let out_canon = std::fs::canonicalize(out).map_err(|e| DataError::io(out, e))?;
+    let mut found: Vec<(PathBuf, Result<Format>)> = Vec::new();
+    for src in sources {
+        match std::fs::canonicalize(src) {
+            Err(e) => found.push((src.clone(), Err(DataError::io(src, e)))),
+            Ok(path) if path.is_dir() => {
+                if path.join(CLIPS_FILE).exists() {
+                    found.push((path, Err(DataError::new(src, CLIPS_FILE, "this folder is an any4d store, not a source"))));
+                } else {
+                    walk(&path, &out_canon, &mut found);
+                }
+            }
+            Ok(path) => {
+                let format = Format::from_path(&path);
+                found.push((path, format));
+            }
+        }
+    }
+    found.sort_by(|a, b| a.0.cmp(&b.0));
+    found.dedup_by(|a, b| a.0 == b.0);
+    Ok(found.into_iter().map(|(path, format)| Job::File { source: path.display().to_string(), path, format }).collect())
+}
+
+/// Recursively collect clip files and OBJ-sequence folders under `dir`. Unreadable folders become rejected jobs.
+fn walk(dir: &Path, out: &Path, found: &mut Vec<(PathBuf, Result<Format>)>) {
+    if dir == out || dir.join(CLIPS_FILE).exists() {
+        return;
+    }
+    let mut entries: Vec<PathBuf> = match std::fs::read_dir(dir).and_then(|rd| rd.map(|e| e.map(|e| e.path())).collect()) {
+        Ok(v) => v,
+        Err(e) => {
+            found.push((dir.to_path_buf(), Err(DataError::io(dir, e))));
+            return;
+        }
+    };
+    entries.sort();
+    let ext = |p: &Path| p.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if entries.iter().any(|p| p.is_file() && ext(p).as_deref() == Some("obj")) {
+        found.push((dir.to_path_buf(), Format::from_path(dir)));
+    }
+    for p in entries {
+        if p.is_dir() {
+            walk(&p, out, found);
+        } else if matches!(ext(&p).as_deref(), Some("bin" | "pkl" | "pickle" | "gltf" | "glb")) {
+            let format = Format::from_path(&p);
+            found.push((p, format));
+        }
+    }
+}
+
+/// The reason text of a rejection: `field: reason`, prefixed by the file when it is not the source itself.
+fn reason(e: &DataError, source: &str) -> String {
+    if e.path == source { format!("{}: {}", e.field, e.reason) } else { e.to_string() }
+}
+
+fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
+    let Job::File { source, path, format } = job else {
+        return Outcome::Rejected("not a file".into());
+    };
+    if let Err(e) = format {
+        return Outcome::Rejected(reason(e, source));
+    }
+    let mut clip = match formats::read_clip(path) {
+        Ok(c) => c,
+        Err(e) => return Outcome::Rejected(reason(&e, source)),
+    };
+    clip.source = source.clone();
+    if let Weld::Eps(eps) = opts.weld {
+        clip = preprocess::weld(&clip, eps);
+    }
+    if let Err(e) = opts.filter.check(&clip) {
+        return Outcome::Rejected(reason(&e, source));
+    }
+    if clip.frames < opts.frames {
+        return Outcome::Rejected(format!(
+            "frames: clip {} has {} frames, fewer than the window length {}",
+            clip.id, clip.frames, opts.frames
+        ));
+    }
+    Outcome::Clips(preprocess_windows(&clip, opts.frames, opts.stride, opts.p))
+}
+
+/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 (SPEC §2.5)
+/// and assign the split of the clip's object (SPEC §2.2). Returns each window with its object uid.
+fn preprocess_windows(clip: &Clip, frames: usize, stride: usize, p: usize) -> Vec<(StoredClip, String)> {
+    // The uid of the whole clip, so every window of one animation shares its split.
+    let object = object_uid(&clip.id).to_owned();
+    let split = Split::of_object(&object, SPLIT_SEED);
+    preprocess::windows(clip, frames, stride)
+        .iter()
+        .map(|w| {
+            let (clip, normalization) = preprocess::normalize(w);
+            let fps = farthest_point_sampling(clip.frame(0), p);
+            (StoredClip { clip, fps, normalization, split }, object.clone())
+        })
+        .collect()
+}
+
+/// The index row of a stored clip; called after [`StoreWriter::append`] accepted it, which checked that the
+/// counts fit in u32.
+fn ok_row(c: &StoredClip, format: &str, object: String) -> IndexRow {
+    let to_u32 = |v: usize| Some(v as u32);
+    IndexRow {
+        id: c.clip.id.clone(),
+        source: c.clip.source.clone(),
+        format: format.to_owned(),
+        frames: to_u32(c.clip.frames),
+        vertices: to_u32(c.clip.n_vertices),
+        faces: to_u32(c.clip.faces.len()),
+        caption: c.clip.caption.clone(),
+        split: Some(c.split),
+        status: Status::Ok,
+        reason: String::new(),
+        object,
+    }
+}
+
+fn rejected_row(job: &Job, reason: String) -> IndexRow {
+    let source = job.source().to_owned();
+    let id = Path::new(&source).file_name().map_or_else(|| source.clone(), |n| n.to_string_lossy().into_owned());
+    IndexRow {
+        object: object_uid(&id).to_owned(),
+        id,
+        source,
+        format: job.format_name().to_owned(),
+        frames: None,
+        vertices: None,
+        faces: None,
+        caption: String::new(),
+        split: None,
+        status: Status::Rejected,
+        reason,
+    }
+}
+
+/// Sources processed in parallel per chunk, written in order.
+const CHUNK: usize = 64;
+
+/// Rewrite the store in `out` from the kept part of `existing` plus the outcome of `jobs`.
+fn run_jobs(
+    out: &Path,
+    existing: Option<(Store, Vec<IndexRow>)>,
+    jobs: &[Job],
+    frames: usize,
+    p: usize,
+    progress: Progress,
+    process: impl Fn(&Job) -> Outcome + Sync,
+) -> Result<ImportReport> {
+    let replaced: HashSet<&str> = jobs.iter().map(Job::source).collect();
+    let mut writer = StoreWriter::create(&out.join(CLIPS_FILE), frames, p)?;
+    let mut ok_rows = Vec::new();
+    let mut rejected_rows = Vec::new();
+    let mut kept = 0;
+    if let Some((store, rows)) = existing {
+        let (old_ok, old_rejected): (Vec<IndexRow>, Vec<IndexRow>) = rows.into_iter().partition(|r| r.status == Status::Ok);
+        for (i, row) in old_ok.into_iter().enumerate() {
+            if replaced.contains(row.source.as_str()) {
+                continue;
+            }
+            let raw = store.raw(i)?;
+            let id = record_id(&raw);
+            if id != Some(row.id.as_str()) {
+                return Err(DataError::new(
+                    out,
+                    "index.parquet",
+                    format!("row {i} names clip {:?} but clips.bin holds {id:?} there: the store is inconsistent", row.id),
+                ));
+            }
+            writer.append_encoded(&raw, store.split(i)?)?;
+            ok_rows.push(row);
+            kept += 1;
+        }
+        rejected_rows.extend(old_rejected.into_iter().filter(|r| !replaced.contains(r.source.as_str())));
+    }
+    let mut rejected = Vec::new();
+    let mut added = 0;
+    for (c, chunk) in jobs.chunks(CHUNK).enumerate() {
+        let outcomes: Vec<Outcome> = chunk.par_iter().map(&process).collect();
+        for (job, outcome) in chunk.iter().zip(outcomes) {
+            match outcome {
+                Outcome::Clips(clips) => {
+                    for (clip, object) in clips {
+                        writer.append(&clip)?;
+                        ok_rows.push(ok_row(&clip, job.format_name(), object));
+                        added += 1;
+                    }
+                }
+                Outcome::Rejected(reason) => {
+                    rejected.push(Rejected { source: job.source().to_owned(), reason: reason.clone() });
+                    rejected_rows.push(rejected_row(job, reason));
+                }
+            }
+        }
+        if let Some(f) = progress {
+            f((c * CHUNK + chunk.len()).min(jobs.len()), jobs.len());
+        }
+    }
+    writer.finish()?;
+    let val = ok_rows.iter().filter(|r| r.split == Some(Split::Val)).count();
+    let total = ok_rows.len();
+    ok_rows.extend(rejected_rows);
+    write_index(out, &ok_rows)?;
+    Ok(ImportReport { dir: out.to_path_buf(), sources: jobs.len(), added, kept, total, train: total - val, val, rejected })
+}
+
+/// The id at the start of an encoded record, if it is well formed.
+fn record_id(raw: &[u8]) -> Option<&str> {
+    let len = u32::from_le_bytes(raw.get(..4)?.try_into().ok()?) as usize;
+    std::str::from_utf8(raw.get(4..4 + len)?).ok()
+}

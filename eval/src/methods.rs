@@ -1,0 +1,353 @@
+//! Completion methods on one protocol (SPEC §5, §6.1): every method fills the non-keyframes of a normalised clip
+//! through the same [`Method::complete`] call, so all are scored identically on the same manifest.
+//!
+//! Methods: keyframe-conditioned RF (ours, (R3)–(R6)), non-keyframe RF with sampling-time replacement (the
+//! paper's Baseline, (R7)–(R8)), SceneMI-style impute-until-τ* with clean or noisy keyframes ((R9), §5.4), linear
+//! interpolation in vertex and latent space ((L1), §5.2) and the static nearest keyframe. BD-LSTM (§5.3) is a later
+//! variant of [`MethodKind`].
+
+use std::fmt;
+
+use any4d_data::rng::{Rng, rng};
+use any4d_data::{Clip, DataError};
+use serde::{Deserialize, Serialize};
+
+use crate::baselines::VertexBaseline;
+use crate::metrics::{ClipMetrics, Motion, evaluate_clip};
+
+type Result<T, E = DataError> = std::result::Result<T, E>;
+
+/// Standard deviation of the SceneMI keyframe noise at level l = 1, normalised units (SPEC §5.4: std l · 0.02).
+pub const KEYFRAME_NOISE_STD: f32 = 0.02;
+/// RNG stream of the keyframe noise, distinct from the sampler's streams.
+const KEYFRAME_NOISE_STREAM: u64 = 0x6e6f_6973;
+
+/// Which keyframes a method is given (SPEC §5.4: evaluate with clean keyframes and noisy ones at l = 1).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum KeyframeNoise {
+    /// The ground-truth keyframe meshes.
+    Clean,
+    /// Keyframe vertices + i.i.d. N(0, (level · 0.02)²); the first and last frames stay clean.
+    Noisy { level: f32 },
+}
+
+/// The methods of the evaluation protocol, by name (what a config or the CLI selects).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum MethodKind {
+    /// Keyframe-conditioned RF, 221 input channels, (R3)–(R6) (ours).
+    KeyframeRf,
+    /// Non-keyframe RF with sampling-time replacement (R7)–(R8) (the paper's "Baseline").
+    ReplacementRf,
+    /// SceneMI-style imputation until τ* (R9) with clean or noisy keyframes.
+    ImputeUntil {
+        tau_star: f32,
+        keyframes: KeyframeNoise,
+    },
+    /// (L1) in normalised vertex space.
+    Lerp,
+    /// (L1) between keyframe latents, then decoded (`lerp_space = "latent"`).
+    LerpLatent,
+    /// Hold the nearest keyframe (ties to the earlier one).
+    StaticNearest,
+}
+
+impl MethodKind {
+    /// Label used in tables, file names and manifests: `keyframe_rf`, `replacement_rf`, `impute_until_0.98_noisy1`, …
+    pub fn label(&self) -> String {
+        match self {
+            MethodKind::KeyframeRf => "keyframe_rf".into(),
+            MethodKind::ReplacementRf => "replacement_rf".into(),
+            MethodKind::ImputeUntil {
+                tau_star,
+                keyframes: KeyframeNoise::Clean,
+            } => format!("impute_until_{tau_star}"),
+            MethodKind::ImputeUntil {
+                tau_star,
+                keyframes: KeyframeNoise::Noisy { level },
+            } => {
+                format!("impute_until_{tau_star}_noisy{level}")
+            }
+            MethodKind::Lerp => "lerp".into(),
+            MethodKind::LerpLatent => "lerp_latent".into(),
+            MethodKind::StaticNearest => "static_nearest".into(),
+        }
+    }
+
+    /// Parse a label written by [`MethodKind::label`] (plus `impute_until` = τ* 0.98, clean).
+    pub fn parse(s: &str) -> Result<Self> {
+        let bad = |reason: String| DataError::new("method", s, reason);
+        Ok(match s {
+            "keyframe_rf" | "ours" => MethodKind::KeyframeRf,
+            "replacement_rf" | "baseline" => MethodKind::ReplacementRf,
+            "lerp" => MethodKind::Lerp,
+            "lerp_latent" => MethodKind::LerpLatent,
+            "static_nearest" => MethodKind::StaticNearest,
+            "impute_until" => MethodKind::ImputeUntil {
+                tau_star: 0.98,
+                keyframes: KeyframeNoise::Clean,
+            },
+            other => {
+                let rest = other.strip_prefix("impute_until_").ok_or_else(|| {
+                    bad("unknown method; expected keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest or \
+                         impute_until[_<tau*>[_noisy<level>]]"
+                        .into())
+                })?;
+                let (tau, noise) = match rest.split_once("_noisy") {
+                    Some((t, l)) => (t, Some(l)),
+                    None => (rest, None),
+                };
+                let tau_star: f32 = tau.parse().map_err(|e| bad(format!("τ* {tau:?}: {e}")))?;
+                if !(0.0..=1.0).contains(&tau_star) {
+                    return Err(bad(format!("τ* = {tau_star} is outside [0, 1]")));
+                }
+                let keyframes = match noise {
+                    None => KeyframeNoise::Clean,
+                    Some(l) => KeyframeNoise::Noisy {
+                        level: l
+                            .parse()
+                            .map_err(|e| bad(format!("noise level {l:?}: {e}")))?,
+                    },
+                };
+                MethodKind::ImputeUntil {
+                    tau_star,
+                    keyframes,
+                }
+            }
+        })
+    }
+
+    /// Whether the method needs a trained network (RF and/or VAE) rather than keyframes alone.
+    pub fn needs_model(&self) -> bool {
+        !matches!(self, MethodKind::Lerp | MethodKind::StaticNearest)
+    }
+}
+
+impl fmt::Display for MethodKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.label())
+    }
+}
+
+/// A way to fill the non-keyframes of a window.
+pub trait Method {
+    /// What the method is.
+    fn kind(&self) -> MethodKind;
+
+    /// Predict every frame of `clip` from its keyframes. `clip` is in the normalised frame of its frame 0
+    /// (SPEC §1.5); only the frames listed in `keyframes` may be read (callers pass [`hide_non_keyframes`] output).
+    /// `seed` fixes the sampler noise.
+    ///
+    /// # Shapes
+    /// `clip.vertices`: `[T, N]` rows of xyz; returns `[T, N]` rows.
+    fn complete(
+        &self,
+        clip: &Clip,
+        keyframes: &[usize],
+        caption: &str,
+        seed: u64,
+    ) -> Result<Vec<[f32; 3]>>;
+}
+
+/// The training-free vertex-space methods: (L1) and the static nearest keyframe.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct VertexMethod(pub VertexBaseline);
+
+impl Method for VertexMethod {
+    fn kind(&self) -> MethodKind {
+        match self.0 {
+            VertexBaseline::Linear => MethodKind::Lerp,
+            VertexBaseline::NearestKeyframe => MethodKind::StaticNearest,
+        }
+    }
+
+    fn complete(
+        &self,
+        clip: &Clip,
+        keyframes: &[usize],
+        _caption: &str,
+        _seed: u64,
+    ) -> Result<Vec<[f32; 3]>> {
+        let gt = Motion::from_clip(clip)
+            .map_err(|e| DataError::new(&clip.id, "vertices", e.to_string()))?;
+        self.0
+            .complete(gt, keyframes)
+            .map_err(|e| DataError::new(&clip.id, self.kind().label(), e.to_string()))
+    }
+}
+
+/// A trained generator of whole windows: encode the keyframes, sample, decode (SPEC §4.6, §5.1, §5.4). The model
+/// crate's samplers are wrapped in this by the caller that loads the checkpoints.
+pub trait WindowSampler {
+    /// Predict every frame of a normalised window from its keyframes.
+    ///
+    /// # Shapes
+    /// `clip.vertices`: `[T, N]` rows; returns `[T, N]` rows.
+    fn sample(
+        &self,
+        clip: &Clip,
+        keyframes: &[usize],
+        caption: &str,
+        seed: u64,
+    ) -> Result<Vec<[f32; 3]>>;
+}
+
+/// An RF method (ours, the replacement baseline or impute-until-τ*) around its sampler. It applies the evaluation
+/// assembly of SPEC §4.6 ("keyframe frames are replaced by ground-truth meshes"), so keyframes come back exactly,
+/// and adds SceneMI keyframe noise first when its kind asks for it.
+pub struct RfMethod<S> {
+    kind: MethodKind,
+    sampler: S,
+}
+
+impl<S: WindowSampler> RfMethod<S> {
+    /// Errors for kinds that are not RF methods.
+    pub fn new(kind: MethodKind, sampler: S) -> Result<Self> {
+        match kind {
+            MethodKind::KeyframeRf
+            | MethodKind::ReplacementRf
+            | MethodKind::ImputeUntil { .. }
+            | MethodKind::LerpLatent => Ok(Self { kind, sampler }),
+            other => Err(DataError::new(
+                "method",
+                other.label(),
+                "is not a model-based method",
+            )),
+        }
+    }
+}
+
+impl<S: WindowSampler> Method for RfMethod<S> {
+    fn kind(&self) -> MethodKind {
+        self.kind
+    }
+
+    fn complete(
+        &self,
+        clip: &Clip,
+        keyframes: &[usize],
+        caption: &str,
+        seed: u64,
+    ) -> Result<Vec<[f32; 3]>> {
+        let given = match self.kind {
+            MethodKind::ImputeUntil {
+                keyframes: KeyframeNoise::Noisy { level },
+                ..
+            } => noisy_keyframes(clip, keyframes, level, seed),
+            _ => clip.clone(),
+        };
+        let mut out = self.sampler.sample(&given, keyframes, caption, seed)?;
+        let n = clip.n_vertices;
+        if out.len() != clip.frames * n {
+            return Err(DataError::new(
+                &clip.id,
+                self.kind.label(),
+                format!(
+                    "sampler returned {} rows, expected {} frames × {n}",
+                    out.len(),
+                    clip.frames
+                ),
+            ));
+        }
+        // Evaluation assembly (SPEC §4.6): keyframe frames are the given keyframe meshes.
+        for &f in keyframes.iter().filter(|&&f| f < clip.frames) {
+            out[f * n..(f + 1) * n].copy_from_slice(given.frame(f));
+        }
+        Ok(out)
+    }
+}
+
+/// A copy of `clip` in which every non-keyframe is replaced by frame 0 (the reference mesh), so a method cannot
+/// read ground truth it is not given. Frame 0 is always known: it is the reference mesh (SPEC §1.2).
+pub fn hide_non_keyframes(clip: &Clip, keyframes: &[usize]) -> Clip {
+    let mut out = clip.clone();
+    let reference = clip.frame(0).to_vec();
+    for f in (1..clip.frames).filter(|f| !keyframes.contains(f)) {
+        out.frame_mut(f).copy_from_slice(&reference);
+    }
+    out
+}
+
+/// SceneMI keyframe noise (SPEC §5.4): each interior keyframe's vertices + i.i.d. N(0, (level · 0.02)²), drawn from
+/// `rng(seed, KEYFRAME_NOISE_STREAM)`; frames 0 and T − 1 stay clean. Box–Muller from uniform draws.
+pub fn noisy_keyframes(clip: &Clip, keyframes: &[usize], level: f32, seed: u64) -> Clip {
+    let mut out = clip.clone();
+    let std = level * KEYFRAME_NOISE_STD;
+    let mut r = rng(seed, KEYFRAME_NOISE_STREAM);
+    let last = clip.frames - 1;
+    for &f in keyframes
+        .iter()
+        .filter(|&&f| f != 0 && f != last && f < clip.frames)
+    {
+        for p in out.frame_mut(f) {
+            for c in p.iter_mut() {
+                let (u1, u2): (f64, f64) =
+                    (r.random::<f64>().max(f64::MIN_POSITIVE), r.random::<f64>());
+                let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+                *c += std * g as f32;
+            }
+        }
+    }
+    out
+}
+
+/// One scored generation: the method's prediction and its metrics (SPEC §6.1 assembly and (E1)–(E7)).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scored {
+    /// Raw prediction `[T, N]` rows (before keyframe replacement).
+    pub prediction: Vec<[f32; 3]>,
+    pub metrics: ClipMetrics,
+}
+
+/// Run `method` on `gt` (normalised) with `keyframes` and score it against `gt`: the method sees only the
+/// keyframes, its output is checked for shape and finiteness, then scored by [`evaluate_clip`].
+///
+/// # Shapes
+/// `gt.vertices`: `[T, N]` rows; `Scored::prediction` the same.
+pub fn complete_and_score(
+    method: &dyn Method,
+    gt: &Clip,
+    keyframes: &[usize],
+    caption: &str,
+    seed: u64,
+) -> Result<Scored> {
+    let label = method.kind().label();
+    let visible = hide_non_keyframes(gt, keyframes);
+    let prediction = method.complete(&visible, keyframes, caption, seed)?;
+    let pred = Motion::new(&prediction, gt.frames, gt.n_vertices)
+        .map_err(|e| DataError::new(&gt.id, &label, format!("prediction: {e}")))?;
+    let truth =
+        Motion::from_clip(gt).map_err(|e| DataError::new(&gt.id, "vertices", e.to_string()))?;
+    let metrics = evaluate_clip(pred, truth, keyframes)
+        .map_err(|e| DataError::new(&gt.id, &label, e.to_string()))?;
+    Ok(Scored {
+        prediction,
+        metrics,
+    })
+}
+
+/// The metrics of one clip as (name, value) pairs, for [`crate::tables::ClipRecord`].
+pub fn metrics_map(m: &ClipMetrics) -> std::collections::BTreeMap<String, f64> {
+    let fields = [
+        ("rmse", m.rmse),
+        ("mae_elem", m.mae_elem),
+        ("chamfer", m.chamfer),
+        ("dtw", m.dtw),
+        ("jerk", m.jerk),
+        ("jerk_gt", m.jerk_gt),
+        ("jerk_ratio", m.jerk_ratio),
+        ("accel", m.accel),
+        ("accel_gt", m.accel_gt),
+        ("accel_ratio", m.accel_ratio),
+        ("energy", m.energy),
+        ("energy_gt", m.energy_gt),
+        ("energy_ratio", m.energy_ratio),
+        ("keyframe_rmse", m.keyframe_rmse),
+        ("mean_vertex_error", m.mean_vertex_error),
+    ];
+    fields
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect()
+}

@@ -1,0 +1,520 @@
+//! The evaluation protocol of SPEC §6.1: a manifest of fixed validation clips, nested keyframe sets per K_x
+//! (or every-r / Bernoulli-p placements, SPEC §8 X4) and noise seeds, shared by every method and saved as JSON.
+//! The items are read from a dataset store's validation split ([`StoreSource`]); 31-frame items join two
+//! clips that share a frame (SPEC §2.7).
+
+use std::path::Path;
+
+use any4d_data::keyframes::{KeyframeStrategy, sample_keyframes};
+use any4d_data::rng::{Rng, rng};
+use any4d_data::store::{Split, Status, Store, StoredClip, read_index};
+use any4d_data::{Clip, DataError};
+use serde::{Deserialize, Serialize};
+
+/// Manifest format version written by [`Manifest::save`]; [`Manifest::load`] rejects any other.
+pub const MANIFEST_VERSION: u32 = 1;
+/// The manifest seed of SPEC §6.1.
+pub const MANIFEST_SEED: u64 = 42;
+/// Stream label for the clip draw, so it never shares draws with the keyframe draws (streams 1 + position).
+const CLIP_STREAM: u64 = 0;
+
+type Result<T, E = DataError> = std::result::Result<T, E>;
+
+/// Where the keyframes of a test window sit (SPEC §6.1, §8 X4). First and last frames are always keyframes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum Placement {
+    /// K_x = 0..=k_extra_max extra frames drawn without replacement from {1..T−2}, nested across K_x (ours).
+    Random { k_extra_max: usize },
+    /// Every r-th frame: {0, r, 2r, …} ∪ {T−1}.
+    EveryR { r: usize },
+    /// Each interior frame independently with probability p.
+    Bernoulli { p: f32 },
+    /// Keyframes every `stride` frames, e.g. {0, 15, 30} for the 31-frame rollout (SPEC §7).
+    Stride { stride: usize },
+}
+
+impl Placement {
+    /// Short label for tables and file names: `random`, `every_4`, `bernoulli_0.25`, `stride_15`.
+    pub fn label(&self) -> String {
+        match self {
+            Placement::Random { .. } => "random".into(),
+            Placement::EveryR { r } => format!("every_{r}"),
+            Placement::Bernoulli { p } => format!("bernoulli_{p}"),
+            Placement::Stride { stride } => format!("stride_{stride}"),
+        }
+    }
+}
+
+/// A clip of the dataset store: its index there and its id.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ClipRef {
+    /// Index in the dataset store (`Store::get(index)`).
+    pub index: usize,
+    /// Clip id (AAM form `<uid>_offset<k>_<start>-<end>` when known).
+    pub id: String,
+}
+
+/// One evaluation item: a 16-frame clip, or two clips sharing their boundary frame (31 frames, SPEC §2.7).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ManifestClip {
+    /// The clip, or the first clip of a long-horizon pair.
+    pub clip: ClipRef,
+    /// The second clip of a long-horizon pair (its frame 0 is the first clip's last frame).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub next: Option<ClipRef>,
+    /// Keyframe sets, zero-based frame indices, sorted. For `Placement::Random`, entry k is the set for K_x = k
+    /// and each set contains the previous one; other placements have one set.
+    pub keyframes: Vec<Vec<usize>>,
+}
+
+/// The fixed protocol: which clips, which keyframes, which noise seeds (SPEC §6.1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// [`MANIFEST_VERSION`].
+    pub version: u32,
+    /// Seed of the clip and keyframe draws (42).
+    pub seed: u64,
+    /// Frames per evaluation item: 16 (short horizon) or 31 (two windows sharing frame 15).
+    pub frames: usize,
+    /// How the keyframe sets were drawn.
+    pub placement: Placement,
+    /// Base noise seeds; generation for item i with base s uses [`noise_seed`]`(s, i)`.
+    pub seeds: Vec<u64>,
+    /// The dataset the clips come from (a directory or description).
+    pub data: String,
+    /// The split the clips were drawn from (`validation`).
+    pub split: String,
+    /// The evaluation items, in draw order.
+    pub clips: Vec<ManifestClip>,
+}
+
+/// What to draw in [`Manifest::build`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ManifestOptions {
+    /// Number of items (100 in SPEC §6.1); fewer candidates is an error.
+    pub n_clips: usize,
+    /// Draw seed (42).
+    pub seed: u64,
+    /// Frames per item (16 or 31).
+    pub frames: usize,
+    /// Keyframe placement.
+    pub placement: Placement,
+    /// Base noise seeds (`[42]`; SPEC §8 X8: `[42, 43, 44, 45, 46]`).
+    pub seeds: Vec<u64>,
+    /// Dataset description stored in the manifest.
+    pub data: String,
+    /// Split name stored in the manifest.
+    pub split: String,
+}
+
+impl ManifestOptions {
+    /// The short-horizon protocol of P-Table 1: 100 clips, 16 frames, K_x = 0..3 nested, seed 42, noise seed 42.
+    pub fn table1(data: impl Into<String>) -> Self {
+        Self {
+            n_clips: 100,
+            seed: MANIFEST_SEED,
+            frames: 16,
+            placement: Placement::Random { k_extra_max: 3 },
+            seeds: vec![MANIFEST_SEED],
+            data: data.into(),
+            split: "validation".into(),
+        }
+    }
+
+    /// The long-horizon protocol of P-Table 2: 100 pairs, 31 frames, keyframes {0, 15, 30}.
+    pub fn table2(data: impl Into<String>) -> Self {
+        Self {
+            frames: 31,
+            placement: Placement::Stride { stride: 15 },
+            ..Self::table1(data)
+        }
+    }
+}
+
+/// A candidate evaluation item before keyframes are drawn.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Candidate {
+    pub clip: ClipRef,
+    pub next: Option<ClipRef>,
+}
+
+impl Manifest {
+    /// Draw `opts.n_clips` items from `candidates` (a seeded shuffle, draw order kept) and their keyframe sets.
+    /// The error names `source` (the dataset) when there are too few candidates or the options are invalid.
+    pub fn build(candidates: &[Candidate], opts: &ManifestOptions, source: &str) -> Result<Self> {
+        let bad = |field: &str, reason: String| DataError::new(source, field, reason);
+        if candidates.len() < opts.n_clips {
+            return Err(bad(
+                "clips",
+                format!(
+                    "{} candidate clips in the {} split, the protocol needs {}",
+                    candidates.len(),
+                    opts.split,
+                    opts.n_clips
+                ),
+            ));
+        }
+        check_placement(opts.placement, opts.frames).map_err(|r| bad("placement", r))?;
+        if opts.seeds.is_empty() {
+            return Err(bad("seeds", "at least one noise seed is needed".into()));
+        }
+        let mut order: Vec<usize> = (0..candidates.len()).collect();
+        let mut r = rng(opts.seed, CLIP_STREAM);
+        // Partial Fisher–Yates: the first n positions are a uniform draw without replacement.
+        for i in 0..opts.n_clips {
+            let j = r.random_range(i..order.len());
+            order.swap(i, j);
+        }
+        let clips = order[..opts.n_clips]
+            .iter()
+            .enumerate()
+            .map(|(pos, &c)| ManifestClip {
+                clip: candidates[c].clip.clone(),
+                next: candidates[c].next.clone(),
+                keyframes: draw_keyframes(opts.placement, opts.frames, opts.seed, pos as u64),
+            })
+            .collect();
+        Ok(Self {
+            version: MANIFEST_VERSION,
+            seed: opts.seed,
+            frames: opts.frames,
+            placement: opts.placement,
+            seeds: opts.seeds.clone(),
+            data: opts.data.clone(),
+            split: opts.split.clone(),
+            clips,
+        })
+    }
+
+    /// Write the manifest as pretty JSON (temp file, then rename).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let text = serde_json::to_string_pretty(self)
+            .map_err(|e| DataError::new(path, "manifest", e.to_string()))?;
+        write_atomic(path, text.as_bytes())
+    }
+
+    /// Read and validate a manifest; errors name the file, the field (e.g. `clips[3].keyframes[1]`) and the reason.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
+        let m: Manifest = serde_json::from_str(&text)
+            .map_err(|e| DataError::new(path, format!("line {}", e.line()), e.to_string()))?;
+        m.validate().map_err(|e| e.at(path))?;
+        Ok(m)
+    }
+
+    /// Checks version, placement, seeds and every keyframe set (sorted, unique, in range, first and last
+    /// frame present, nested with K_x + 2 entries for `Random`).
+    pub fn validate(&self) -> Result<()> {
+        let bad = |field: String, reason: String| Err(DataError::new("manifest", field, reason));
+        if self.version != MANIFEST_VERSION {
+            return bad(
+                "version".into(),
+                format!("is {}, this build reads {MANIFEST_VERSION}", self.version),
+            );
+        }
+        if let Err(r) = check_placement(self.placement, self.frames) {
+            return bad("placement".into(), r);
+        }
+        if self.seeds.is_empty() {
+            return bad("seeds".into(), "is empty".into());
+        }
+        for (i, item) in self.clips.iter().enumerate() {
+            let expected_sets = match self.placement {
+                Placement::Random { k_extra_max } => k_extra_max + 1,
+                _ => 1,
+            };
+            if item.keyframes.len() != expected_sets {
+                return bad(
+                    format!("clips[{i}].keyframes"),
+                    format!(
+                        "holds {} sets, placement {} needs {expected_sets}",
+                        item.keyframes.len(),
+                        self.placement.label()
+                    ),
+                );
+            }
+            for (k, set) in item.keyframes.iter().enumerate() {
+                if let Err(r) = check_set(set, self.frames) {
+                    return bad(format!("clips[{i}].keyframes[{k}]"), r);
+                }
+                if let Placement::Random { .. } = self.placement {
+                    if set.len() != k + 2 {
+                        return bad(
+                            format!("clips[{i}].keyframes[{k}]"),
+                            format!("has {} frames, K_x = {k} needs {}", set.len(), k + 2),
+                        );
+                    }
+                    if k > 0 && !item.keyframes[k - 1].iter().all(|f| set.contains(f)) {
+                        return bad(
+                            format!("clips[{i}].keyframes[{k}]"),
+                            format!("does not contain the K_x = {} set", k - 1),
+                        );
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The K_x value (extra keyframes beyond first and last) of keyframe set `set` of item `item`.
+    pub fn k_extra(&self, item: usize, set: usize) -> usize {
+        self.clips[item].keyframes[set].len().saturating_sub(2)
+    }
+}
+
+/// The noise seed of item `clip_index` under base seed `base` (SPEC §6.1: derived from (42, clip index)).
+/// SplitMix64 of the pair, so neighbouring items and seeds get unrelated streams; the same for every K_x.
+pub fn noise_seed(base: u64, clip_index: usize) -> u64 {
+    let mut z = base.wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (clip_index as u64).wrapping_add(0xD1B5_4A32_D192_ED03);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Keyframe sets of one item (position `pos` in draw order; its own RNG stream, so items are independent),
+/// drawn with the data crate's samplers; first and last frames are forced for every placement.
+fn draw_keyframes(placement: Placement, frames: usize, seed: u64, pos: u64) -> Vec<Vec<usize>> {
+    let item_rng = rng(seed, 1 + pos);
+    let draw = |strategy: KeyframeStrategy| {
+        // A fresh copy of the item's generator per set: FirstLastPlus sets are then nested across K_x.
+        let mask = sample_keyframes(&strategy, frames, &mut item_rng.clone());
+        let mut set: Vec<usize> = (0..frames)
+            .filter(|&f| mask[f] || f == 0 || f == frames - 1)
+            .collect();
+        set.dedup();
+        set
+    };
+    match placement {
+        Placement::Random { k_extra_max } => (0..=k_extra_max)
+            .map(|k| draw(KeyframeStrategy::FirstLastPlus(k)))
+            .collect(),
+        Placement::EveryR { r } => vec![draw(KeyframeStrategy::Uniform(r))],
+        Placement::Stride { stride } => vec![draw(KeyframeStrategy::Uniform(stride))],
+        Placement::Bernoulli { p } => vec![draw(KeyframeStrategy::Bernoulli(p))],
+    }
+}
+
+fn check_placement(placement: Placement, frames: usize) -> std::result::Result<(), String> {
+    if frames < 2 {
+        return Err(format!("frames = {frames}, at least 2 are needed"));
+    }
+    match placement {
+        Placement::Random { k_extra_max } if k_extra_max > frames - 2 => Err(format!(
+            "k_extra_max = {k_extra_max} exceeds the {} interior frames",
+            frames - 2
+        )),
+        Placement::EveryR { r: 0 } | Placement::Stride { stride: 0 } => {
+            Err("the step must be at least 1".into())
+        }
+        Placement::Bernoulli { p } if !(0.0..=1.0).contains(&p) => {
+            Err(format!("p = {p} is outside [0, 1]"))
+        }
+        _ => Ok(()),
+    }
+}
+
+fn check_set(set: &[usize], frames: usize) -> std::result::Result<(), String> {
+    if set.first() != Some(&0) || set.last() != Some(&(frames - 1)) {
+        return Err(format!(
+            "{set:?} must start with frame 0 and end with frame {}",
+            frames - 1
+        ));
+    }
+    if set.windows(2).any(|w| w[0] >= w[1]) {
+        return Err(format!("{set:?} is not strictly increasing"));
+    }
+    Ok(())
+}
+
+/// Long-horizon candidates (SPEC §2.7): pairs of clips of one animation (same id up to the `_<start>-<end>`
+/// tail) where the second starts 15 frames after the first, so they share the first clip's last frame.
+/// Ids that do not follow the AAM form `<uid>_offset<k>_<start>-<end>` are skipped.
+pub fn long_horizon_pairs(clips: &[ClipRef]) -> Vec<Candidate> {
+    let parsed: Vec<Option<(&str, usize)>> = clips.iter().map(|c| split_start(&c.id)).collect();
+    let mut by_key: std::collections::HashMap<(&str, usize), usize> =
+        std::collections::HashMap::new();
+    for (i, p) in parsed.iter().enumerate() {
+        if let Some(key) = p {
+            by_key.insert(*key, i);
+        }
+    }
+    let mut out = Vec::new();
+    for (i, p) in parsed.iter().enumerate() {
+        if let Some((stem, start)) = p
+            && let Some(&j) = by_key.get(&(*stem, start + 15))
+        {
+            out.push(Candidate {
+                clip: clips[i].clone(),
+                next: Some(clips[j].clone()),
+            });
+        }
+    }
+    out
+}
+
+/// `uid_offset0_30-46` → (`uid_offset0`, 30).
+fn split_start(id: &str) -> Option<(&str, usize)> {
+    let (stem, range) = id.rsplit_once('_')?;
+    let (start, _end) = range.split_once('-')?;
+    match start.parse() {
+        Ok(s) => Some((stem, s)),
+        Err(_) => None, // not the AAM form: not a long-horizon candidate
+    }
+}
+
+/// Clips for the protocol: the validation split of a store.
+pub struct StoreSource {
+    store: Store,
+    val: Vec<ClipRef>,
+}
+
+impl StoreSource {
+    /// Open a store and list its validation clips from `index.parquet` (rows with status ok, in store order).
+    pub fn open(dir: &Path) -> Result<Self> {
+        let store = Store::open(dir)?;
+        let ok: Vec<_> = read_index(dir)?
+            .into_iter()
+            .filter(|r| r.status == Status::Ok)
+            .collect();
+        if ok.len() != store.len() {
+            return Err(DataError::new(
+                dir,
+                "index.parquet",
+                format!(
+                    "{} ok rows but clips.bin holds {} clips",
+                    ok.len(),
+                    store.len()
+                ),
+            ));
+        }
+        let val = ok
+            .into_iter()
+            .enumerate()
+            .filter(|(_, r)| r.split == Some(Split::Val))
+            .map(|(index, r)| ClipRef { index, id: r.id })
+            .collect();
+        Ok(Self { store, val })
+    }
+
+    /// Evaluation candidates: single validation clips when the store's clips are long enough for `frames`,
+    /// otherwise pairs of clips sharing their boundary frame (SPEC §2.7).
+    pub fn candidates(&self, frames: usize) -> Vec<Candidate> {
+        if self.store.frames() >= frames {
+            self.val
+                .iter()
+                .map(|c| Candidate {
+                    clip: c.clone(),
+                    next: None,
+                })
+                .collect()
+        } else {
+            long_horizon_pairs(&self.val)
+        }
+    }
+
+    /// The ground truth of a manifest item and its prompts (one per 16-frame clip), normalised by its frame 0.
+    pub fn item(&self, item: &ManifestClip, frames: usize) -> Result<(Clip, Vec<String>)> {
+        let first = self.store.get(item.clip.index)?;
+        check_id(&first.clip, &item.clip, self.store.dir())?;
+        match &item.next {
+            None => {
+                let c = first_frames(&first.clip, frames)?;
+                let caption = c.caption.clone();
+                Ok((c, vec![caption]))
+            }
+            Some(next) => {
+                let second = self.store.get(next.index)?;
+                check_id(&second.clip, next, self.store.dir())?;
+                let captions = vec![first.clip.caption.clone(), second.clip.caption.clone()];
+                let joined = join_shared_frame(&first, &second, self.store.dir())?;
+                Ok((any4d_data::preprocess::normalize(&joined).0, captions))
+            }
+        }
+    }
+}
+
+fn check_id(clip: &Clip, want: &ClipRef, dir: &Path) -> Result<()> {
+    if clip.id != want.id {
+        return Err(DataError::new(
+            dir,
+            format!("clip {}", want.index),
+            format!("is {:?}, the manifest names {:?}", clip.id, want.id),
+        ));
+    }
+    Ok(())
+}
+
+fn first_frames(clip: &Clip, frames: usize) -> Result<Clip> {
+    if clip.frames < frames {
+        return Err(DataError::new(
+            &clip.id,
+            "frames",
+            format!("{} frames, the protocol needs {frames}", clip.frames),
+        ));
+    }
+    Clip::new(
+        &clip.id,
+        clip.vertices[..frames * clip.n_vertices].to_vec(),
+        frames,
+        clip.n_vertices,
+        clip.faces.clone(),
+        &clip.caption,
+        &clip.source,
+    )
+}
+
+/// Two consecutive windows sharing a frame → one sequence without the duplicate (SPEC §2.7), in absolute
+/// coordinates (each stored window is normalised by its own frame 0; the stored (c, s) undo that).
+fn join_shared_frame(a: &StoredClip, b: &StoredClip, dir: &Path) -> Result<Clip> {
+    let (mut a_abs, mut b_abs) = (a.clip.clone(), b.clip.clone());
+    a.normalization.invert(&mut a_abs);
+    b.normalization.invert(&mut b_abs);
+    let pair = format!("{} + {}", a_abs.id, b_abs.id);
+    if a_abs.n_vertices != b_abs.n_vertices || a_abs.faces != b_abs.faces {
+        return Err(DataError::new(
+            dir,
+            pair,
+            "the pair does not share one mesh (vertex count or faces differ)",
+        ));
+    }
+    let n = a_abs.n_vertices;
+    let worst = a_abs
+        .frame(a_abs.frames - 1)
+        .iter()
+        .zip(b_abs.frame(0))
+        .map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0f32, f32::max))
+        .fold(0.0f32, f32::max);
+    if worst > 1e-4 * a.normalization.scale.max(f32::MIN_POSITIVE) {
+        return Err(DataError::new(
+            dir,
+            pair,
+            format!(
+                "last frame of the first and frame 0 of the second differ by {worst}: not a shared frame"
+            ),
+        ));
+    }
+    let mut vertices = a_abs.vertices.clone();
+    vertices.extend_from_slice(&b_abs.vertices[n..]);
+    Clip::new(
+        &a_abs.id,
+        vertices,
+        a_abs.frames + b_abs.frames - 1,
+        n,
+        a_abs.faces.clone(),
+        &a_abs.caption,
+        &a_abs.source,
+    )
+}
+
+/// Write `bytes` to `path` through a temporary file in the same folder and a rename.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = path.with_extension(format!(
+        "{}.tmp",
+        path.extension().and_then(|e| e.to_str()).unwrap_or("out")
+    ));
+    std::fs::write(&tmp, bytes).map_err(|e| DataError::io(&tmp, e))?;
+    std::fs::rename(&tmp, path).map_err(|e| DataError::io(path, e))
+}

@@ -1,0 +1,601 @@
+//! Paper-shaped result tables (SPEC §6.1, §6.4: P-Tables 1, 2, 4, 5): per-clip records to parquet, summaries to
+//! Markdown and CSV. Each metric is averaged over clips per seed, then reported as mean ± 95 % confidence
+//! half-width over seeds, t_{0.975, n−1} · sd / √n (Student t with n − 1 degrees of freedom, sample sd).
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use any4d_data::DataError;
+use polars::prelude::{Column, DataFrame, ParquetReader, ParquetWriter, SerReader};
+use serde::{Deserialize, Serialize};
+
+use crate::protocol::write_atomic;
+
+type Result<T, E = DataError> = std::result::Result<T, E>;
+
+/// Which paper table a protocol run reproduces.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TableKind {
+    /// P-Table 1: short horizon, 16 frames, K_x = 0..3; RMSE, Chamfer, DTW × 100.
+    Table1,
+    /// P-Table 2: long horizon, 31 frames, keyframes {0, 15, 30}; RMSE, Chamfer, DTW × 100, seam jerk.
+    Table2,
+    /// P-Table 4: end-to-end seconds per vertex count and frame count.
+    Table4,
+    /// P-Table 5: VAE reconstruction RMSE and Chamfer over all frames, unscaled.
+    Table5,
+}
+
+impl TableKind {
+    /// Title line of the Markdown summary.
+    pub fn title(&self) -> &'static str {
+        match self {
+            TableKind::Table1 => {
+                "Table 1: short-horizon completion (16 frames, K_x extra keyframes)"
+            }
+            TableKind::Table2 => {
+                "Table 2: long-horizon completion (31 frames, two-stage rollout, keyframes 0/15/30)"
+            }
+            TableKind::Table4 => "Table 4: end-to-end inference seconds (encode → sample → decode)",
+            TableKind::Table5 => "Table 5: VAE reconstruction on validation clips",
+        }
+    }
+
+    /// The metric columns of the table: (record key, header, scale).
+    pub fn columns(&self) -> &'static [MetricColumn] {
+        const SHORT: &[MetricColumn] = &[
+            MetricColumn {
+                key: "rmse",
+                header: "RMSE ×100",
+                scale: 100.0,
+            },
+            MetricColumn {
+                key: "chamfer",
+                header: "Chamfer ×100",
+                scale: 100.0,
+            },
+            MetricColumn {
+                key: "dtw",
+                header: "DTW ×100",
+                scale: 100.0,
+            },
+            MetricColumn {
+                key: "mae_elem",
+                header: "MAE ×100",
+                scale: 100.0,
+            },
+            MetricColumn {
+                key: "jerk_ratio",
+                header: "jerk / GT",
+                scale: 1.0,
+            },
+            MetricColumn {
+                key: "energy_ratio",
+                header: "motion / GT",
+                scale: 1.0,
+            },
+        ];
+        const LONG: &[MetricColumn] = &[
+            MetricColumn {
+                key: "rmse",
+                header: "RMSE ×100",
+                scale: 100.0,
+            },
+            MetricColumn {
+                key: "chamfer",
+                header: "Chamfer ×100",
+                scale: 100.0,
+            },
+            MetricColumn {
+                key: "dtw",
+                header: "DTW ×100",
+                scale: 100.0,
+            },
+            MetricColumn {
+                key: "jerk_ratio",
+                header: "jerk / GT",
+                scale: 1.0,
+            },
+            MetricColumn {
+                key: "seam_jerk_ratio",
+                header: "seam jerk / GT",
+                scale: 1.0,
+            },
+        ];
+        const VAE: &[MetricColumn] = &[
+            MetricColumn {
+                key: "rmse",
+                header: "RMSE",
+                scale: 1.0,
+            },
+            MetricColumn {
+                key: "chamfer",
+                header: "Chamfer",
+                scale: 1.0,
+            },
+        ];
+        match self {
+            TableKind::Table1 => SHORT,
+            TableKind::Table2 => LONG,
+            TableKind::Table4 => &[],
+            TableKind::Table5 => VAE,
+        }
+    }
+}
+
+/// One metric column of a summary table.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MetricColumn {
+    /// Key in [`ClipRecord::metrics`].
+    pub key: &'static str,
+    /// Column header.
+    pub header: &'static str,
+    /// Multiplier applied when printing (100 where the paper scales).
+    pub scale: f64,
+}
+
+/// The metrics of one (method, keyframe set, seed, clip) generation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClipRecord {
+    /// Method label (e.g. `keyframe_rf`).
+    pub method: String,
+    /// Placement label (`random`, `every_4`, …).
+    pub placement: String,
+    /// Extra keyframes K_x (number of keyframes − 2).
+    pub k_extra: usize,
+    /// Base noise seed.
+    pub seed: u64,
+    /// Position of the item in the manifest.
+    pub item: usize,
+    /// Clip id.
+    pub clip_id: String,
+    /// Metric name → value (raw, unscaled). Every record of one table has the same names.
+    pub metrics: BTreeMap<String, f64>,
+}
+
+/// Names the method, checkpoint, text encoder and data behind a table (printed in its header).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct TableHeader {
+    /// Dataset directory or description, and split.
+    pub data: String,
+    /// Manifest file the clips and keyframes come from.
+    pub manifest: String,
+    /// Text encoder of the RF runs (`scratch`, `minilm`, `clip_l14`, or `none`).
+    pub text_encoder: String,
+    /// Method label → checkpoint (run folder / step) or `none` for training-free methods.
+    pub checkpoints: BTreeMap<String, String>,
+    /// Backend and device (P-Table 4).
+    pub device: String,
+}
+
+/// Mean and 95 % confidence half-width over seeds (`None` with one seed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    pub mean: f64,
+    pub ci95: Option<f64>,
+    /// Number of seeds.
+    pub n: usize,
+}
+
+/// One summary row: a method at one keyframe setting, with an estimate per table column.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SummaryRow {
+    pub method: String,
+    pub placement: String,
+    pub k_extra: usize,
+    /// Number of clips averaged per seed.
+    pub clips: usize,
+    pub values: Vec<Estimate>,
+}
+
+/// Student-t 97.5 % quantiles for 1..=30 degrees of freedom; 1.96 (normal) beyond.
+const T975: [f64; 30] = [
+    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
+    2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
+    2.052, 2.048, 2.045, 2.042,
+];
+
+/// Mean ± t_{0.975, n−1} · sd / √n of `xs` (sample sd); no interval for fewer than two values.
+pub fn mean_ci95(xs: &[f64]) -> Estimate {
+    let n = xs.len();
+    let mean = xs.iter().sum::<f64>() / n.max(1) as f64;
+    if n < 2 {
+        return Estimate {
+            mean,
+            ci95: None,
+            n,
+        };
+    }
+    let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    let t = T975.get(n - 2).copied().unwrap_or(1.96);
+    Estimate {
+        mean,
+        ci95: Some(t * var.sqrt() / (n as f64).sqrt()),
+        n,
+    }
+}
+
+/// Group records by (method, placement, K_x), average each column over clips per seed, then over seeds.
+/// Rows keep the order in which their methods first appear, then ascending K_x.
+pub fn summarize(records: &[ClipRecord], kind: TableKind) -> Result<Vec<SummaryRow>> {
+    let columns = kind.columns();
+    let mut method_order: Vec<&str> = Vec::new();
+    // (method, placement, k) → seed → (sums per column, clip count)
+    let mut groups: BTreeMap<(usize, &str, usize), BTreeMap<u64, (Vec<f64>, usize)>> =
+        BTreeMap::new();
+    for r in records {
+        let m = match method_order.iter().position(|&m| m == r.method) {
+            Some(i) => i,
+            None => {
+                method_order.push(&r.method);
+                method_order.len() - 1
+            }
+        };
+        let entry = groups
+            .entry((m, r.placement.as_str(), r.k_extra))
+            .or_default()
+            .entry(r.seed)
+            .or_insert_with(|| (vec![0.0; columns.len()], 0));
+        for (c, col) in columns.iter().enumerate() {
+            let v = r.metrics.get(col.key).ok_or_else(|| {
+                DataError::new(
+                    &r.clip_id,
+                    col.key,
+                    format!("missing from the record of method {}", r.method),
+                )
+            })?;
+            entry.0[c] += v;
+        }
+        entry.1 += 1;
+    }
+    let mut rows = Vec::new();
+    for ((m, placement, k), seeds) in groups {
+        let clips = seeds.values().map(|(_, n)| *n).max().unwrap_or(0);
+        let values = (0..columns.len())
+            .map(|c| {
+                mean_ci95(
+                    &seeds
+                        .values()
+                        .map(|(sums, n)| sums[c] / *n as f64)
+                        .collect::<Vec<_>>(),
+                )
+            })
+            .collect();
+        rows.push(SummaryRow {
+            method: method_order[m].to_string(),
+            placement: placement.to_string(),
+            k_extra: k,
+            clips,
+            values,
+        });
+    }
+    Ok(rows)
+}
+
+/// Write the per-clip records as parquet: columns method, placement, k_extra, seed, item, clip_id, then one f64
+/// column per metric name (all records must carry the same names).
+pub fn write_clip_parquet(records: &[ClipRecord], path: &Path) -> Result<()> {
+    let names: Vec<&String> = records
+        .first()
+        .map_or_else(Vec::new, |r| r.metrics.keys().collect());
+    for r in records {
+        if r.metrics.len() != names.len() || !names.iter().all(|n| r.metrics.contains_key(*n)) {
+            return Err(DataError::new(
+                path,
+                "metrics",
+                format!(
+                    "record of {} / {} has metrics {:?}, expected {names:?}",
+                    r.method,
+                    r.clip_id,
+                    r.metrics.keys()
+                ),
+            ));
+        }
+    }
+    let mut cols = vec![
+        Column::new(
+            "method".into(),
+            records
+                .iter()
+                .map(|r| r.method.as_str())
+                .collect::<Vec<_>>(),
+        ),
+        Column::new(
+            "placement".into(),
+            records
+                .iter()
+                .map(|r| r.placement.as_str())
+                .collect::<Vec<_>>(),
+        ),
+        Column::new(
+            "k_extra".into(),
+            records.iter().map(|r| r.k_extra as u32).collect::<Vec<_>>(),
+        ),
+        Column::new(
+            "seed".into(),
+            records.iter().map(|r| r.seed).collect::<Vec<_>>(),
+        ),
+        Column::new(
+            "item".into(),
+            records.iter().map(|r| r.item as u32).collect::<Vec<_>>(),
+        ),
+        Column::new(
+            "clip_id".into(),
+            records
+                .iter()
+                .map(|r| r.clip_id.as_str())
+                .collect::<Vec<_>>(),
+        ),
+    ];
+    for name in &names {
+        cols.push(Column::new(
+            name.as_str().into(),
+            records.iter().map(|r| r.metrics[*name]).collect::<Vec<_>>(),
+        ));
+    }
+    let mut df = DataFrame::new(records.len(), cols)
+        .map_err(|e| DataError::new(path, "dataframe", e.to_string()))?;
+    let mut buf = Vec::new();
+    ParquetWriter::new(&mut buf)
+        .finish(&mut df)
+        .map_err(|e| DataError::new(path, "parquet", e.to_string()))?;
+    write_atomic(path, &buf)
+}
+
+/// Read records written by [`write_clip_parquet`]; every column after `clip_id` is a metric.
+pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
+    let file = std::fs::File::open(path).map_err(|e| DataError::io(path, e))?;
+    let df = ParquetReader::new(file)
+        .finish()
+        .map_err(|e| DataError::new(path, "parquet", e.to_string()))?;
+    let perr =
+        |field: &str, e: polars::prelude::PolarsError| DataError::new(path, field, e.to_string());
+    let col = |name: &str| df.column(name).map_err(|e| perr(name, e));
+    let strs = |name: &str| -> Result<Vec<String>> {
+        let c = col(name)?;
+        let ca = c.str().map_err(|e| perr(name, e))?;
+        ca.into_iter()
+            .enumerate()
+            .map(|(i, v)| {
+                v.map(str::to_owned)
+                    .ok_or_else(|| DataError::new(path, format!("{name} row {i}"), "null"))
+            })
+            .collect()
+    };
+    let (method, placement, clip_id) = (strs("method")?, strs("placement")?, strs("clip_id")?);
+    let u32s = |name: &str| -> Result<Vec<u32>> {
+        let c = col(name)?;
+        let ca = c.u32().map_err(|e| perr(name, e))?;
+        ca.into_iter()
+            .enumerate()
+            .map(|(i, v)| v.ok_or_else(|| DataError::new(path, format!("{name} row {i}"), "null")))
+            .collect()
+    };
+    let (k_extra, item) = (u32s("k_extra")?, u32s("item")?);
+    let seed: Vec<u64> = {
+        let c = col("seed")?;
+        let ca = c.u64().map_err(|e| perr("seed", e))?;
+        ca.into_iter()
+            .enumerate()
+            .map(|(i, v)| v.ok_or_else(|| DataError::new(path, format!("seed row {i}"), "null")))
+            .collect::<Result<_>>()?
+    };
+    let fixed = ["method", "placement", "k_extra", "seed", "item", "clip_id"];
+    let mut metrics: Vec<(String, Vec<f64>)> = Vec::new();
+    for c in df.columns() {
+        let name = c.name().as_str();
+        if fixed.contains(&name) {
+            continue;
+        }
+        let ca = c.f64().map_err(|e| perr(name, e))?;
+        let values = ca
+            .into_iter()
+            .enumerate()
+            .map(|(i, v)| v.ok_or_else(|| DataError::new(path, format!("{name} row {i}"), "null")))
+            .collect::<Result<Vec<f64>>>()?;
+        metrics.push((name.to_string(), values));
+    }
+    Ok((0..df.height())
+        .map(|i| ClipRecord {
+            method: method[i].clone(),
+            placement: placement[i].clone(),
+            k_extra: k_extra[i] as usize,
+            seed: seed[i],
+            item: item[i] as usize,
+            clip_id: clip_id[i].clone(),
+            metrics: metrics.iter().map(|(n, v)| (n.clone(), v[i])).collect(),
+        })
+        .collect())
+}
+
+fn fmt_estimate(e: &Estimate, scale: f64) -> String {
+    match e.ci95 {
+        Some(ci) => format!("{:.4} ± {:.4}", e.mean * scale, ci * scale),
+        None => format!("{:.4}", e.mean * scale),
+    }
+}
+
+fn header_lines(kind: TableKind, header: &TableHeader, seeds: usize) -> String {
+    let mut s = format!("# {}\n\n", kind.title());
+    let _ = writeln!(s, "- data: {}", header.data);
+    let _ = writeln!(s, "- manifest: {}", header.manifest);
+    let _ = writeln!(s, "- text encoder: {}", header.text_encoder);
+    for (m, ckpt) in &header.checkpoints {
+        let _ = writeln!(s, "- method `{m}`: checkpoint {ckpt}");
+    }
+    if !header.device.is_empty() {
+        let _ = writeln!(s, "- backend / device: {}", header.device);
+    }
+    let ci = if seeds > 1 {
+        format!(
+            "mean over clips per seed, then mean ± 95 % CI over {seeds} seeds (Student t, n − 1 dof, sample sd)"
+        )
+    } else {
+        "mean over clips, one seed (no confidence interval)".to_string()
+    };
+    let _ = writeln!(s, "- values: {ci}; lower is better\n");
+    s
+}
+
+/// The Markdown summary of a table: a header naming data, manifest, text encoder and checkpoints, then one row per
+/// method and keyframe setting, values scaled as in the paper.
+pub fn markdown(kind: TableKind, rows: &[SummaryRow], header: &TableHeader) -> String {
+    let seeds = rows
+        .iter()
+        .flat_map(|r| r.values.iter().map(|v| v.n))
+        .max()
+        .unwrap_or(0);
+    let mut s = header_lines(kind, header, seeds);
+    let cols = kind.columns();
+    s.push_str("| Method | Placement | K_x | Clips |");
+    for c in cols {
+        let _ = write!(s, " {} |", c.header);
+    }
+    s.push_str("\n|---|---|---|---|");
+    s.push_str(&"---|".repeat(cols.len()));
+    s.push('\n');
+    for r in rows {
+        let _ = write!(
+            s,
+            "| {} | {} | {} | {} |",
+            r.method, r.placement, r.k_extra, r.clips
+        );
+        for (v, c) in r.values.iter().zip(cols) {
+            let _ = write!(s, " {} |", fmt_estimate(v, c.scale));
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// The CSV summary: one row per method and setting, `<key>_mean` and `<key>_ci95` per column (scaled as in the
+/// Markdown; empty CI with one seed), and the checkpoint, text encoder and data on every row.
+pub fn csv(kind: TableKind, rows: &[SummaryRow], header: &TableHeader) -> String {
+    let cols = kind.columns();
+    let mut s = String::from("method,placement,k_extra,clips,seeds");
+    for c in cols {
+        let _ = write!(s, ",{0}_mean,{0}_ci95", c.key);
+    }
+    s.push_str(",scale,checkpoint,text_encoder,data\n");
+    for r in rows {
+        let seeds = r.values.first().map_or(0, |v| v.n);
+        let _ = write!(
+            s,
+            "{},{},{},{},{}",
+            csv_field(&r.method),
+            csv_field(&r.placement),
+            r.k_extra,
+            r.clips,
+            seeds
+        );
+        for (v, c) in r.values.iter().zip(cols) {
+            let ci = v.ci95.map_or(String::new(), |x| format!("{}", x * c.scale));
+            let _ = write!(s, ",{},{}", v.mean * c.scale, ci);
+        }
+        let scale = cols
+            .iter()
+            .map(|c| format!("{}", c.scale))
+            .collect::<Vec<_>>()
+            .join("/");
+        let ckpt = header
+            .checkpoints
+            .get(&r.method)
+            .map_or("none", String::as_str);
+        let _ = writeln!(
+            s,
+            ",{},{},{},{}",
+            scale,
+            csv_field(ckpt),
+            csv_field(&header.text_encoder),
+            csv_field(&header.data)
+        );
+    }
+    s
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// One P-Table 4 measurement: a method at one (frames, vertices) size, the timed repetitions in seconds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimingRecord {
+    pub method: String,
+    pub frames: usize,
+    pub vertices: usize,
+    /// Seconds per timed run (the warm-up excluded).
+    pub seconds: Vec<f64>,
+}
+
+/// Median of a non-empty slice (mean of the two middle values for even lengths).
+pub fn median(xs: &[f64]) -> f64 {
+    let mut v = xs.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
+}
+
+/// P-Table 4 in Markdown and CSV: one row per (method, frames), one column per vertex count (median seconds), and
+/// the mean over vertex counts.
+pub fn timing_tables(records: &[TimingRecord], header: &TableHeader) -> (String, String) {
+    let mut sizes: Vec<usize> = records.iter().map(|r| r.vertices).collect();
+    sizes.sort_unstable();
+    sizes.dedup();
+    let mut keys: Vec<(&str, usize)> = Vec::new();
+    for r in records {
+        if !keys.contains(&(r.method.as_str(), r.frames)) {
+            keys.push((r.method.as_str(), r.frames));
+        }
+    }
+    let reps = records.iter().map(|r| r.seconds.len()).max().unwrap_or(0);
+    let mut md = header_lines(TableKind::Table4, header, 1);
+    let _ = writeln!(
+        md,
+        "Median of {reps} timed runs after one warm-up, batch 1, seconds.\n"
+    );
+    md.push_str("| Method | Frames |");
+    let mut csv = String::from("method,frames");
+    for n in &sizes {
+        let _ = write!(md, " {n} |");
+        let _ = write!(csv, ",v{n}");
+    }
+    md.push_str(" Mean |\n|---|---|");
+    md.push_str(&"---|".repeat(sizes.len() + 1));
+    md.push('\n');
+    let _ = writeln!(csv, ",mean,device");
+    for (method, frames) in keys {
+        let meds: Vec<Option<f64>> = sizes
+            .iter()
+            .map(|&n| {
+                records
+                    .iter()
+                    .find(|r| r.method == method && r.frames == frames && r.vertices == n)
+                    .map(|r| median(&r.seconds))
+            })
+            .collect();
+        let present: Vec<f64> = meds.iter().flatten().copied().collect();
+        let mean = present.iter().sum::<f64>() / present.len().max(1) as f64;
+        let _ = write!(md, "| {method} | {frames} |");
+        let _ = write!(csv, "{},{frames}", csv_field(method));
+        for m in &meds {
+            let _ = write!(md, " {} |", m.map_or("–".into(), |x| format!("{x:.3}")));
+            let _ = write!(csv, ",{}", m.map_or(String::new(), |x| format!("{x}")));
+        }
+        let _ = writeln!(md, " {mean:.3} |");
+        let _ = writeln!(csv, ",{mean},{}", csv_field(&header.device));
+    }
+    (md, csv)
+}

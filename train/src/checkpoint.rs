@@ -1,0 +1,141 @@
+//! Checkpoints (STYLE.md §9, issue 5 item 2): `checkpoints/step_N/{model.bpk, optim.bpk, state.json}` with the
+//! model, the optimiser state, the step, the host RNG and the data-order position. A checkpoint is written into
+//! `checkpoints/.tmp_step_N/` and renamed into place, so a killed run leaves only complete checkpoints. Old
+//! checkpoints are pruned to the last few plus the best validation.
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use burn::module::Module;
+use burn::optim::ModuleOptimizer;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::data_order::DataOrder;
+use crate::error::{Result, TrainError, io_err};
+use crate::run_folder::write_atomic;
+
+/// Model parameters (burnpack).
+pub const MODEL_FILE: &str = "model.bpk";
+/// Optimiser state (burnpack).
+pub const OPTIM_FILE: &str = "optim.bpk";
+/// [`TrainState`] as JSON; written last, so its presence marks a complete checkpoint.
+pub const STATE_FILE: &str = "state.json";
+
+/// Everything besides tensors that a resumed run needs to continue exactly.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrainState {
+    /// Optimiser steps completed.
+    pub step: u64,
+    /// Host RNG (keyframes, τ, noise, text dropout) after `step` steps.
+    pub rng: ChaCha8Rng,
+    /// Data-order position after `step` steps.
+    pub order: DataOrder,
+    /// Best validation so far: (step, loss).
+    pub best_valid: Option<(u64, f64)>,
+}
+
+/// Name of the folder of step `step`.
+pub fn step_dir_name(step: u64) -> String {
+    format!("step_{step}")
+}
+
+/// Writes a checkpoint of `step` under `dir` (the run's `checkpoints/`) and returns its folder. If a complete
+/// checkpoint of this step already exists (a resumed run interrupted at once) it is kept and returned.
+pub fn save<M: Module + Clone>(dir: &Path, model: &M, optim: &ModuleOptimizer, state: &TrainState) -> Result<PathBuf> {
+    let final_dir = dir.join(step_dir_name(state.step));
+    if final_dir.join(STATE_FILE).exists() {
+        return Ok(final_dir);
+    }
+    let tmp = dir.join(format!(".tmp_{}", step_dir_name(state.step)));
+    if tmp.exists() {
+        // Left by a run killed while writing this same step: ours, incomplete, never a user's folder.
+        fs::remove_dir_all(&tmp).map_err(io_err("remove stale temporary checkpoint", &tmp))?;
+    }
+    fs::create_dir_all(&tmp).map_err(io_err("create", &tmp))?;
+    let ckpt_err = |what: &str, e: burn::store::RecordError| TrainError::Checkpoint {
+        path: tmp.clone(),
+        reason: format!("{what}: {e}"),
+    };
+    model.clone().save_file(tmp.join(MODEL_FILE)).map_err(|e| ckpt_err("save model", e))?;
+    optim.save(tmp.join(OPTIM_FILE)).map_err(|e| ckpt_err("save optimiser", e))?;
+    let json = serde_json::to_vec_pretty(state).map_err(|e| TrainError::Checkpoint {
+        path: tmp.clone(),
+        reason: format!("serialise state: {e}"),
+    })?;
+    write_atomic(&tmp.join(STATE_FILE), &json)?;
+    for f in [MODEL_FILE, OPTIM_FILE] {
+        let p = tmp.join(f);
+        fs::File::open(&p).and_then(|f| f.sync_all()).map_err(io_err("sync", &p))?;
+    }
+    if final_dir.exists() {
+        // An incomplete step folder cannot come from this code (rename is atomic); refuse to touch it.
+        return Err(TrainError::Checkpoint {
+            path: final_dir,
+            reason: "exists without state.json; not written by this program, left untouched".into(),
+        });
+    }
+    fs::rename(&tmp, &final_dir).map_err(io_err("rename checkpoint into place", &final_dir))?;
+    Ok(final_dir)
+}
+
+/// Complete checkpoints under `dir`, sorted by step.
+pub fn list(dir: &Path) -> Result<Vec<(u64, PathBuf)>> {
+    let mut out = Vec::new();
+    for entry in fs::read_dir(dir).map_err(io_err("list", dir))? {
+        let entry = entry.map_err(io_err("list", dir))?;
+        let name = entry.file_name();
+        let Some(step) = name.to_str().and_then(|n| n.strip_prefix("step_")).and_then(|s| s.parse::<u64>().ok())
+        else {
+            continue;
+        };
+        if entry.path().join(STATE_FILE).is_file() {
+            out.push((step, entry.path()));
+        }
+    }
+    out.sort_by_key(|(s, _)| *s);
+    Ok(out)
+}
+
+/// The newest complete checkpoint under `dir`, if any.
+pub fn latest(dir: &Path) -> Result<Option<PathBuf>> {
+    Ok(list(dir)?.pop().map(|(_, p)| p))
+}
+
+/// Reads `state.json` of a checkpoint folder.
+pub fn read_state(ckpt: &Path) -> Result<TrainState> {
+    let p = ckpt.join(STATE_FILE);
+    let text = fs::read_to_string(&p).map_err(io_err("read", &p))?;
+    let state: TrainState = serde_json::from_str(&text).map_err(|e| TrainError::Checkpoint {
+        path: p.clone(),
+        reason: format!("bad state: {e}"),
+    })?;
+    Ok(TrainState { order: state.order.restored(), ..state })
+}
+
+/// Loads the parameters of a checkpoint into `model` (built from the same config).
+pub fn load_model<M: Module>(model: M, ckpt: &Path) -> Result<M> {
+    let p = ckpt.join(MODEL_FILE);
+    model.try_load_file(&p).map_err(|e| TrainError::Checkpoint { path: p, reason: e.to_string() })
+}
+
+/// Loads model, optimiser state and [`TrainState`] of a checkpoint.
+pub fn load<M: Module>(ckpt: &Path, model: M, optim: ModuleOptimizer) -> Result<(M, ModuleOptimizer, TrainState)> {
+    let state = read_state(ckpt)?;
+    let model = load_model(model, ckpt)?;
+    let p = ckpt.join(OPTIM_FILE);
+    let optim = optim.load(&p).map_err(|e| TrainError::Checkpoint { path: p, reason: e.to_string() })?;
+    Ok((model, optim, state))
+}
+
+/// Deletes checkpoints under `dir` except the newest `keep_last` and the one at `best_step`.
+pub fn prune(dir: &Path, keep_last: usize, best_step: Option<u64>) -> Result<()> {
+    let all = list(dir)?;
+    let cut = all.len().saturating_sub(keep_last);
+    for (step, path) in &all[..cut] {
+        if Some(*step) != best_step {
+            fs::remove_dir_all(path).map_err(io_err("prune old checkpoint", path))?;
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,301 @@
+//! The training loop shared by the VAE (SPEC §3.3–3.5) and the RF (SPEC §4.5–4.7): gradient accumulation to the
+//! global batch, global-norm gradient clipping, AdamW at a constant learning rate, metrics, validation,
+//! checkpoints that resume exactly, Ctrl-C and the NaN/Inf guard (issue 5 items 1–3). What a step computes is
+//! an [`Objective`].
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::optim::{GradientsAccumulator, GradientsParams, ModuleOptimizer};
+use burn::prelude::{Device, Tensor};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::checkpoint::{self, TrainState};
+use crate::config::{OptimConfig, TrainConfig};
+use crate::data_order::DataOrder;
+use crate::error::{Result, TrainError};
+use crate::plot;
+use crate::progress::{Progress, ProgressMode};
+use crate::run_folder::{CHECKPOINTS_DIR, METRICS_FILE, PLOT_FILE, RunFolder, VALID_FILE};
+
+/// Loss of one micro-batch: the total that is differentiated and each named term (scalar tensors, shape [1]).
+pub struct Losses {
+    /// The optimised loss.
+    pub total: Tensor<1>,
+    /// One scalar per [`Objective::terms`] name, same order.
+    pub terms: Vec<Tensor<1>>,
+}
+
+/// What one training step computes.
+pub trait Objective {
+    /// The trained network.
+    type Model: Module + Clone;
+
+    /// Names of the loss terms (the `metrics.csv` columns before `loss`).
+    fn terms(&self) -> Vec<String>;
+
+    /// Number of training examples.
+    fn train_len(&self) -> usize;
+
+    /// Loss of the training examples `indices` on the autodiff `device`. All randomness comes from `rng` or
+    /// from the device RNG, which the loop reseeds from (seed, step) before every step.
+    fn loss(&self, model: &Self::Model, indices: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses>;
+
+    /// Mean validation terms followed by the total, computed with `model` (inference mode) on `device`;
+    /// `None` when there is no validation set.
+    fn validate(&self, model: &Self::Model, device: &Device) -> Result<Option<Vec<f64>>>;
+}
+
+/// Set by Ctrl-C (or a test); the loop checks it before every step, saves a checkpoint and returns.
+#[derive(Clone, Debug, Default)]
+pub struct StopFlag(Arc<AtomicBool>);
+
+impl StopFlag {
+    /// A flag that is not set.
+    pub fn new() -> Self {
+        Self::default()
+    }
+    /// Asks the loop to stop after the current step.
+    pub fn request(&self) {
+        self.0.store(true, Ordering::SeqCst);
+    }
+    /// Whether a stop was requested.
+    pub fn is_set(&self) -> bool {
+        self.0.load(Ordering::SeqCst)
+    }
+    /// Installs the process-wide Ctrl-C handler that sets this flag (once per process; the CLI calls it).
+    pub fn install_ctrlc(&self) -> Result<()> {
+        let flag = self.clone();
+        ctrlc::set_handler(move || flag.request())
+            .map_err(|e| TrainError::Other(format!("cannot install the Ctrl-C handler: {e}")))
+    }
+}
+
+/// How a run ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Outcome {
+    /// All steps done; the final checkpoint.
+    Finished { steps: u64, checkpoint: PathBuf },
+    /// Stopped by the [`StopFlag`] after `step` steps; the checkpoint written then.
+    Interrupted { step: u64, checkpoint: PathBuf },
+}
+
+/// Everything the loop needs besides the objective and the model.
+pub struct LoopSetup<'a> {
+    /// The run folder it writes to.
+    pub run: &'a RunFolder,
+    /// `[train]`.
+    pub train: &'a TrainConfig,
+    /// `[optim]`.
+    pub optim: &'a OptimConfig,
+    /// The autodiff training device.
+    pub device: Device,
+    /// Ctrl-C flag.
+    pub stop: StopFlag,
+    /// Progress display.
+    pub progress: ProgressMode,
+    /// Continue from this checkpoint folder instead of starting at step 0.
+    pub resume: Option<PathBuf>,
+}
+
+/// Trains `model` with `objective` until the configured duration, a stop request or a non-finite value.
+/// Returns the trained model and how the run ended. Checkpoints go to `run/checkpoints/`.
+pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>) -> Result<(O::Model, Outcome)> {
+    let LoopSetup { run, train: cfg, optim: optim_cfg, device, stop, progress, resume } = setup;
+    let ckpt_dir = run.path(CHECKPOINTS_DIR);
+    let len = objective.train_len();
+    if len == 0 {
+        return Err(TrainError::Other("the training set is empty".into()));
+    }
+    let total_steps = cfg.duration.steps(len, cfg.batch_size);
+    let (mut model, mut optim, mut state) = match &resume {
+        Some(ckpt) => {
+            let (m, o, s) = checkpoint::load(ckpt, model, optim_cfg.init())?;
+            run.log(&format!("resumed from {} at step {}", ckpt.display(), s.step))?;
+            (m, o, s)
+        }
+        None => {
+            let state = TrainState {
+                step: 0,
+                rng: ChaCha8Rng::seed_from_u64(cfg.seed),
+                order: DataOrder::new(cfg.seed, len),
+                best_valid: None,
+            };
+            (model, optim_cfg.init(), state)
+        }
+    };
+    if state.order.len != len {
+        return Err(TrainError::Checkpoint {
+            path: resume.unwrap_or_default(),
+            reason: format!("saved with {} training examples, the data now has {len}", state.order.len),
+        });
+    }
+    run.log(&format!(
+        "training {} → {total_steps} steps, batch {} = {} × {} micro-batches, {len} examples",
+        state.step,
+        cfg.batch_size,
+        cfg.accumulation(),
+        cfg.micro_batch
+    ))?;
+    let mut last_ckpt = checkpoint::latest(&ckpt_dir)?;
+    let mut bar = Progress::new(
+        progress,
+        state.step,
+        total_steps,
+        std::time::Duration::from_secs_f64(cfg.progress_every_secs),
+    );
+    let n_terms = objective.terms().len();
+
+    while state.step < total_steps {
+        if stop.is_set() {
+            let ckpt = save(&ckpt_dir, &model, &optim, &state, cfg)?;
+            run.log(&format!("stopped by request after step {}; checkpoint {}", state.step, ckpt.display()))?;
+            bar.finish();
+            finish_plot(run)?;
+            return Ok((model, Outcome::Interrupted { step: state.step, checkpoint: ckpt }));
+        }
+        let step = state.step + 1;
+        let t0 = Instant::now();
+        device.seed(step_seed(cfg.seed, step));
+        let mut accum = GradientsAccumulator::<O::Model>::new();
+        let mut sums = vec![0.0f64; n_terms + 1];
+        for _ in 0..cfg.accumulation() {
+            let idx = state.order.take(cfg.micro_batch);
+            let losses = objective.loss(&model, &idx, &mut state.rng, &device)?;
+            if losses.terms.len() != n_terms {
+                return Err(TrainError::Other(format!(
+                    "objective returned {} loss terms, declared {n_terms}",
+                    losses.terms.len()
+                )));
+            }
+            let weight = idx.len() as f64 / cfg.batch_size as f64;
+            let names = objective.terms();
+            for (i, t) in losses.terms.iter().enumerate() {
+                let v = scalar(t.clone());
+                guard(v, step, &format!("loss term `{}`", names[i]), &last_ckpt)?;
+                sums[i] += weight * v;
+            }
+            let scaled = losses.total.mul_scalar(weight);
+            let v = scalar(scaled.clone());
+            guard(v, step, "loss", &last_ckpt)?;
+            sums[n_terms] += v;
+            let grads = GradientsParams::from_grads(scaled.backward(), &model);
+            accum.accumulate(&model, grads);
+        }
+        let (grads, grad_norm) = clip_global_norm(&model, accum.grads(), optim_cfg.grad_clip);
+        guard(grad_norm, step, "gradient norm", &last_ckpt)?;
+        model = optim.step(optim_cfg.lr, model, grads);
+        state.step = step;
+
+        let secs = t0.elapsed().as_secs_f64();
+        let mut row = sums.clone();
+        row.extend([optim_cfg.lr, grad_norm, 1.0 / secs, cfg.batch_size as f64 / secs]);
+        run.append_metrics(step, &row)?;
+        bar.step(step, sums[n_terms], secs);
+
+        let mut new_best = false;
+        if step % cfg.valid_every == 0 || step == total_steps {
+            if let Some(values) = objective.validate(&model.clone().valid(), &device.clone().without_autodiff())? {
+                let loss = *values.last().expect("validate returns the total last");
+                run.append_valid(step, &values)?;
+                bar.println(&format!("step {step}: validation loss {loss:.4e}"));
+                if state.best_valid.is_none_or(|(_, b)| loss < b) {
+                    state.best_valid = Some((step, loss));
+                    new_best = true;
+                }
+            }
+        }
+        if step % cfg.checkpoint_every == 0 || step == total_steps || new_best {
+            last_ckpt = Some(save(&ckpt_dir, &model, &optim, &state, cfg)?);
+        }
+    }
+    bar.finish();
+    let ckpt = match last_ckpt {
+        Some(c) if c.ends_with(checkpoint::step_dir_name(state.step)) => c,
+        _ => save(&ckpt_dir, &model, &optim, &state, cfg)?,
+    };
+    run.log(&format!("finished {} steps; checkpoint {}", state.step, ckpt.display()))?;
+    finish_plot(run)?;
+    Ok((model, Outcome::Finished { steps: state.step, checkpoint: ckpt }))
+}
+
+fn save<M: Module + Clone>(
+    dir: &Path,
+    model: &M,
+    optim: &ModuleOptimizer,
+    state: &TrainState,
+    cfg: &TrainConfig,
+) -> Result<PathBuf> {
+    let path = checkpoint::save(dir, model, optim, state)?;
+    checkpoint::prune(dir, cfg.keep_last, state.best_valid.map(|(s, _)| s))?;
+    Ok(path)
+}
+
+fn finish_plot(run: &RunFolder) -> Result<()> {
+    plot::plot_run(&run.path(METRICS_FILE), &run.path(VALID_FILE), &run.path(PLOT_FILE))
+}
+
+/// Device seed of `step`: a fixed function of (seed, step), so a resumed run draws the same in-model noise.
+pub fn step_seed(seed: u64, step: u64) -> u64 {
+    // SplitMix64 finaliser of seed ⊕ step·φ: nearby steps get unrelated seeds.
+    let mut z = seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The value of a one-element tensor on the host.
+pub fn scalar(t: Tensor<1>) -> f64 {
+    f64::from(t.into_scalar::<f32>())
+}
+
+fn guard(value: f64, step: u64, what: &str, last_good: &Option<PathBuf>) -> Result<()> {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err(TrainError::NonFinite { step, what: what.to_string(), value, last_good: last_good.clone() })
+    }
+}
+
+/// Scales `grads` so that their global L2 norm over `model`'s parameters is at most `max_norm` (PyTorch's
+/// `clip_grad_norm_`, SPEC §3.5/§4.7 "gradient clip 1.0"); returns the clipped gradients and the norm before.
+pub fn clip_global_norm<M: Module>(model: &M, mut grads: GradientsParams, max_norm: f64) -> (GradientsParams, f64) {
+    struct SquaredNorm<'a> {
+        grads: &'a GradientsParams,
+        sum: Option<Tensor<1>>,
+    }
+    impl ModuleVisitor for SquaredNorm<'_> {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            if let Some(g) = self.grads.get::<D>(param.id) {
+                let s = g.square().sum();
+                self.sum = Some(match self.sum.take() {
+                    Some(acc) => acc + s,
+                    None => s,
+                });
+            }
+        }
+    }
+    struct Scale<'a> {
+        grads: &'a mut GradientsParams,
+        factor: f64,
+    }
+    impl ModuleVisitor for Scale<'_> {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            if let Some(g) = self.grads.remove::<D>(param.id) {
+                self.grads.register::<D>(param.id, g.mul_scalar(self.factor));
+            }
+        }
+    }
+    let mut norm = SquaredNorm { grads: &grads, sum: None };
+    model.visit(&mut norm);
+    let total = norm.sum.map_or(0.0, |s| scalar(s).sqrt());
+    if total > max_norm {
+        let mut scale = Scale { grads: &mut grads, factor: max_norm / (total + 1e-6) };
+        model.visit(&mut scale);
+    }
+    (grads, total)
+}
