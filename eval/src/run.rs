@@ -18,7 +18,7 @@ use crate::plot::{Series, line_plot};
 use crate::protocol::{
     Manifest, ManifestOptions, Placement, StoreSource, noise_seed, write_atomic,
 };
-use crate::render::{StripOptions, write_strip};
+use crate::render::{ExportFormat, StripOptions, export_sequence, write_strip};
 use crate::rollout::{OverlapSource, RolloutSpec, rollout, seam_jerk};
 use crate::tables::{
     ClipRecord, SummaryRow, TableHeader, TableKind, TimingRecord, csv, markdown, read_clip_parquet,
@@ -367,11 +367,10 @@ fn run_completion(opts: &RunOptions) -> Result<TableReport> {
         plot_rmse_vs_kx(&rows, &path)?;
         files.push(path);
     }
-    let strips = opts.out.join("strips");
     for item in 0..opts.export_items.min(manifest.clips.len()) {
         let (gt, _) = source.item(&manifest.clips[item], manifest.frames)?;
         let preds: Vec<&Prediction> = kept.iter().filter(|p| p.item == item).collect();
-        files.extend(write_item_outputs(&gt, &preds, &strips)?);
+        files.extend(write_item_outputs(&gt, &preds, &opts.out)?);
     }
     Ok(TableReport {
         kind: opts.protocol,
@@ -381,17 +380,18 @@ fn run_completion(opts: &RunOptions) -> Result<TableReport> {
     })
 }
 
-/// PNG strips and exported sequences of one item, one per (method, keyframe set, seed).
-fn write_item_outputs(gt: &Clip, preds: &[&Prediction], dir: &Path) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))?;
+/// PNG strips (`strips/`) and exported sequences (`predictions/`: `.bin`, OBJ folder, `.glb`) of one item, one per
+/// (method, keyframe set, seed). File stems: `item<i>_<method>_k<K_x>_seed<s>`.
+fn write_item_outputs(gt: &Clip, preds: &[&Prediction], out: &Path) -> Result<Vec<PathBuf>> {
+    let strips = out.join("strips");
+    std::fs::create_dir_all(&strips).map_err(|e| DataError::io(&strips, e))?;
     let mut files = Vec::new();
     for p in preds {
-        let stem = format!(
-            "item{:03}_{}_k{}_seed{}",
+        let stem = prediction_stem(
             p.item,
-            p.method,
+            &p.method,
             p.keyframes.len().saturating_sub(2),
-            p.seed
+            p.seed,
         );
         let pred = Clip::new(
             &gt.id,
@@ -402,15 +402,26 @@ fn write_item_outputs(gt: &Clip, preds: &[&Prediction], dir: &Path) -> Result<Ve
             &gt.caption,
             &gt.source,
         )?;
-        let path = dir.join(format!("{stem}.png"));
+        let path = strips.join(format!("{stem}.png"));
         let opts = StripOptions {
             prediction_label: p.method.clone(),
             ..StripOptions::default()
         };
         write_strip(gt, &pred, &p.keyframes, &opts, &path)?;
         files.push(path);
+        files.extend(export_sequence(
+            &pred,
+            &out.join("predictions"),
+            &stem,
+            &ExportFormat::ALL,
+        )?);
     }
     Ok(files)
+}
+
+/// `item<i>_<method>_k<K_x>_seed<s>`.
+fn prediction_stem(item: usize, method: &str, k_extra: usize, seed: u64) -> String {
+    format!("item{item:03}_{method}_k{k_extra}_seed{seed}")
 }
 
 /// RMSE × 100 against K_x, one line per method, 95 % CI bars when there are several seeds.
@@ -640,12 +651,91 @@ fn run_reconstruction(opts: &RunOptions) -> Result<TableReport> {
     })
 }
 
-/// `any4d eval render`: redraw the summary plot of a finished table-1 run from its `clips.parquet`
-/// (`rmse_vs_kx.png`); strips are drawn by [`run_protocol`] for the first `export_items` items.
-pub fn render_results(out: &Path) -> Result<Vec<PathBuf>> {
-    let records = read_clip_parquet(&out.join("clips.parquet"))?;
-    let rows = summarize(&records, TableKind::Table1)?;
-    let path = out.join("rmse_vs_kx.png");
-    plot_rmse_vs_kx(&rows, &path)?;
-    Ok(vec![path])
+/// `any4d eval render`: redraw the pictures of a finished run in `out` from its files: `rmse_vs_kx.png` from
+/// `clips.parquet` (random placement, 16 frames), and a strip per exported `predictions/<stem>.bin`, with ground
+/// truth and keyframes taken from `manifest.json` and the store `data`. Returns the written paths.
+pub fn render_results(out: &Path, data: &Path) -> Result<Vec<PathBuf>> {
+    let manifest = Manifest::load(&out.join("manifest.json"))?;
+    let mut files = Vec::new();
+    if manifest.frames == 16 && matches!(manifest.placement, Placement::Random { .. }) {
+        let rows = summarize(
+            &read_clip_parquet(&out.join("clips.parquet"))?,
+            TableKind::Table1,
+        )?;
+        let path = out.join("rmse_vs_kx.png");
+        plot_rmse_vs_kx(&rows, &path)?;
+        files.push(path);
+    }
+    let pred_dir = out.join("predictions");
+    if !pred_dir.is_dir() {
+        return Ok(files);
+    }
+    let source = StoreSource::open(data)?;
+    let mut bins: Vec<PathBuf> = std::fs::read_dir(&pred_dir)
+        .map_err(|e| DataError::io(&pred_dir, e))?
+        .map(|e| {
+            e.map(|e| e.path())
+                .map_err(|err| DataError::io(&pred_dir, err))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    bins.retain(|p| p.extension().is_some_and(|e| e == "bin"));
+    bins.sort();
+    let strips = out.join("strips");
+    std::fs::create_dir_all(&strips).map_err(|e| DataError::io(&strips, e))?;
+    for bin in bins {
+        let stem = bin
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .map(str::to_owned)
+            .ok_or_else(|| DataError::new(&bin, "file name", "is not UTF-8"))?;
+        let (item, method, k_extra) = parse_stem(&stem).ok_or_else(|| {
+            DataError::new(
+                &bin,
+                "file name",
+                "expected item<i>_<method>_k<K_x>_seed<s>.bin",
+            )
+        })?;
+        let entry = manifest.clips.get(item).ok_or_else(|| {
+            DataError::new(
+                &bin,
+                "item",
+                format!(
+                    "{item} is past the manifest's {} items",
+                    manifest.clips.len()
+                ),
+            )
+        })?;
+        let keyframes = entry
+            .keyframes
+            .iter()
+            .find(|set| set.len() == k_extra + 2)
+            .ok_or_else(|| {
+                DataError::new(
+                    &bin,
+                    "k",
+                    format!("the manifest has no set with K_x = {k_extra} for item {item}"),
+                )
+            })?;
+        let (gt, _) = source.item(entry, manifest.frames)?;
+        let pred = any4d_data::formats::read_clip(&bin)?;
+        let path = strips.join(format!("{stem}.png"));
+        let opts = StripOptions {
+            prediction_label: method,
+            ..StripOptions::default()
+        };
+        write_strip(&gt, &pred, keyframes, &opts, &path)?;
+        files.push(path);
+    }
+    Ok(files)
+}
+
+/// Inverse of [`prediction_stem`]: (item, method, K_x).
+fn parse_stem(stem: &str) -> Option<(usize, String, usize)> {
+    let (head, _seed) = stem.rsplit_once("_seed")?;
+    let (head, k) = head.rsplit_once("_k")?;
+    let (item, method) = head.strip_prefix("item")?.split_once('_')?;
+    match (item.parse(), k.parse()) {
+        (Ok(i), Ok(k)) => Some((i, method.to_string(), k)),
+        _ => None, // not a stem this module wrote
+    }
 }

@@ -9,7 +9,6 @@ use any4d_model::mmdit::{KfMode, MmditConfig};
 use any4d_model::summary::{format_report, param_report, time_rf_step};
 use burn::prelude::Device;
 use clap::{Args, Subcommand, ValueEnum};
-use serde::Deserialize;
 
 #[derive(Subcommand, Debug)]
 pub enum ModelCmd {
@@ -78,7 +77,7 @@ pub fn load_rf_model_config(path: &Path) -> anyhow::Result<MmditConfig> {
             path.display()
         );
     }
-    let cfg = MmditConfig::deserialize(model.clone()).with_context(|| format!("{}: [model]", path.display()))?;
+    let cfg: MmditConfig = model.clone().try_into().with_context(|| format!("{}: [model]", path.display()))?;
     cfg.validate().map_err(|msg| anyhow::anyhow!("{}: {msg}", path.display()))?;
     Ok(cfg)
 }
