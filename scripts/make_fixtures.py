@@ -103,7 +103,7 @@ def bin_fixtures():
         "not_a_dict": [verts(), FACES],
     }
     for name, obj in bad.items():
-        write(f"bin/bad_{name}.bin", pickle.dumps(obj, protocol=2 if "eval" in name else 4))
+        write(f"bin/bad_{name}.bin", pickle.dumps(obj, protocol=2 if "os_system" in name else 4))
     full = pickle.dumps(ok, protocol=4)
     write("bin/bad_truncated.bin", full[: len(full) // 2])
     write("bin/bad_not_pickle.bin", b"solid mesh\nthis is an STL file, not a pickle\n")

@@ -47,6 +47,22 @@ pub enum FrameLabels {
     None,
 }
 
+/// Whether a ground shadow is drawn under the mesh.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Ground {
+    /// The mesh flattened onto the lowest height reached in the clip, in grey: shows jumps and travel.
+    #[default]
+    Shadow,
+    None,
+}
+
+/// How triangles are coloured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Shading {
+    Lambert([u8; 3]),
+    Flat([u8; 3]),
+}
+
 /// Settings of [`contact_sheet`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderOptions {
@@ -56,6 +72,7 @@ pub struct RenderOptions {
     pub columns: usize,
     pub camera: Camera,
     pub labels: FrameLabels,
+    pub ground: Ground,
     /// Surface colour at full light.
     pub color: [u8; 3],
     pub background: [u8; 3],
@@ -68,6 +85,7 @@ impl Default for RenderOptions {
             columns: 8,
             camera: Camera::FrontRightTop,
             labels: FrameLabels::Number,
+            ground: Ground::Shadow,
             color: [235, 160, 90],
             background: [250, 250, 250],
         }
@@ -142,7 +160,15 @@ pub fn rasterize_frame(
         ..RenderOptions::default()
     };
     let mut img = RgbImage::from_pixel(size, size, Rgb(opts.background));
-    draw_frame(&mut img, (0, 0), size, vertices, faces, view, opts.color)?;
+    draw_frame(
+        &mut img,
+        (0, 0),
+        size,
+        vertices,
+        faces,
+        view,
+        Shading::Lambert(opts.color),
+    )?;
     Ok(img)
 }
 
@@ -155,8 +181,27 @@ pub fn contact_sheet(clip: &Clip, opts: &RenderOptions) -> Result<RgbImage> {
     let rows = clip.frames.div_ceil(cols);
     let mut img = RgbImage::from_pixel(w * cols as u32, w * rows as u32, Rgb(opts.background));
     let view = View::fit(&clip.vertices, opts.camera);
+    let ground = clip
+        .vertices
+        .iter()
+        .map(|p| p[1])
+        .filter(|y| y.is_finite())
+        .fold(f32::INFINITY, f32::min);
     for f in 0..clip.frames {
         let origin = ((f % cols) as u32 * w, (f / cols) as u32 * w);
+        if opts.ground == Ground::Shadow {
+            let flat: Vec<V3> = clip.frame(f).iter().map(|p| [p[0], ground, p[2]]).collect();
+            draw_frame(
+                &mut img,
+                origin,
+                w,
+                &flat,
+                &clip.faces,
+                &view,
+                Shading::Flat([215, 215, 215]),
+            )
+            .map_err(|e| e.at(&clip.source))?;
+        }
         draw_frame(
             &mut img,
             origin,
@@ -164,7 +209,7 @@ pub fn contact_sheet(clip: &Clip, opts: &RenderOptions) -> Result<RgbImage> {
             clip.frame(f),
             &clip.faces,
             &view,
-            opts.color,
+            Shading::Lambert(opts.color),
         )
         .map_err(|e| e.at(&clip.source))?;
         // Tile border.
@@ -200,7 +245,7 @@ fn draw_frame(
     vertices: &[V3],
     faces: &[[u32; 3]],
     view: &View,
-    color: [u8; 3],
+    shading: Shading,
 ) -> Result<()> {
     if let Some((i, f)) = faces
         .iter()
@@ -248,9 +293,14 @@ fn draw_frame(
             vertices[f[2] as usize],
         );
         let n = unit(cross(sub(wb, wa), sub(wc, wa)));
-        // Two-sided Lambert plus ambient.
-        let shade = 0.28 + 0.72 * dot(n, light).abs();
-        let rgb = Rgb(color.map(|ch| (ch as f32 * shade).round().clamp(0.0, 255.0) as u8));
+        let rgb = match shading {
+            // Two-sided Lambert plus ambient.
+            Shading::Lambert(color) => {
+                let shade = 0.28 + 0.72 * dot(n, light).abs();
+                Rgb(color.map(|ch| (ch as f32 * shade).round().clamp(0.0, 255.0) as u8))
+            }
+            Shading::Flat(color) => Rgb(color),
+        };
         let x0 = a[0].min(b[0]).min(c[0]).floor().max(0.0) as u32;
         let x1 = (a[0].max(b[0]).max(c[0]).ceil().min(size as f32 - 1.0)).max(-1.0) as i64;
         let y0 = a[1].min(b[1]).min(c[1]).floor().max(0.0) as u32;

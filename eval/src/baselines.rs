@@ -52,13 +52,21 @@ pub fn lerp_latents(latents: &[f32], frames: usize, frame_len: usize, keyframes:
     if latents.len() != frames * frame_len {
         return Err(EvalError::Parameter {
             name: "latents",
-            reason: format!("hold {} values, expected frames × frame length = {frames} × {frame_len}", latents.len()),
+            reason: format!(
+                "hold {} values, expected frames × frame length = {frames} × {frame_len}",
+                latents.len()
+            ),
         });
     }
     if let Some(i) = latents.iter().position(|x| !x.is_finite()) {
         return Err(EvalError::Parameter {
             name: "latents",
-            reason: format!("non-finite value {} at frame {}, index {}", latents[i], i / frame_len, i % frame_len),
+            reason: format!(
+                "non-finite value {} at frame {}, index {}",
+                latents[i],
+                i / frame_len,
+                i % frame_len
+            ),
         });
     }
     fill_frames(Fill::Linear, latents, frames, frame_len, keyframes)

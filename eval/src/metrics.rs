@@ -17,19 +17,40 @@ pub enum EvalError {
     Mismatch { what: &'static str, pred: usize, gt: usize },
     /// A flat vertex array does not hold `frames × n_vertices` rows.
     #[error("vertex array holds {rows} rows, expected frames × vertices = {frames} × {n_vertices}")]
-    Layout { rows: usize, frames: usize, n_vertices: usize },
+    Layout {
+        rows: usize,
+        frames: usize,
+        n_vertices: usize,
+    },
     /// A sequence has no frames or no vertices.
     #[error("{name} is empty: {frames} frames × {n_vertices} vertices")]
-    Empty { name: &'static str, frames: usize, n_vertices: usize },
+    Empty {
+        name: &'static str,
+        frames: usize,
+        n_vertices: usize,
+    },
     /// NaN or infinity in an input.
     #[error("{name}: non-finite coordinate {value:?} at frame {frame}, vertex {vertex}")]
-    NonFinite { name: &'static str, frame: usize, vertex: usize, value: [f32; 3] },
+    NonFinite {
+        name: &'static str,
+        frame: usize,
+        vertex: usize,
+        value: [f32; 3],
+    },
     /// A keyframe or scored frame index past the last frame.
     #[error("{what} index {index} is out of range for {frames} frames")]
-    FrameOutOfRange { what: &'static str, index: usize, frames: usize },
+    FrameOutOfRange {
+        what: &'static str,
+        index: usize,
+        frames: usize,
+    },
     /// A metric needs more frames than the sequence has.
     #[error("{metric} needs at least {needed} frames, the sequence has {frames}")]
-    TooFewFrames { metric: &'static str, needed: usize, frames: usize },
+    TooFewFrames {
+        metric: &'static str,
+        needed: usize,
+        frames: usize,
+    },
     /// The frame set a metric averages over is empty.
     #[error("no frames to score: {0}")]
     NoFrames(String),
@@ -55,9 +76,17 @@ impl<'a> Motion<'a> {
     /// `vertices`: `[T * N]` rows of xyz.
     pub fn new(vertices: &'a [[f32; 3]], frames: usize, n_vertices: usize) -> Result<Self> {
         if vertices.len() != frames * n_vertices {
-            return Err(EvalError::Layout { rows: vertices.len(), frames, n_vertices });
+            return Err(EvalError::Layout {
+                rows: vertices.len(),
+                frames,
+                n_vertices,
+            });
         }
-        Ok(Self { vertices, frames, n_vertices })
+        Ok(Self {
+            vertices,
+            frames,
+            n_vertices,
+        })
     }
 
     /// View a clip (already validated by the data crate).
@@ -88,7 +117,11 @@ impl<'a> Motion<'a> {
     /// Errors on an empty sequence or a non-finite coordinate; `name` labels the error.
     pub fn check(&self, name: &'static str) -> Result<()> {
         if self.frames == 0 || self.n_vertices == 0 {
-            return Err(EvalError::Empty { name, frames: self.frames, n_vertices: self.n_vertices });
+            return Err(EvalError::Empty {
+                name,
+                frames: self.frames,
+                n_vertices: self.n_vertices,
+            });
         }
         if let Some(i) = self.vertices.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
             return Err(EvalError::NonFinite {
@@ -105,10 +138,18 @@ impl<'a> Motion<'a> {
 /// Checks that prediction and ground truth are finite and have the same frame and vertex counts.
 pub fn check_pair(pred: Motion, gt: Motion) -> Result<()> {
     if pred.n_vertices != gt.n_vertices {
-        return Err(EvalError::Mismatch { what: "vertex counts", pred: pred.n_vertices, gt: gt.n_vertices });
+        return Err(EvalError::Mismatch {
+            what: "vertex counts",
+            pred: pred.n_vertices,
+            gt: gt.n_vertices,
+        });
     }
     if pred.frames != gt.frames {
-        return Err(EvalError::Mismatch { what: "frame counts", pred: pred.frames, gt: gt.frames });
+        return Err(EvalError::Mismatch {
+            what: "frame counts",
+            pred: pred.frames,
+            gt: gt.frames,
+        });
     }
     pred.check("prediction")?;
     gt.check("ground truth")
@@ -126,7 +167,11 @@ fn check_frames(what: &'static str, indices: &[usize], frames: usize) -> Result<
 }
 
 fn sub(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
-    [f64::from(a[0]) - f64::from(b[0]), f64::from(a[1]) - f64::from(b[1]), f64::from(a[2]) - f64::from(b[2])]
+    [
+        f64::from(a[0]) - f64::from(b[0]),
+        f64::from(a[1]) - f64::from(b[1]),
+        f64::from(a[2]) - f64::from(b[2]),
+    ]
 }
 
 fn norm(d: [f64; 3]) -> f64 {
@@ -180,21 +225,38 @@ pub fn mean_vertex_error(pred: Motion, gt: Motion, frames: &[usize]) -> Result<f
 /// Exact mean nearest-neighbour distance from each point of `from` to the set `to` (k-d tree over `to`).
 fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]]) -> Result<f64> {
     let points: Vec<[f64; 3]> = to.iter().map(|p| p.map(f64::from)).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&points)
-        .map_err(|e| EvalError::Parameter { name: "nearest-neighbour set", reason: e.to_string() })?;
+    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&points).map_err(|e| EvalError::Parameter {
+        name: "nearest-neighbour set",
+        reason: e.to_string(),
+    })?;
     let sum: f64 = from
         .iter()
-        .map(|p| tree.query(&p.map(f64::from)).nearest_one::<SquaredEuclidean<f64>>().execute().distance.sqrt())
+        .map(|p| {
+            tree.query(&p.map(f64::from))
+                .nearest_one::<SquaredEuclidean<f64>>()
+                .execute()
+                .distance
+                .sqrt()
+        })
         .sum();
     Ok(sum / from.len() as f64)
 }
 
 fn check_set(name: &'static str, set: &[[f32; 3]]) -> Result<()> {
     if set.is_empty() {
-        return Err(EvalError::Empty { name, frames: 1, n_vertices: 0 });
+        return Err(EvalError::Empty {
+            name,
+            frames: 1,
+            n_vertices: 0,
+        });
     }
     match set.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-        Some(i) => Err(EvalError::NonFinite { name, frame: 0, vertex: i, value: set[i] }),
+        Some(i) => Err(EvalError::NonFinite {
+            name,
+            frame: 0,
+            vertex: i,
+            value: set[i],
+        }),
         None => Ok(()),
     }
 }
@@ -266,7 +328,11 @@ impl DtwPath {
 /// `a`: `[n, 3]`, `b`: `[m, 3]`.
 pub fn dtw_path(a: &[[f64; 3]], b: &[[f64; 3]]) -> Result<DtwPath> {
     if a.is_empty() || b.is_empty() {
-        return Err(EvalError::NoFrames(format!("DTW of sequences of lengths {} and {}", a.len(), b.len())));
+        return Err(EvalError::NoFrames(format!(
+            "DTW of sequences of lengths {} and {}",
+            a.len(),
+            b.len()
+        )));
     }
     let (n, m) = (a.len(), b.len());
     let cost = |i: usize, j: usize| norm([a[i][0] - b[j][0], a[i][1] - b[j][1], a[i][2] - b[j][2]]);
@@ -276,7 +342,11 @@ pub fn dtw_path(a: &[[f64; 3]], b: &[[f64; 3]]) -> Result<DtwPath> {
             let best = if i == 0 && j == 0 {
                 0.0
             } else {
-                let diag = if i > 0 && j > 0 { acc[(i - 1) * m + j - 1] } else { f64::INFINITY };
+                let diag = if i > 0 && j > 0 {
+                    acc[(i - 1) * m + j - 1]
+                } else {
+                    f64::INFINITY
+                };
                 let up = if i > 0 { acc[(i - 1) * m + j] } else { f64::INFINITY };
                 let left = if j > 0 { acc[i * m + j - 1] } else { f64::INFINITY };
                 diag.min(up).min(left)
@@ -304,7 +374,10 @@ pub fn dtw_path(a: &[[f64; 3]], b: &[[f64; 3]]) -> Result<DtwPath> {
         path.push((i, j));
     }
     path.reverse();
-    Ok(DtwPath { cost: acc[n * m - 1], path })
+    Ok(DtwPath {
+        cost: acc[n * m - 1],
+        path,
+    })
 }
 
 /// (E3) centroid DTW over the listed frames (re-indexed 0..U − 1 in list order): summed cost of π* / |π*|.
@@ -340,14 +413,21 @@ fn check_rate(rate: f64) -> Result<()> {
     if rate.is_finite() && rate > 0.0 {
         Ok(())
     } else {
-        Err(EvalError::Parameter { name: "frame rate", reason: format!("{rate} is not a positive finite number") })
+        Err(EvalError::Parameter {
+            name: "frame rate",
+            reason: format!("{rate} is not a positive finite number"),
+        })
     }
 }
 
 fn check_single(motion: Motion, metric: &'static str, needed: usize) -> Result<()> {
     motion.check("sequence")?;
     if motion.frames < needed {
-        return Err(EvalError::TooFewFrames { metric, needed, frames: motion.frames });
+        return Err(EvalError::TooFewFrames {
+            metric,
+            needed,
+            frames: motion.frames,
+        });
     }
     Ok(())
 }
@@ -369,7 +449,11 @@ pub fn acceleration(motion: Motion, rate: f64) -> Result<f64> {
 pub fn jerk(motion: Motion, rate: f64) -> Result<f64> {
     check_rate(rate)?;
     check_single(motion, "jerk", 4)?;
-    Ok(mean_difference_norm(motion, &[-1.0, 3.0, -3.0, 1.0], rate * rate * rate)) // (E5) j_f
+    Ok(mean_difference_norm(
+        motion,
+        &[-1.0, 3.0, -3.0, 1.0],
+        rate * rate * rate,
+    )) // (E5) j_f
 }
 
 /// (E6) motion energy: mean over f = 0..T − 2 and v of ‖x_{f+1} − x_f‖.
@@ -395,7 +479,10 @@ pub struct Reconstruction {
 /// `decoded`, `input`: `[T, N, 3]`.
 pub fn vae_reconstruction(decoded: Motion, input: Motion) -> Result<Reconstruction> {
     let all: Vec<usize> = (0..input.frames).collect();
-    Ok(Reconstruction { rmse: rmse(decoded, input, &all)?, chamfer: chamfer(decoded, input, &all)? }) // (E4)
+    Ok(Reconstruction {
+        rmse: rmse(decoded, input, &all)?,
+        chamfer: chamfer(decoded, input, &all)?,
+    }) // (E4)
 }
 
 /// Sorted, deduplicated keyframes, checked against `frames`. An empty set is an error: the protocol always keeps
@@ -413,7 +500,9 @@ pub fn non_keyframes(frames: usize, keyframes: &[usize]) -> Result<Vec<usize>> {
     let set = keyframe_set(keyframes, frames)?;
     let scored: Vec<usize> = (0..frames).filter(|f| set.binary_search(f).is_err()).collect();
     if scored.is_empty() {
-        return Err(EvalError::NoFrames(format!("all {frames} frames are keyframes {set:?}")));
+        return Err(EvalError::NoFrames(format!(
+            "all {frames} frames are keyframes {set:?}"
+        )));
     }
     Ok(scored)
 }
@@ -442,7 +531,10 @@ pub fn normalise_by_gt(pred: Motion, gt: Motion) -> Result<(Vec<[f32; 3]>, Vec<[
     let norm = Normalization::from_frame(gt.frame(0)); // (D1), (D2) from GT frame 0
     let (c, s) = (norm.center, norm.scale);
     let apply = |m: Motion| {
-        m.vertices.iter().map(|p| [0, 1, 2].map(|k| (p[k] - c[k]) / s)).collect::<Vec<[f32; 3]>>() // (D3)
+        m.vertices
+            .iter()
+            .map(|p| [0, 1, 2].map(|k| (p[k] - c[k]) / s))
+            .collect::<Vec<[f32; 3]>>() // (D3)
     };
     Ok((apply(pred), apply(gt)))
 }
@@ -468,7 +560,10 @@ pub struct Protocol {
 
 impl Default for Protocol {
     fn default() -> Self {
-        Self { coordinates: Coordinates::NormaliseByGtFrame0, rate: 1.0 }
+        Self {
+            coordinates: Coordinates::NormaliseByGtFrame0,
+            rate: 1.0,
+        }
     }
 }
 
@@ -517,16 +612,15 @@ pub fn evaluate_clip(pred: Motion, gt: Motion, keyframes: &[usize]) -> Result<Cl
 ///
 /// # Shapes
 /// `pred`, `gt`: `[T, N, 3]` with T ≥ 4 (jerk); `keyframes`: indices into `0..T`.
-pub fn evaluate_clip_with(
-    pred: Motion,
-    gt: Motion,
-    keyframes: &[usize],
-    protocol: &Protocol,
-) -> Result<ClipMetrics> {
+pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], protocol: &Protocol) -> Result<ClipMetrics> {
     check_pair(pred, gt)?;
     check_rate(protocol.rate)?;
     if gt.frames < 4 {
-        return Err(EvalError::TooFewFrames { metric: "jerk", needed: 4, frames: gt.frames });
+        return Err(EvalError::TooFewFrames {
+            metric: "jerk",
+            needed: 4,
+            frames: gt.frames,
+        });
     }
     let (t, n) = (gt.frames, gt.n_vertices);
     let keys = keyframe_set(keyframes, t)?;
@@ -543,7 +637,10 @@ pub fn evaluate_clip_with(
     let assembled_rows = replace_keyframes(pred, gt, &keys)?;
     let assembled = Motion::new(&assembled_rows, t, n)?;
     let (jerk_p, jerk_g) = (jerk(assembled, protocol.rate)?, jerk(gt, protocol.rate)?);
-    let (accel_p, accel_g) = (acceleration(assembled, protocol.rate)?, acceleration(gt, protocol.rate)?);
+    let (accel_p, accel_g) = (
+        acceleration(assembled, protocol.rate)?,
+        acceleration(gt, protocol.rate)?,
+    );
     let (energy_p, energy_g) = (motion_energy(assembled)?, motion_energy(gt)?);
     Ok(ClipMetrics {
         rmse: rmse(assembled, gt, &scored)?,

@@ -179,10 +179,10 @@ impl<E: TextEncoder> TextEncoder for CachedEncoder<E> {
         };
         if !missing.is_empty() {
             let batch = self.inner.encode(&missing, device)?;
-            let states: Vec<f32> = batch.states.into_data().convert::<f32>().into_vec().map_err(|e| {
+            let states: Vec<f32> = batch.states.into_data().convert::<f32>().try_into_vec().map_err(|e| {
                 TextError::Invalid { path: PathBuf::from("<cache>"), message: format!("{e:?}") }
             })?;
-            let pad: Vec<bool> = batch.pad_mask.into_data().into_vec().map_err(|e| TextError::Invalid {
+            let pad: Vec<bool> = batch.pad_mask.into_data().try_into_vec().map_err(|e| TextError::Invalid {
                 path: PathBuf::from("<cache>"),
                 message: format!("{e:?}"),
             })?;

@@ -32,7 +32,7 @@ fn normal<const D: usize>(shape: [usize; D], device: &Device) -> Tensor<D> {
 }
 
 fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().convert::<f32>().into_vec().expect("f32 data")
+    t.into_data().convert::<f32>().try_into_vec().expect("f32 data")
 }
 
 fn max_abs_diff<const D: usize>(a: Tensor<D>, b: Tensor<D>) -> f32 {
@@ -306,6 +306,8 @@ fn tiny_batch(cfg: &MmditConfig, b: usize, p: usize, l: usize, d: &Device) -> Rf
 fn every_parameter_gets_a_gradient_after_one_step() {
     // The zero-initialised output layer blocks every gradient but its own at step 0, so take one optimiser
     // step first; after it every parameter (all blocks, both adaLN streams, text and time paths) must get one.
+    // Exception by design (AAM's CogX block): the text stream leaves the network after the last block's
+    // attention, so that block's text-side post-attention LayerNorm never influences the output.
     let _g = lock();
     let d = dev().autodiff();
     let cfg = MmditConfig::tiny();
@@ -322,7 +324,7 @@ fn every_parameter_gets_a_gradient_after_one_step() {
     let loss = rf_training_loss(&model, &batch, eps, tau, &opts);
     let grads = loss.backward();
     struct Check<'a> {
-        grads: &'a burn::tensor::backend::Gradients,
+        grads: &'a burn::tensor::Gradients,
         path: Vec<String>,
         missing: Vec<String>,
         total: usize,
@@ -349,7 +351,11 @@ fn every_parameter_gets_a_gradient_after_one_step() {
     let mut check = Check { grads: &grads, path: Vec::new(), missing: Vec::new(), total: 0 };
     model.visit(&mut check);
     assert!(check.total > 30, "visited {} parameters", check.total);
-    assert!(check.missing.is_empty(), "no gradient for {:?}", check.missing);
+    let last = cfg.blocks - 1;
+    let dead = [format!("blocks.{last}.norm2_text.gamma"), format!("blocks.{last}.norm2_text.beta")];
+    let mut missing = check.missing.clone();
+    missing.sort();
+    assert_eq!(missing, dead.to_vec(), "parameters without gradient");
 }
 
 #[test]

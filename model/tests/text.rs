@@ -21,11 +21,11 @@ fn fixtures() -> PathBuf {
 }
 
 fn floats<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().convert::<f32>().into_vec().expect("f32")
+    t.into_data().convert::<f32>().try_into_vec().expect("f32")
 }
 
 fn bools(t: Tensor<2, Bool>) -> Vec<bool> {
-    t.into_data().into_vec().expect("bool")
+    t.into_data().try_into_vec().expect("bool")
 }
 
 fn captions(list: &[&str]) -> Vec<String> {

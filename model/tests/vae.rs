@@ -6,10 +6,10 @@ use std::sync::{Mutex, MutexGuard};
 
 use any4d_model::attention::{EdgeList, NeighbourAttentionConfig};
 use any4d_model::dymesh_vae::{DyMeshVae, DyMeshVaeConfig};
-use any4d_model::frame_vae::{FrameVae, FrameVaeConfig, PadKeys, Posterior, VaeBatch, VaeEncoding, VaeLoss};
+use any4d_model::frame_vae::{FrameVae, FrameVaeConfig, PadKeys, VaeBatch, VaeEncoding, VaeLoss};
 use burn::grad_clipping::GradientClippingConfig;
 use burn::module::{ModuleMapper, ModuleVisitor, Param};
-use burn::optim::{AdamWConfig, GradientsParams, Optimizer};
+use burn::optim::{AdamWConfig, GradientsParams};
 use burn::prelude::*;
 use burn::tensor::Distribution;
 
@@ -304,7 +304,7 @@ fn seeded_runs_are_identical_and_other_seeds_differ() {
 
 /// Collects parameters whose gradient is missing, non-finite or all zero, by module path.
 struct GradCheck<'a> {
-    grads: &'a burn::tensor::backend::Gradients,
+    grads: &'a burn::tensor::Gradients,
     path: Vec<String>,
     missing: Vec<String>,
     zero: Vec<String>,
@@ -340,7 +340,7 @@ fn grad_report<M: Vae>(vae: &M, b: &VaeBatch) -> (Vec<String>, Vec<String>) {
     (check.missing, check.zero)
 }
 
-fn check_every_parameter_gets_a_gradient<M: Vae + burn::module::AutodiffModule>(vae: M, device: &Device) {
+fn check_every_parameter_gets_a_gradient<M: Vae>(vae: M, device: &Device) {
     let b = batch(&fixture(), None, device);
     // Step 0: the zero-initialised output projections (neighbour `to_out`, query `to_out`) make every
     // gradient upstream of them zero, but their own gradients are non-zero.
@@ -368,7 +368,7 @@ fn every_parameter_receives_a_gradient() {
     check_every_parameter_gets_a_gradient(dymesh_vae(&device), &device);
 }
 
-fn overfit<M: Vae + burn::module::AutodiffModule>(mut vae: M, steps: usize, device: &Device) -> (f32, f32) {
+fn overfit<M: Vae>(mut vae: M, steps: usize, device: &Device) -> (f32, f32) {
     let b = batch(&fixture(), None, device);
     let mut optim = AdamWConfig::new()
         .with_weight_decay(1e-4)

@@ -93,12 +93,12 @@ pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
     let strs = |name: &str| -> Result<Vec<Option<String>>> {
         let c = col(name)?;
         let ca = c.str().map_err(|e| polars_err(&path, name, e))?;
-        Ok(ca.into_iter().map(|s| s.map(str::to_owned)).collect())
+        Ok(ca.iter().map(|s| s.map(str::to_owned)).collect())
     };
     let ints = |name: &str| -> Result<Vec<Option<u32>>> {
         let c = col(name)?;
         let ca = c.u32().map_err(|e| polars_err(&path, name, e))?;
-        Ok(ca.into_iter().collect())
+        Ok(ca.iter().collect())
     };
     let required = |name: &str| -> Result<Vec<String>> {
         strs(name)?

@@ -21,7 +21,7 @@ type V3 = [f32; 3];
 pub enum ShapeFamily {
     /// A noisy, lumpy sphere.
     Blob,
-    /// An upright tube with an elliptic cross-section.
+    /// An upright fluted tube with an elliptic, tapering cross-section.
     Tube,
     /// A two-legged figure (torso, head, arms, legs), skinned to leg and arm bones.
     Humanoid,
@@ -65,7 +65,7 @@ impl ShapeFamily {
             ShapeFamily::Blob => "blob",
             ShapeFamily::Tube => "tube",
             ShapeFamily::Humanoid => "humanoid",
-            ShapeFamily::Quadruped => "four-legged animal",
+            ShapeFamily::Quadruped => "quadruped",
             ShapeFamily::Sheet => "cloth sheet",
             ShapeFamily::Worm => "worm",
             ShapeFamily::Helix => "spring",
@@ -86,7 +86,7 @@ pub enum MotionFamily {
     Walk,
     /// One to three hops, squashing at take-off and landing, in place or travelling.
     Jump,
-    /// Volume-preserving vertical squash and stretch.
+    /// Volume-preserving squash and stretch: vertical, or along the length of a worm or sheet.
     Squash,
     /// Rigid spin about the vertical axis while sliding.
     Rigid,

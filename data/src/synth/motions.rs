@@ -11,8 +11,9 @@ use crate::rng::{DataRng, Rng};
 pub(super) struct Geometry {
     /// Rest bounding-box centre.
     center: V3,
-    /// Largest rest extent.
+    /// Largest rest extent, and largest extent across the main axis.
     size: f32,
+    width: f32,
     /// Range of the main axis.
     lo: f32,
     hi: f32,
@@ -39,6 +40,10 @@ impl Geometry {
         Self {
             center: [0, 1, 2].map(|k| (lo[k] + hi[k]) / 2.0),
             size: (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f32::max),
+            width: (0..3)
+                .filter(|&k| k != a)
+                .map(|k| hi[k] - lo[k])
+                .fold(0.0, f32::max),
             lo: lo[a],
             hi: hi[a],
             s0,
@@ -97,7 +102,12 @@ pub(super) fn draw(
     r: &mut DataRng,
 ) -> (Motion, String) {
     let a = body.axis;
-    let perp: Vec<usize> = (0..3).filter(|&k| k != a).collect();
+    // Bends and waves of a sheet stay out of its plane.
+    let perp: Vec<usize> = if body.closed {
+        (0..3).filter(|&k| k != a).collect()
+    } else {
+        vec![1]
+    };
     let sign = |r: &mut DataRng| if r.random_bool(0.5) { 1.0f32 } else { -1.0 };
     let cardinal = |r: &mut DataRng| {
         let base = [
@@ -114,7 +124,9 @@ pub(super) fn draw(
     match family {
         MotionFamily::Bend => {
             let dir = (perp[r.random_range(0..perp.len())], sign(r));
-            let angle = r.random_range(0.6f32..1.6);
+            // Stubby standing shapes (no longer than wide) need a larger angle to show the bend.
+            let stubby = !lying && geo.hi - geo.lo < 1.3 * geo.width;
+            let angle = r.random_range(0.8f32..1.8) * if stubby { 1.5 } else { 1.0 };
             let cycles = r.random_range(0.5f32..2.0);
             let verb = if lying { "curling" } else { "bending" };
             (
@@ -123,7 +135,8 @@ pub(super) fn draw(
             )
         }
         MotionFamily::Twist => {
-            let angle = sign(r) * r.random_range(1.0f32..3.0);
+            // Lying shapes twist both ends (in opposite senses), so less at each end.
+            let angle = sign(r) * r.random_range(0.8f32..2.4) * if lying { 0.75 } else { 1.0 };
             let cycles = r.random_range(0.5f32..2.0);
             let turn = if angle > 0.0 {
                 "counterclockwise"
@@ -161,9 +174,9 @@ pub(super) fn draw(
             let legged = !body.limbs.is_empty();
             let run = legged && r.random_bool(0.4);
             let (swing, cycles) = if run {
-                (r.random_range(0.55f32..0.8), r.random_range(1.8f32..2.6))
+                (r.random_range(0.5f32..0.7), r.random_range(1.4f32..2.0))
             } else if legged {
-                (r.random_range(0.35f32..0.55), r.random_range(0.8f32..1.6))
+                (r.random_range(0.3f32..0.5), r.random_range(0.7f32..1.3))
             } else {
                 (0.0, r.random_range(1.0f32..3.0))
             };
@@ -376,13 +389,8 @@ pub(super) fn pose(motion: &Motion, body: &Body, geo: &Geometry, tau: f32, out: 
             distance,
         } => {
             let progress = if body.limbs.is_empty() {
-                // Crawling: forward in pulses (zero speed between them), squashing down at each push.
-                let sy = 1.0 - 0.15 * pulse(cycles, tau);
-                for p in out.iter_mut() {
-                    p[1] *= sy;
-                    p[0] = c[0] + (p[0] - c[0]) / sy.sqrt();
-                    p[2] = c[2] + (p[2] - c[2]) / sy.sqrt();
-                }
+                // Crawling: forward in pulses (zero speed between them), contracting at each push.
+                stretch(out, body, c, 1.0 - 0.15 * pulse(cycles, tau));
                 distance * (tau - (TAU * cycles * tau).sin() / (TAU * cycles))
             } else {
                 let f = body.forward.unwrap_or(2);
@@ -433,15 +441,7 @@ pub(super) fn pose(motion: &Motion, body: &Body, geo: &Geometry, tau: f32, out: 
             }
         }
         Motion::Squash { amount, cycles } => {
-            let sy = 1.0 + amount * (TAU * cycles * tau).sin();
-            let sxz = 1.0 / sy.sqrt();
-            for p in out.iter_mut() {
-                *p = [
-                    c[0] + (p[0] - c[0]) * sxz,
-                    p[1] * sy,
-                    c[2] + (p[2] - c[2]) * sxz,
-                ];
-            }
+            stretch(out, body, c, 1.0 + amount * (TAU * cycles * tau).sin());
         }
         Motion::Rigid { spin, travel } => {
             let e = ease(tau);
@@ -450,6 +450,23 @@ pub(super) fn pose(motion: &Motion, body: &Body, geo: &Geometry, tau: f32, out: 
                 let q = yaw(*p, c, spin * e);
                 *p = [q[0] + shift[0], q[1], q[2] + shift[2]];
             }
+        }
+    }
+}
+
+/// Volume-preserving scale by `s` along the squash axis (the length of limbless lying shapes, else vertical)
+/// and by 1/√s across it; heights stay anchored on the ground, the rest on the rest centre `c`.
+fn stretch(out: &mut [V3], body: &Body, c: V3, s: f32) {
+    let k = if body.pivot == Pivot::Center && body.limbs.is_empty() {
+        body.axis
+    } else {
+        1
+    };
+    let anchor = [c[0], 0.0, c[2]];
+    for p in out.iter_mut() {
+        for (i, x) in p.iter_mut().enumerate() {
+            let f = if i == k { s } else { 1.0 / s.sqrt() };
+            *x = anchor[i] + (*x - anchor[i]) * f;
         }
     }
 }

@@ -298,11 +298,11 @@ pub(super) fn build(
         ShapeFamily::Blob => {
             let rad = r.random_range(0.4f32..0.9);
             let stretch = [
-                r.random_range(0.8f32..1.25),
-                r.random_range(0.7f32..1.2),
-                r.random_range(0.8f32..1.25),
+                r.random_range(0.8f32..1.2),
+                r.random_range(0.9f32..1.4),
+                r.random_range(0.8f32..1.2),
             ];
-            let lump = r.random_range(0.04f32..0.22);
+            let lump = r.random_range(0.05f32..0.3);
             let waves: Vec<(V3, f32, f32, f32)> = (0..6)
                 .map(|_| {
                     let d = unit([
@@ -312,7 +312,7 @@ pub(super) fn build(
                     ]);
                     (
                         d,
-                        r.random_range(1.5f32..4.0),
+                        r.random_range(0.8f32..2.2),
                         r.random_range(0.4f32..1.0),
                         r.random_range(0.0..TAU),
                     )
@@ -326,22 +326,24 @@ pub(super) fn build(
                     .iter()
                     .map(|(d, f, a, p)| a * (f * PI * dot(*d, u) + p).sin())
                     .sum();
-                let k = rad * (1.0 + lump * noise / wsum * 2.0);
+                let k = rad * (1.0 + 1.5 * lump * noise / wsum);
                 [0, 1, 2].map(|i| k * stretch[i] * u[i])
             });
             body.words.extend(pick(rad, 0.55, 0.75, "small", "large"));
-            body.words.extend(pick(lump, 0.09, 0.15, "smooth", "lumpy"));
+            body.words.extend(pick(lump, 0.12, 0.2, "smooth", "lumpy"));
         }
         ShapeFamily::Tube => {
             let height = r.random_range(1.0f32..2.2);
             let rad = height * r.random_range(0.06f32..0.2);
             let ratio = r.random_range(0.5f32..0.8);
             let taper = r.random_range(0.6f32..1.0);
+            let (ribs, rib) = (r.random_range(3..=6) as f32, r.random_range(0.06f32..0.14));
             let res = allocate(target, lo, hi, &[(height + rad * 2.0, TAU * rad)])?;
             m.sweep(res[0], height, rad, ratio, |s| [0.0, s * height, 0.0]);
-            // Taper the upper part: radius shrinks linearly to `taper` at the top.
+            // Taper towards the top and flute the sides with `ribs` ridges, so that twisting shows.
             for p in &mut m.pos {
-                let k = 1.0 + (taper - 1.0) * (p[1] / height).clamp(0.0, 1.0);
+                let flute = 1.0 + rib * (ribs * p[2].atan2(p[0])).cos();
+                let k = (1.0 + (taper - 1.0) * (p[1] / height).clamp(0.0, 1.0)) * flute;
                 p[0] *= k;
                 p[2] *= k;
             }
@@ -480,7 +482,7 @@ pub(super) fn build(
         ShapeFamily::Worm => {
             let len = r.random_range(1.0f32..2.5);
             let rad = len * r.random_range(0.025f32..0.07);
-            let wiggle = len * r.random_range(0.03f32..0.1);
+            let wiggle = len * r.random_range(0.05f32..0.12);
             let phase = r.random_range(0.0f32..TAU);
             let res = allocate(target, lo, hi, &[(len, TAU * rad)])?;
             m.sweep(res[0], len, rad, 1.0, |s| {

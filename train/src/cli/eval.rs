@@ -4,9 +4,9 @@ use std::path::PathBuf;
 use std::process::{Command, ExitCode};
 use std::time::Instant;
 
-use anyhow::{Context, bail};
 use any4d_data::formats::read_clip;
 use any4d_eval::metrics::{ClipMetrics, Coordinates, Motion, Protocol, average, evaluate_clip_with};
+use anyhow::{Context, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -65,14 +65,25 @@ pub fn run(cmd: EvalCmd) -> anyhow::Result<ExitCode> {
 fn metrics(args: MetricsArgs) -> anyhow::Result<ExitCode> {
     let pred = read_clip(&args.pred).with_context(|| format!("reading the prediction {}", args.pred.display()))?;
     let gt = read_clip(&args.gt).with_context(|| format!("reading the ground truth {}", args.gt.display()))?;
-    let keyframes = args.keyframes.clone().unwrap_or_else(|| vec![0, gt.frames.saturating_sub(1)]);
+    let keyframes = args
+        .keyframes
+        .clone()
+        .unwrap_or_else(|| vec![0, gt.frames.saturating_sub(1)]);
     let coordinates = match args.coordinates {
         CoordinatesArg::Normalise => Coordinates::NormaliseByGtFrame0,
         CoordinatesArg::AsGiven => Coordinates::AsGiven,
     };
-    let protocol = Protocol { coordinates, rate: args.rate };
-    let m = evaluate_clip_with(Motion::from_clip(&pred)?, Motion::from_clip(&gt)?, &keyframes, &protocol)
-        .with_context(|| format!("scoring {} against {}", args.pred.display(), args.gt.display()))?;
+    let protocol = Protocol {
+        coordinates,
+        rate: args.rate,
+    };
+    let m = evaluate_clip_with(
+        Motion::from_clip(&pred)?,
+        Motion::from_clip(&gt)?,
+        &keyframes,
+        &protocol,
+    )
+    .with_context(|| format!("scoring {} against {}", args.pred.display(), args.gt.display()))?;
     match args.format {
         OutputFormat::Json => println!("{}", serde_json::to_string_pretty(&m)?),
         OutputFormat::Table => {
@@ -141,13 +152,17 @@ fn bench_clips(args: &BenchArgs) -> Vec<(Vec<[f32; 3]>, Vec<[f32; 3]>)> {
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     (0..args.clips)
         .map(|_| {
-            let base: Vec<[f32; 3]> =
-                (0..args.vertices).map(|_| [0; 3].map(|_| rng.random_range(-1.0f32..1.0))).collect();
+            let base: Vec<[f32; 3]> = (0..args.vertices)
+                .map(|_| [0; 3].map(|_| rng.random_range(-1.0f32..1.0)))
+                .collect();
             let vel: [f32; 3] = [0; 3].map(|_| rng.random_range(-0.05f32..0.05));
             let gt: Vec<[f32; 3]> = (0..args.frames)
                 .flat_map(|f| base.iter().map(move |b| [0, 1, 2].map(|k| b[k] + vel[k] * f as f32)))
                 .collect();
-            let pred = gt.iter().map(|g| [0, 1, 2].map(|k| g[k] + rng.random_range(-0.02f32..0.02))).collect();
+            let pred = gt
+                .iter()
+                .map(|g| [0, 1, 2].map(|k| g[k] + rng.random_range(-0.02f32..0.02)))
+                .collect();
             (pred, gt)
         })
         .collect()
@@ -168,9 +183,16 @@ fn timed<T>(repeat: usize, mut f: impl FnMut() -> anyhow::Result<T>) -> anyhow::
 }
 
 /// Runs the reference script on the same clips; `Err` carries why it could not run (missing python or scipy).
-fn reference(args: &BenchArgs, clips: &[(Vec<[f32; 3]>, Vec<[f32; 3]>)], keys: &[usize]) -> anyhow::Result<(f64, ClipMetrics)> {
+fn reference(
+    args: &BenchArgs,
+    clips: &[(Vec<[f32; 3]>, Vec<[f32; 3]>)],
+    keys: &[usize],
+) -> anyhow::Result<(f64, ClipMetrics)> {
     if !args.script.is_file() {
-        bail!("reference script {} not found (run from the repository root or pass --script)", args.script.display());
+        bail!(
+            "reference script {} not found (run from the repository root or pass --script)",
+            args.script.display()
+        );
     }
     let file = std::env::temp_dir().join(format!("any4d-bench-metrics-{}.f32", std::process::id()));
     let bytes: Vec<u8> = clips
@@ -196,7 +218,11 @@ fn reference(args: &BenchArgs, clips: &[(Vec<[f32; 3]>, Vec<[f32; 3]>)], keys: &
     removed.with_context(|| format!("removing {}", file.display()))?;
     if !output.status.success() {
         let stderr = String::from_utf8_lossy(&output.stderr);
-        bail!("{} failed (numpy/scipy missing?): {}", args.script.display(), stderr.trim().lines().last().unwrap_or(""));
+        bail!(
+            "{} failed (numpy/scipy missing?): {}",
+            args.script.display(),
+            stderr.trim().lines().last().unwrap_or("")
+        );
     }
     let json: serde_json::Value = serde_json::from_slice(&output.stdout).context("parsing the reference's JSON")?;
     let seconds = json["seconds"].as_f64().context("reference JSON lacks `seconds`")?;
@@ -216,7 +242,10 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
         let per_clip = clips
             .par_iter()
             .map(|(p, g)| {
-                let (p, g) = (Motion::new(p, args.frames, args.vertices)?, Motion::new(g, args.frames, args.vertices)?);
+                let (p, g) = (
+                    Motion::new(p, args.frames, args.vertices)?,
+                    Motion::new(g, args.frames, args.vertices)?,
+                );
                 evaluate_clip_with(p, g, &keys, &protocol)
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -236,7 +265,11 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
     match reference(&args, &clips, &keys) {
         Ok((tr, reference)) => {
             println!("numpy+scipy, 1 core     {:>10.2} clips/s", rate(tr));
-            println!("speed-up over the reference: {:.2}× (1 thread), {:.2}× ({threads} threads)", tr / t1, tr / tn);
+            println!(
+                "speed-up over the reference: {:.2}× (1 thread), {:.2}× ({threads} threads)",
+                tr / t1,
+                tr / tn
+            );
             let (a, b) = (serde_json::to_value(ours)?, serde_json::to_value(reference)?);
             let worst = b
                 .as_object()
@@ -248,7 +281,10 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
                 })
                 .max_by(|p, q| p.0.total_cmp(&q.0))
                 .context("no metrics to compare")?;
-            println!("agreement: largest relative difference of the mean metrics {:.1e} ({})", worst.0, worst.1);
+            println!(
+                "agreement: largest relative difference of the mean metrics {:.1e} ({})",
+                worst.0, worst.1
+            );
         }
         Err(e) => println!("reference skipped: {e:#}"),
     }
