@@ -140,6 +140,20 @@ mod tests {
         assert!(farthest_point_sampling(&[], 4).is_empty());
     }
 
+    /// Timing: `cargo test -p any4d-data fps_speed -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn fps_speed() {
+        let pts = cloud(4096, 3);
+        let start = std::time::Instant::now();
+        let reps = 20;
+        for _ in 0..reps {
+            assert_eq!(farthest_point_sampling(&pts, 512).len(), 512);
+        }
+        let ms = start.elapsed().as_secs_f64() * 1e3 / reps as f64;
+        println!("fps_speed: N = 4096, P = 512: {ms:.2} ms per clip");
+    }
+
     #[test]
     fn many_matches_single() {
         let (a, b) = (cloud(600, 1), cloud(900, 2));

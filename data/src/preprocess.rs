@@ -39,7 +39,7 @@ pub fn weld(clip: &Clip, eps: f32) -> Clip {
     let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
     let mut kept: Vec<usize> = Vec::new(); // old index of each new vertex
     let mut remap = vec![0u32; n];
-    for v in 0..n {
+    for (v, slot) in remap.iter_mut().enumerate() {
         let c = cell(clip.vertices[v]);
         let mut found = None;
         'search: for dx in -reach..=reach {
@@ -58,7 +58,7 @@ pub fn weld(clip: &Clip, eps: f32) -> Clip {
                 }
             }
         }
-        remap[v] = match found {
+        *slot = match found {
             Some(new) => new as u32,
             None => {
                 grid.entry(c).or_default().push(kept.len());
@@ -127,8 +127,8 @@ impl Normalization {
     /// Normalise every frame of `clip` in place.
     pub fn apply(&self, clip: &mut Clip) {
         for p in &mut clip.vertices {
-            for k in 0..3 {
-                p[k] = (p[k] - self.center[k]) / self.scale; // (D3)
+            for (x, c) in p.iter_mut().zip(self.center) {
+                *x = (*x - c) / self.scale; // (D3)
             }
         }
     }
@@ -136,8 +136,8 @@ impl Normalization {
     /// Undo [`Normalization::apply`] in place: `x = x̄ · s + c`.
     pub fn invert(&self, clip: &mut Clip) {
         for p in &mut clip.vertices {
-            for k in 0..3 {
-                p[k] = p[k] * self.scale + self.center[k];
+            for (x, c) in p.iter_mut().zip(self.center) {
+                *x = *x * self.scale + c;
             }
         }
     }

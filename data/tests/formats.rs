@@ -10,7 +10,9 @@ use any4d_data::formats::obj::{read_obj_seq, write_obj_seq};
 use any4d_data::formats::{read_clip, write_clip};
 
 fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(rel)
 }
 
 /// A small moving clip with coordinates that are not round numbers.
@@ -19,10 +21,23 @@ fn sample_clip() -> Clip {
     let v = (0..t * n)
         .map(|i| {
             let (f, k) = ((i / n) as f32, (i % n) as f32);
-            [0.1 * k + 0.013 * f, (k * 0.7).sin() - f * 0.25, 1.0 / (k + 3.0) + f * f * 0.01]
+            [
+                0.1 * k + 0.013 * f,
+                (k * 0.7).sin() - f * 0.25,
+                1.0 / (k + 3.0) + f * f * 0.01,
+            ]
         })
         .collect();
-    Clip::new("sample", v, t, n, vec![[0, 1, 2], [0, 2, 3], [3, 4, 0]], "a thing wiggles", "mem").unwrap()
+    Clip::new(
+        "sample",
+        v,
+        t,
+        n,
+        vec![[0, 1, 2], [0, 2, 3], [3, 4, 0]],
+        "a thing wiggles",
+        "mem",
+    )
+    .unwrap()
 }
 
 fn assert_close(a: &[[f32; 3]], b: &[[f32; 3]], tol: f32) {
@@ -43,21 +58,67 @@ fn good_bin_fixtures_match_numpy_exactly() {
     for (name, want) in cases {
         let path = fixture(&format!("bin/{name}.bin"));
         let clip = read_bin(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
-        let shape: Vec<usize> = want["shape"].as_array().unwrap().iter().map(|x| x.as_u64().unwrap() as usize).collect();
-        let flat: Vec<f32> = want["vertices"].as_array().unwrap().iter().map(|x| x.as_f64().unwrap() as f32).collect();
-        let faces: Vec<u32> = want["faces"].as_array().unwrap().iter().map(|x| x.as_u64().unwrap() as u32).collect();
-        assert_eq!((clip.frames, clip.n_vertices), (shape[0], shape[1]), "{name}");
-        assert_eq!(clip.vertices.iter().flatten().copied().collect::<Vec<_>>(), flat, "{name}");
-        assert_eq!(clip.faces.iter().flatten().copied().collect::<Vec<_>>(), faces, "{name}");
+        let shape: Vec<usize> = want["shape"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_u64().unwrap() as usize)
+            .collect();
+        let flat: Vec<f32> = want["vertices"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap() as f32)
+            .collect();
+        let faces: Vec<u32> = want["faces"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_u64().unwrap() as u32)
+            .collect();
+        assert_eq!(
+            (clip.frames, clip.n_vertices),
+            (shape[0], shape[1]),
+            "{name}"
+        );
+        assert_eq!(
+            clip.vertices.iter().flatten().copied().collect::<Vec<_>>(),
+            flat,
+            "{name}"
+        );
+        assert_eq!(
+            clip.faces.iter().flatten().copied().collect::<Vec<_>>(),
+            faces,
+            "{name}"
+        );
         assert_eq!(clip.caption, want["caption"].as_str().unwrap(), "{name}");
-        assert_eq!((clip.id.as_str(), clip.source.as_str()), (name.as_str(), path.display().to_string().as_str()));
+        assert_eq!(
+            (clip.id.as_str(), clip.source.as_str()),
+            (name.as_str(), path.display().to_string().as_str())
+        );
     }
     // float64 0.1 rounds to float32 as numpy does, and the special captions survive.
     let c = read_bin(&fixture("bin/p2_f64.bin")).unwrap();
-    assert_eq!(c.vertices[1], [0.1f64 as f32, (0.1f64 + 0.01) as f32, (0.1f64 + 0.02) as f32]);
-    assert_eq!(read_bin(&fixture("bin/no_caption.bin")).unwrap().caption, " ");
-    assert_eq!(read_bin(&fixture("bin/empty_caption.bin")).unwrap().caption, "");
-    assert_eq!(read_bin(&fixture("bin/bytes_caption.bin")).unwrap().caption, "café spins");
+    assert_eq!(
+        c.vertices[1],
+        [
+            0.1f64 as f32,
+            (0.1f64 + 0.01) as f32,
+            (0.1f64 + 0.02) as f32
+        ]
+    );
+    assert_eq!(
+        read_bin(&fixture("bin/no_caption.bin")).unwrap().caption,
+        " "
+    );
+    assert_eq!(
+        read_bin(&fixture("bin/empty_caption.bin")).unwrap().caption,
+        ""
+    );
+    assert_eq!(
+        read_bin(&fixture("bin/bytes_caption.bin")).unwrap().caption,
+        "café spins"
+    );
 }
 
 #[test]
@@ -77,8 +138,16 @@ fn bad_bin_fixtures_name_path_and_field() {
         ("not_a_dict", "pickle", "list"),
         ("truncated", "pickle", "truncated"),
         ("not_pickle", "pickle", "stack underflow"),
-        ("hostile_os_system", "pickle", "`posix.system` is not allowed"),
-        ("hostile_builtins_eval", "pickle", "`builtins.eval` is not allowed"),
+        (
+            "hostile_os_system",
+            "pickle",
+            "`posix.system` is not allowed",
+        ),
+        (
+            "hostile_builtins_eval",
+            "pickle",
+            "`builtins.eval` is not allowed",
+        ),
     ];
     for (name, field, reason) in cases {
         let path = fixture(&format!("bin/bad_{name}.bin"));
@@ -91,16 +160,25 @@ fn bad_bin_fixtures_name_path_and_field() {
 
 #[test]
 fn hostile_pickles_never_run() {
-    let marks = ["/tmp/any4d_fixture_pwned_os_system", "/tmp/any4d_fixture_pwned_eval"];
+    let marks = [
+        "/tmp/any4d_fixture_pwned_os_system",
+        "/tmp/any4d_fixture_pwned_eval",
+    ];
     for m in marks {
-        assert!(!Path::new(m).exists(), "{m} exists before the test; remove it and rerun");
+        assert!(
+            !Path::new(m).exists(),
+            "{m} exists before the test; remove it and rerun"
+        );
     }
     for name in ["hostile_os_system", "hostile_builtins_eval"] {
         assert!(read_bin(&fixture(&format!("bin/bad_{name}.bin"))).is_err());
         assert!(read_clip(&fixture(&format!("bin/bad_{name}.bin"))).is_err());
     }
     for m in marks {
-        assert!(!Path::new(m).exists(), "{m} appeared: a hostile pickle was executed");
+        assert!(
+            !Path::new(m).exists(),
+            "{m} appeared: a hostile pickle was executed"
+        );
     }
 }
 
@@ -111,12 +189,18 @@ fn write_bin_round_trips_exactly() {
     let clip = sample_clip();
     write_bin(&path, &clip).unwrap();
     let back = read_bin(&path).unwrap();
-    assert_eq!((back.vertices, back.faces, back.caption, back.frames), (clip.vertices, clip.faces, clip.caption, clip.frames));
+    assert_eq!(
+        (back.vertices, back.faces, back.caption, back.frames),
+        (clip.vertices, clip.faces, clip.caption, clip.frames)
+    );
 }
 
 #[test]
 fn python_reads_written_bin() {
-    let has_numpy = Command::new("python3").args(["-c", "import numpy"]).output().is_ok_and(|o| o.status.success());
+    let has_numpy = Command::new("python3")
+        .args(["-c", "import numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
     if !has_numpy {
         println!("skipped: python3/numpy not available");
         return;
@@ -125,20 +209,40 @@ fn python_reads_written_bin() {
     let path = dir.path().join("sample.bin");
     write_bin(&path, &sample_clip()).unwrap();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/check_bin.py");
-    let out = Command::new("python3").arg(&script).arg(&path).output().unwrap();
+    let out = Command::new("python3")
+        .arg(&script)
+        .arg(&path)
+        .output()
+        .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
-    assert!(stdout.contains("vertices ndarray float32 (4, 5, 3) C"), "{stdout}");
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("vertices ndarray float32 (4, 5, 3) C"),
+        "{stdout}"
+    );
     assert!(stdout.contains("faces ndarray int64 (3, 3) C"), "{stdout}");
     assert!(stdout.contains("caption str 'a thing wiggles'"), "{stdout}");
     let v0 = sample_clip().vertices[0].map(|x| x as f64);
-    assert!(stdout.contains(&format!("vertices[0,0] [{:?}, {:?}, {:?}]", v0[0], v0[1], v0[2])), "{stdout}");
+    assert!(
+        stdout.contains(&format!(
+            "vertices[0,0] [{:?}, {:?}, {:?}]",
+            v0[0], v0[1], v0[2]
+        )),
+        "{stdout}"
+    );
 }
 
 #[test]
 fn obj_sequence_reads_in_natural_order() {
     let clip = read_obj_seq(&fixture("obj/quad_seq")).unwrap();
-    assert_eq!((clip.frames, clip.n_vertices, clip.id.as_str()), (3, 4, "quad_seq"));
+    assert_eq!(
+        (clip.frames, clip.n_vertices, clip.id.as_str()),
+        (3, 4, "quad_seq")
+    );
     assert_eq!(clip.faces, vec![[0, 1, 2], [0, 2, 3]]);
     assert_eq!(clip.caption, "a quad rises");
     // frame_1, frame_2, frame_10 lift z by 0, 0.5, 1 (plus 0.25 x).
@@ -151,7 +255,10 @@ fn bad_obj_sequences_name_file_and_line() {
     let e = read_obj_seq(&fixture("obj/bad_vertex_count")).unwrap_err();
     assert!(e.path.ends_with("f1.obj") && e.field == "vertices", "{e}");
     let e = read_obj_seq(&fixture("obj/bad_line")).unwrap_err();
-    assert!(e.path.ends_with("a.obj") && e.field == "line 3" && e.reason.contains("`one`"), "{e}");
+    assert!(
+        e.path.ends_with("a.obj") && e.field == "line 3" && e.reason.contains("`one`"),
+        "{e}"
+    );
     let e = read_obj_seq(&fixture("gltf")).unwrap_err();
     assert_eq!(e.field, "frames");
 }
@@ -163,45 +270,103 @@ fn obj_round_trip_and_no_overwrite() {
     let clip = sample_clip();
     write_obj_seq(&seq, &clip).unwrap();
     let back = read_obj_seq(&seq).unwrap();
-    assert_eq!((back.vertices, back.faces, back.caption), (clip.vertices.clone(), clip.faces.clone(), clip.caption.clone()));
+    assert_eq!(
+        (back.vertices, back.faces, back.caption),
+        (
+            clip.vertices.clone(),
+            clip.faces.clone(),
+            clip.caption.clone()
+        )
+    );
     assert_eq!(write_obj_seq(&seq, &clip).unwrap_err().field, "frames");
 }
 
 #[test]
 fn gltf_morph_fixture_bakes_weights() {
-    let clip = read_gltf(&fixture("gltf/morph_square.gltf"), &GltfReadOptions::default()).unwrap();
+    let clip = read_gltf(
+        &fixture("gltf/morph_square.gltf"),
+        &GltfReadOptions::default(),
+    )
+    .unwrap();
     assert_eq!((clip.frames, clip.n_vertices), (31, 4));
     assert_eq!(clip.faces, vec![[0, 1, 2], [0, 2, 3]]);
-    let square = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+    let square = [
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [0.0, 1.0, 0.0],
+    ];
     let moved = |d: [f32; 3]| square.map(|p: [f32; 3]| [p[0] + d[0], p[1] + d[1], p[2] + d[2]]);
     assert_close(clip.frame(0), &square, 1e-6);
     assert_close(clip.frame(6), &moved([0.0, 0.0, 0.4]), 1e-6); // t = 0.2: w = (0.4, 0)
     assert_close(clip.frame(15), &moved([0.0, 0.0, 1.0]), 1e-6); // t = 0.5: w = (1, 0)
     assert_close(clip.frame(24), &moved([1.2, 0.0, 0.4]), 1e-6); // t = 0.8: w = (0.4, 0.6)
     assert_close(clip.frame(30), &moved([2.0, 0.0, 0.0]), 1e-6);
-    let opts = GltfReadOptions { fps: 10.0, max_frames: Some(5), mesh: Some(0) };
-    assert_eq!(read_gltf(&fixture("gltf/morph_square.gltf"), &opts).unwrap().frames, 5);
-    let opts = GltfReadOptions { mesh: Some(3), ..GltfReadOptions::default() };
-    assert_eq!(read_gltf(&fixture("gltf/morph_square.gltf"), &opts).unwrap_err().field, "meshes");
+    let opts = GltfReadOptions {
+        fps: 10.0,
+        max_frames: Some(5),
+        mesh: Some(0),
+    };
+    assert_eq!(
+        read_gltf(&fixture("gltf/morph_square.gltf"), &opts)
+            .unwrap()
+            .frames,
+        5
+    );
+    let opts = GltfReadOptions {
+        mesh: Some(3),
+        ..GltfReadOptions::default()
+    };
+    assert_eq!(
+        read_gltf(&fixture("gltf/morph_square.gltf"), &opts)
+            .unwrap_err()
+            .field,
+        "meshes"
+    );
 }
 
 #[test]
 fn gltf_skin_fixture_bakes_joints() {
-    let clip = read_gltf(&fixture("gltf/skin_strip.gltf"), &GltfReadOptions::default()).unwrap();
+    let clip = read_gltf(
+        &fixture("gltf/skin_strip.gltf"),
+        &GltfReadOptions::default(),
+    )
+    .unwrap();
     assert_eq!((clip.frames, clip.n_vertices, clip.faces.len()), (31, 6, 4));
-    let rest = [[-0.5, 0.0, 0.0], [0.5, 0.0, 0.0], [-0.5, 1.0, 0.0], [0.5, 1.0, 0.0], [-0.5, 2.0, 0.0], [0.5, 2.0, 0.0]];
+    let rest = [
+        [-0.5, 0.0, 0.0],
+        [0.5, 0.0, 0.0],
+        [-0.5, 1.0, 0.0],
+        [0.5, 1.0, 0.0],
+        [-0.5, 2.0, 0.0],
+        [0.5, 2.0, 0.0],
+    ];
     assert_close(clip.frame(0), &rest, 1e-6);
     // t = 14/30 < 0.5: the STEP translation of the root joint has not happened; bottom row still at rest.
     assert_close(&clip.frame(14)[..2], &rest[..2], 1e-6);
     // t = 1: root moved by x + 1, joint 1 (at y = 1) turned 90° about z; middle row averages both joints.
-    let end = [[0.5, 0.0, 0.0], [1.5, 0.0, 0.0], [0.75, 0.75, 0.0], [1.25, 1.25, 0.0], [0.0, 0.5, 0.0], [0.0, 1.5, 0.0]];
+    let end = [
+        [0.5, 0.0, 0.0],
+        [1.5, 0.0, 0.0],
+        [0.75, 0.75, 0.0],
+        [1.25, 1.25, 0.0],
+        [0.0, 0.5, 0.0],
+        [0.0, 1.5, 0.0],
+    ];
     assert_close(clip.frame(30), &end, 1e-5);
 }
 
 #[test]
 fn gltf_without_animation_is_an_error() {
-    let e = read_gltf(&fixture("gltf/static_square.gltf"), &GltfReadOptions::default()).unwrap_err();
-    assert_eq!((e.field.as_str(), e.reason.as_str()), ("animations", "no animation"));
+    let e = read_gltf(
+        &fixture("gltf/static_square.gltf"),
+        &GltfReadOptions::default(),
+    )
+    .unwrap_err();
+    assert_eq!(
+        (e.field.as_str(), e.reason.as_str()),
+        ("animations", "no animation")
+    );
 }
 
 #[test]
@@ -211,9 +376,21 @@ fn gltf_and_glb_round_trip() {
     for name in ["sample.gltf", "sample.glb"] {
         let path = dir.path().join(name);
         write_gltf(&path, &clip, 24.0).unwrap();
-        let opts = GltfReadOptions { fps: 24.0, ..GltfReadOptions::default() };
+        let opts = GltfReadOptions {
+            fps: 24.0,
+            ..GltfReadOptions::default()
+        };
         let back = read_gltf(&path, &opts).unwrap();
-        assert_eq!((back.frames, back.n_vertices, &back.faces, back.caption.as_str()), (4, 5, &clip.faces, "a thing wiggles"), "{name}");
+        assert_eq!(
+            (
+                back.frames,
+                back.n_vertices,
+                &back.faces,
+                back.caption.as_str()
+            ),
+            (4, 5, &clip.faces, "a thing wiggles"),
+            "{name}"
+        );
         assert_close(&back.vertices, &clip.vertices, 1e-6);
     }
 }
@@ -226,28 +403,46 @@ fn read_and_write_clip_dispatch_by_path() {
         let path = dir.path().join(name);
         write_clip(&path, &clip).unwrap();
         let back = read_clip(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
-        assert_eq!((back.frames, &back.faces), (clip.frames, &clip.faces), "{name}");
+        assert_eq!(
+            (back.frames, &back.faces),
+            (clip.frames, &clip.faces),
+            "{name}"
+        );
         assert_close(&back.vertices, &clip.vertices, 1e-6);
     }
-    assert_eq!(read_clip(&dir.path().join("c.fbx")).unwrap_err().field, "format");
+    assert_eq!(
+        read_clip(&dir.path().join("c.fbx")).unwrap_err().field,
+        "format"
+    );
 }
 
 /// The Khronos sample files that Debian's `assimp-testmodels` installs; not copied into the repository.
 #[test]
 fn system_gltf_samples_when_installed() {
     let root = Path::new("/usr/share/assimp/models/glTF2");
-    let files = ["glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf", "simple_skin/simple_skin.gltf"];
+    let files = [
+        "glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf",
+        "simple_skin/simple_skin.gltf",
+    ];
     if !root.join(files[0]).exists() {
         println!("skipped: assimp-testmodels not installed (apt-get install assimp-testmodels)");
         return;
     }
     for f in files {
-        let clip = read_gltf(&root.join(f), &GltfReadOptions::default()).unwrap_or_else(|e| panic!("{f}: {e}"));
+        let clip = read_gltf(&root.join(f), &GltfReadOptions::default())
+            .unwrap_or_else(|e| panic!("{f}: {e}"));
         let moved = (1..clip.frames).map(|k| {
-            clip.frame(k).iter().zip(clip.frame(0)).map(|(p, q)| (0..3).map(|c| (p[c] - q[c]).abs()).fold(0.0, f32::max)).fold(0.0, f32::max)
+            clip.frame(k)
+                .iter()
+                .zip(clip.frame(0))
+                .map(|(p, q)| (0..3).map(|c| (p[c] - q[c]).abs()).fold(0.0, f32::max))
+                .fold(0.0, f32::max)
         });
         let max_move = moved.fold(0.0, f32::max);
-        println!("{f}: {} frames, {} vertices, max displacement from frame 0 {max_move}", clip.frames, clip.n_vertices);
+        println!(
+            "{f}: {} frames, {} vertices, max displacement from frame 0 {max_move}",
+            clip.frames, clip.n_vertices
+        );
         assert!(clip.frames > 10 && max_move > 0.1, "{f}");
     }
 }

@@ -41,11 +41,11 @@ fn opts() -> ImportOptions {
 fn sources(dir: &Path) -> PathBuf {
     let src = dir.join("src");
     std::fs::create_dir_all(src.join("nested")).unwrap();
-    formats::write_clip(&src.join("a.bin"), &blob("objA_offset0_0-15", 16, 20, 1)).unwrap();
-    formats::write_clip(&src.join("b.bin"), &blob("objB_offset0_0-15", 16, 32, 2)).unwrap();
-    formats::write_clip(&src.join("nested/c.bin"), &blob("objC_offset0_0-15", 16, 64, 3)).unwrap();
-    formats::write_clip(&src.join("long.bin"), &blob("objL_offset0_0-19", 20, 24, 4)).unwrap();
-    formats::write_clip(&src.join("small.bin"), &blob("objS_offset0_0-15", 16, 8, 5)).unwrap();
+    formats::write_clip(&src.join("objA_offset0_0-15.bin"), &blob("objA_offset0_0-15", 16, 20, 1)).unwrap();
+    formats::write_clip(&src.join("objB_offset0_0-15.bin"), &blob("objB_offset0_0-15", 16, 32, 2)).unwrap();
+    formats::write_clip(&src.join("nested/objC_offset0_0-15.bin"), &blob("objC_offset0_0-15", 16, 64, 3)).unwrap();
+    formats::write_clip(&src.join("objL_offset0_0-19.bin"), &blob("objL_offset0_0-19", 20, 24, 4)).unwrap();
+    formats::write_clip(&src.join("objS_offset0_0-15.bin"), &blob("objS_offset0_0-15", 16, 8, 5)).unwrap();
     std::fs::write(src.join("garbage.bin"), b"this is not a pickle").unwrap();
     std::fs::write(src.join("notes.txt"), b"ignored").unwrap();
     src
@@ -60,12 +60,12 @@ fn import_stores_normalised_windows_and_rejects_bad_files() {
     assert_eq!(report.sources, 6, "{report}");
     assert_eq!(report.added, 3 + 5, "{report}");
     let names: Vec<&str> = report.rejected.iter().map(|r| r.source.rsplit('/').next().unwrap()).collect();
-    assert_eq!(names, ["garbage.bin", "small.bin"], "{report}");
+    assert_eq!(names, ["garbage.bin", "objS_offset0_0-15.bin"], "{report}");
     assert!(report.rejected[1].reason.contains("vertices"), "{report}");
 
     let st = Store::open(&out).unwrap();
     assert_eq!((st.len(), st.frames(), st.p()), (8, 16, 8));
-    let original = formats::read_clip(&src.join("b.bin")).unwrap();
+    let original = formats::read_clip(&src.join("objB_offset0_0-15.bin")).unwrap();
     let i = (0..st.len()).find(|&i| st.get(i).unwrap().clip.id == original.id).unwrap();
     let got = st.get(i).unwrap();
     let (expect, norm) = normalize(&original);
@@ -84,7 +84,7 @@ fn import_stores_normalised_windows_and_rejects_bad_files() {
     assert!(rows[..8].iter().all(|r| r.status == Status::Ok && r.split.is_some()));
     assert!(rows[8..].iter().all(|r| r.status == Status::Rejected && !r.reason.is_empty() && r.split.is_none()));
     // The windows of the long clip share one object and therefore one split.
-    let long: Vec<_> = rows.iter().filter(|r| r.source.ends_with("long.bin")).collect();
+    let long: Vec<_> = rows.iter().filter(|r| r.source.ends_with("objL_offset0_0-19.bin")).collect();
     assert_eq!(long.len(), 5);
     assert!(long.iter().all(|r| r.object == "objL" && r.split == long[0].split));
 }
@@ -94,22 +94,23 @@ fn reimport_is_idempotent_and_unions_other_sources() {
     let tmp = tempfile::tempdir().unwrap();
     let src = sources(tmp.path());
     let out = tmp.path().join("store");
-    let first = store::import(&[src.join("a.bin"), src.join("nested")], &out, &opts()).unwrap();
+    let first = store::import(&[src.join("objA_offset0_0-15.bin"), src.join("nested")], &out, &opts()).unwrap();
     assert_eq!((first.added, first.kept, first.total), (2, 0, 2));
     let bytes = std::fs::read(out.join("clips.bin")).unwrap();
     let rows = read_index(&out).unwrap();
 
-    let again = store::import(&[src.join("a.bin"), src.join("nested")], &out, &opts()).unwrap();
+    let again = store::import(&[src.join("objA_offset0_0-15.bin"), src.join("nested")], &out, &opts()).unwrap();
     assert_eq!((again.added, again.kept, again.total), (2, 0, 2));
     assert_eq!(std::fs::read(out.join("clips.bin")).unwrap(), bytes, "same import twice must give the same file");
     assert_eq!(read_index(&out).unwrap(), rows);
 
-    let more = store::import(&[src.join("b.bin"), src.join("small.bin")], &out, &opts()).unwrap();
+    let more = store::import(&[src.join("objB_offset0_0-15.bin"), src.join("objS_offset0_0-15.bin")], &out, &opts()).unwrap();
     assert_eq!((more.added, more.kept, more.total), (1, 2, 3));
     let ids: Vec<String> = read_index(&out).unwrap().into_iter().map(|r| r.id).collect();
-    assert_eq!(ids, ["objA_offset0_0-15", "objC_offset0_0-15", "objB_offset0_0-15", "small.bin"]);
+    // Sources are processed in canonical-path order (`nested/` sorts before `objA…`); kept clips come first.
+    assert_eq!(ids, ["objC_offset0_0-15", "objA_offset0_0-15", "objB_offset0_0-15", "objS_offset0_0-15.bin"]);
     // Re-importing a source replaces its clips instead of duplicating them.
-    let b = store::import(&[src.join("b.bin")], &out, &opts()).unwrap();
+    let b = store::import(&[src.join("objB_offset0_0-15.bin")], &out, &opts()).unwrap();
     assert_eq!((b.added, b.kept, b.total), (1, 2, 3));
     assert_eq!(read_index(&out).unwrap().len(), 4);
 }
@@ -121,13 +122,13 @@ fn import_refuses_foreign_folders_and_mismatched_stores() {
     let foreign = tmp.path().join("foreign");
     std::fs::create_dir(&foreign).unwrap();
     std::fs::write(foreign.join("thesis.tex"), b"precious").unwrap();
-    let e = store::import(&[src.join("a.bin")], &foreign, &opts()).unwrap_err();
+    let e = store::import(&[src.join("objA_offset0_0-15.bin")], &foreign, &opts()).unwrap_err();
     assert!(e.reason.contains("not empty") && e.reason.contains("thesis.tex"), "{e}");
     assert_eq!(std::fs::read(foreign.join("thesis.tex")).unwrap(), b"precious");
 
     let out = tmp.path().join("store");
-    store::import(&[src.join("a.bin")], &out, &opts()).unwrap();
-    let e = store::import(&[src.join("b.bin")], &out, &ImportOptions { p: 4, ..opts() }).unwrap_err();
+    store::import(&[src.join("objA_offset0_0-15.bin")], &out, &opts()).unwrap();
+    let e = store::import(&[src.join("objB_offset0_0-15.bin")], &out, &ImportOptions { p: 4, ..opts() }).unwrap_err();
     assert!(e.reason.contains("P = 8") && e.reason.contains("P = 4"), "{e}");
     // A missing source is a rejection, not an abort.
     let r = store::import(&[tmp.path().join("nope.bin")], &out, &opts()).unwrap();
@@ -169,7 +170,7 @@ fn corrupt_or_truncated_store_gives_errors_not_panics() {
     let tmp = tempfile::tempdir().unwrap();
     let src = sources(tmp.path());
     let out = tmp.path().join("store");
-    store::import(&[src.join("a.bin"), src.join("b.bin")], &out, &opts()).unwrap();
+    store::import(&[src.join("objA_offset0_0-15.bin"), src.join("objB_offset0_0-15.bin")], &out, &opts()).unwrap();
     let path = out.join("clips.bin");
     let good = std::fs::read(&path).unwrap();
 
@@ -238,12 +239,12 @@ fn synth_store_inspect_and_batches() {
     assert_eq!(train.len(), s.train);
     let items: Vec<_> = (0..3).map(|i| ds.get(i).unwrap()).collect();
     let n_max = items.iter().map(|c| c.clip.n_vertices).max().unwrap();
-    let device = Device::ndarray();
+    let device = Device::flex();
     let batch = ClipBatcher::new(PadTo::BatchMax).batch(items.clone(), &device);
     assert_eq!(batch.vertices.dims(), [3, cfg.frames, n_max, 3]);
     assert_eq!(batch.vmask.dims(), [3, n_max]);
     assert_eq!(batch.fps.dims(), [3, 16]);
-    let mask: Vec<bool> = batch.vmask.to_data().to_vec().unwrap();
+    let mask: Vec<bool> = batch.vmask.to_data().try_to_vec::<bool>().unwrap();
     for (b, item) in items.iter().enumerate() {
         let n = item.clip.n_vertices;
         assert!(mask[b * n_max..b * n_max + n].iter().all(|&m| m));
@@ -251,13 +252,13 @@ fn synth_store_inspect_and_batches() {
         assert_eq!(batch.n_real[b], n);
         assert!(batch.edges[b].iter().all(|e| e[0] < e[1] && (e[1] as usize) < n));
     }
-    let v: Vec<f32> = batch.vertices.to_data().to_vec().unwrap();
+    let v: Vec<f32> = batch.vertices.to_data().try_to_vec::<f32>().unwrap();
     let n0 = items[0].clip.n_vertices;
     assert_eq!(v[..3], items[0].clip.vertices[0]);
     if n0 < n_max {
         assert_eq!(v[n0 * 3..n_max * 3].iter().filter(|&&x| x != 0.0).count(), 0, "padding is zero");
     }
-    let fps: Vec<i64> = batch.fps.to_data().convert::<i64>().to_vec().unwrap();
+    let fps: Vec<i64> = batch.fps.to_data().convert::<i64>().try_to_vec::<i64>().unwrap();
     assert_eq!(fps[..16].iter().map(|&i| i as u32).collect::<Vec<_>>(), items[0].fps);
     let e = ClipBatcher::new(PadTo::Fixed(n_max - 1)).try_batch(&items, &device).unwrap_err();
     assert!(e.reason.contains("exceed"), "{e}");

@@ -54,6 +54,12 @@ pub enum EvalError {
     /// The frame set a metric averages over is empty.
     #[error("no frames to score: {0}")]
     NoFrames(String),
+    /// A point set of the Chamfer distance is empty.
+    #[error("{name} has no points")]
+    EmptySet { name: &'static str },
+    /// [`average`] of no clips.
+    #[error("no clips to average")]
+    NoClips,
     /// A parameter outside its domain (e.g. a non-positive frame rate).
     #[error("invalid {name}: {reason}")]
     Parameter { name: &'static str, reason: String },
@@ -244,11 +250,7 @@ fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]]) -> Result<f64> {
 
 fn check_set(name: &'static str, set: &[[f32; 3]]) -> Result<()> {
     if set.is_empty() {
-        return Err(EvalError::Empty {
-            name,
-            frames: 1,
-            n_vertices: 0,
-        });
+        return Err(EvalError::EmptySet { name });
     }
     match set.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
         Some(i) => Err(EvalError::NonFinite {
@@ -664,7 +666,7 @@ pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], protoco
 /// Field-wise mean over clips (SPEC §6.1: each metric per clip, then averaged; ratios are averaged per clip too).
 pub fn average(clips: &[ClipMetrics]) -> Result<ClipMetrics> {
     if clips.is_empty() {
-        return Err(EvalError::NoFrames("no clips to average".to_string()));
+        return Err(EvalError::NoClips);
     }
     let mean = |f: fn(&ClipMetrics) -> f64| clips.iter().map(f).sum::<f64>() / clips.len() as f64;
     Ok(ClipMetrics {

@@ -31,7 +31,6 @@ impl Default for StripOptions {
         Self {
             cell: 96,
             label_width: 56,
-            max_faces: 1500,
             prediction_label: "PRED".into(),
         }
     }

@@ -356,7 +356,7 @@ pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
     let strs = |name: &str| -> Result<Vec<String>> {
         let c = col(name)?;
         let ca = c.str().map_err(|e| perr(name, e))?;
-        ca.into_iter()
+        ca.iter()
             .enumerate()
             .map(|(i, v)| {
                 v.map(str::to_owned)
@@ -368,7 +368,7 @@ pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
     let u32s = |name: &str| -> Result<Vec<u32>> {
         let c = col(name)?;
         let ca = c.u32().map_err(|e| perr(name, e))?;
-        ca.into_iter()
+        ca.iter()
             .enumerate()
             .map(|(i, v)| v.ok_or_else(|| DataError::new(path, format!("{name} row {i}"), "null")))
             .collect()
@@ -377,7 +377,7 @@ pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
     let seed: Vec<u64> = {
         let c = col("seed")?;
         let ca = c.u64().map_err(|e| perr("seed", e))?;
-        ca.into_iter()
+        ca.iter()
             .enumerate()
             .map(|(i, v)| v.ok_or_else(|| DataError::new(path, format!("seed row {i}"), "null")))
             .collect::<Result<_>>()?
@@ -391,7 +391,7 @@ pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
         }
         let ca = c.f64().map_err(|e| perr(name, e))?;
         let values = ca
-            .into_iter()
+            .iter()
             .enumerate()
             .map(|(i, v)| v.ok_or_else(|| DataError::new(path, format!("{name} row {i}"), "null")))
             .collect::<Result<Vec<f64>>>()?;

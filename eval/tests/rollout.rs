@@ -103,7 +103,7 @@ fn thirty_one_frames_stitch_without_duplicating_frame_15() {
 #[test]
 fn lerp_rollout_reproduces_piecewise_linear_motion_through_h1_to_h3() {
     // Motion linear on [0, 15] and on [15, 30] with a kink at 15: lerp with keyframes 0/15/30 is exact.
-    let gt: Vec<[f32; 3]> = (0..31)
+    let gt: Vec<[f32; 3]> = (0..31usize)
         .flat_map(|f| {
             let a = f.min(15) as f32;
             let b = f.saturating_sub(15) as f32;

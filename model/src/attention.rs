@@ -20,17 +20,23 @@ use burn::tensor::ops::AttentionModuleOptions;
 /// - `q`: `[B, H, Lq, Dh]`, `k`: `[B, H, Lk, Dh]`, `v`: `[B, H, Lk, Dv]` (Dv may differ from Dh)
 /// - `key_mask`: `[B, Lk]`, true = real key; a query row whose keys are all masked gets zeros
 /// - returns `[B, H, Lq, Dv]`
-pub fn scaled_dot_product(
-    q: Tensor<4>,
-    k: Tensor<4>,
-    v: Tensor<4>,
-    key_mask: Option<Tensor<2, Bool>>,
-) -> Tensor<4> {
+pub fn scaled_dot_product(q: Tensor<4>, k: Tensor<4>, v: Tensor<4>, key_mask: Option<Tensor<2, Bool>>) -> Tensor<4> {
     let [b, h, lq, _] = q.dims();
     let lk = k.dims()[2];
     // burn's mask: true = masked out, full [B, H, Lq, Lk] shape (the autodiff fallback does not broadcast).
     let mask = key_mask.map(|m| m.bool_not().reshape([b, 1, 1, lk]).expand([b, h, lq, lk]));
-    attention(q, k, v, mask, None, AttentionModuleOptions { scale: None, softcap: None, is_causal: false })
+    attention(
+        q,
+        k,
+        v,
+        mask,
+        None,
+        AttentionModuleOptions {
+            scale: None,
+            softcap: None,
+            is_causal: false,
+        },
+    )
 }
 
 /// How an output projection starts.
@@ -92,14 +98,22 @@ impl SharedMapAttentionConfig {
     /// # Panics
     /// If `d_values` and `d_outputs` differ in length (a programming error in a model config).
     pub fn init(&self, device: &Device) -> SharedMapAttention {
-        assert_eq!(self.d_values.len(), self.d_outputs.len(), "one output width per value stream");
+        assert_eq!(
+            self.d_values.len(),
+            self.d_outputs.len(),
+            "one output width per value stream"
+        );
         let inner = self.heads * self.head_dim;
         let no_bias = |d_in: usize| LinearConfig::new(d_in, inner).with_bias(false).init(device);
         SharedMapAttention {
             to_q: no_bias(self.d_query),
             to_k: no_bias(self.d_key),
             to_v: self.d_values.iter().map(|&d| no_bias(d)).collect(),
-            to_out: self.d_outputs.iter().map(|&d| out_linear(inner, d, self.out_init, device)).collect(),
+            to_out: self
+                .d_outputs
+                .iter()
+                .map(|&d| out_linear(inner, d, self.out_init, device))
+                .collect(),
             heads: self.heads,
             head_dim: self.head_dim,
         }
@@ -304,7 +318,11 @@ impl NeighbourAttention {
     /// - returns `[B, N, D]`
     pub fn forward(&self, x: Tensor<3>, edges: &EdgeList) -> Tensor<3> {
         let [b, n, d] = x.dims();
-        assert_eq!((edges.batch, edges.vertices), (b, n), "edge list built for another batch or vertex count");
+        assert_eq!(
+            (edges.batch, edges.vertices),
+            (b, n),
+            "edge list built for another batch or vertex count"
+        );
         if edges.num_edges == 0 {
             return x;
         }
@@ -321,7 +339,12 @@ impl NeighbourAttention {
         );
         let update = self.to_out.forward(agg.reshape([b * n, h * dh]));
         // Rows without neighbours: zero update, not the output bias.
-        let lonely = edges.has_neighbour.clone().bool_not().reshape([b * n, 1]).expand([b * n, d]);
+        let lonely = edges
+            .has_neighbour
+            .clone()
+            .bool_not()
+            .reshape([b * n, 1])
+            .expand([b * n, d]);
         x + update.mask_fill(lonely, 0.0).reshape([b, n, d])
     }
 }
@@ -340,7 +363,10 @@ pub fn segment_attention(q: Tensor<3>, k: Tensor<3>, v: Tensor<3>, edges: &EdgeL
     let e = edges.num_edges;
     let q_e = q.select(0, edges.dst.clone());
     let k_e = k.select(0, edges.src.clone());
-    let scores: Tensor<2> = (q_e * k_e).sum_dim(2).reshape([e, h]).mul_scalar(1.0 / (dh as f64).sqrt());
+    let scores: Tensor<2> = (q_e * k_e)
+        .sum_dim(2)
+        .reshape([e, h])
+        .mul_scalar(1.0 / (dh as f64).sqrt());
     // The shift is a constant for the gradient (softmax is shift-invariant), so it is computed detached.
     let seg_max = Tensor::<2>::full([nv, h], -1e30, &device).select_assign(
         0,
@@ -349,7 +375,8 @@ pub fn segment_attention(q: Tensor<3>, k: Tensor<3>, v: Tensor<3>, edges: &EdgeL
         IndexingUpdateOp::Max,
     );
     let num = (scores - seg_max.select(0, edges.dst.clone())).exp();
-    let den = Tensor::<2>::zeros([nv, h], &device).select_assign(0, edges.dst.clone(), num.clone(), IndexingUpdateOp::Add);
+    let den =
+        Tensor::<2>::zeros([nv, h], &device).select_assign(0, edges.dst.clone(), num.clone(), IndexingUpdateOp::Add);
     let alpha = num / den.select(0, edges.dst.clone());
     let msg = v.select(0, edges.src.clone()) * alpha.reshape([e, h, 1]);
     Tensor::<3>::zeros([nv, h, dv], &device).select_assign(0, edges.dst.clone(), msg, IndexingUpdateOp::Add)
@@ -358,6 +385,7 @@ pub fn segment_attention(q: Tensor<3>, k: Tensor<3>, v: Tensor<3>, edges: &EdgeL
 #[cfg(test)]
 mod tests {
     use super::*;
+    use burn::tensor::Distribution;
 
     fn values(t: Tensor<3>) -> Vec<f32> {
         t.into_data().try_to_vec::<f32>().expect("f32 data")
@@ -377,9 +405,15 @@ mod tests {
         // Vertex 1 attends to 0 and 2: scores q1·k0, q1·k2.
         let (a, b) = ((0.5 * 0.2 + 0.1) * s, (0.5 * 0.3 + 0.7) * s);
         let want1 = (a.exp() * 1.0 + b.exp() * 4.0) / (a.exp() + b.exp());
-        assert!((out[0] - 2.0).abs() < 1e-6, "vertex 0 has the single neighbour 1: {out:?}");
+        assert!(
+            (out[0] - 2.0).abs() < 1e-6,
+            "vertex 0 has the single neighbour 1: {out:?}"
+        );
         assert!((out[1] - want1).abs() < 1e-5, "vertex 1: {out:?} vs {want1}");
-        assert!((out[2] - 2.0).abs() < 1e-6, "vertex 2 has the single neighbour 1: {out:?}");
+        assert!(
+            (out[2] - 2.0).abs() < 1e-6,
+            "vertex 2 has the single neighbour 1: {out:?}"
+        );
         assert_eq!(out[3], 0.0, "isolated vertex gets zeros");
     }
 
@@ -388,7 +422,12 @@ mod tests {
         let device = Device::flex();
         assert_eq!(
             EdgeList::new(&[vec![[0, 4]]], 4, &device).err(),
-            Some(EdgeListError::VertexOutOfRange { clip: 0, a: 0, b: 4, n: 4 })
+            Some(EdgeListError::VertexOutOfRange {
+                clip: 0,
+                a: 0,
+                b: 4,
+                n: 4
+            })
         );
         assert_eq!(
             EdgeList::new(&[vec![], vec![[2, 2]]], 4, &device).err(),
@@ -397,24 +436,61 @@ mod tests {
     }
 
     #[test]
-    fn masked_keys_get_no_weight_and_value_streams_share_the_map() {
+    fn masked_keys_get_no_weight() {
         let device = Device::flex();
         device.seed(3);
         let att = SharedMapAttentionConfig::new(4, 4, vec![4, 4], vec![4, 4], 2, 2).init(&device);
-        let q = Tensor::<3>::random([1, 3, 4], burn::tensor::Distribution::Default, &device);
-        let kv = Tensor::<3>::random([1, 5, 4], burn::tensor::Distribution::Default, &device);
+        let q = Tensor::<3>::random([1, 3, 4], Distribution::Default, &device);
+        let kv = Tensor::<3>::random([1, 5, 4], Distribution::Default, &device);
         let mask = Tensor::<2, Bool>::from_data([[true, true, true, false, false]], &device);
         let garbage = kv.clone().slice([0..1, 3..5, 0..4]).mul_scalar(0.0).add_scalar(1e3);
         let kv2 = kv.clone().slice_assign([0..1, 3..5, 0..4], garbage);
         let run = |kv: Tensor<3>| {
-            let out = att.forward(q.clone(), kv.clone(), vec![kv.clone().unsqueeze_dim(1), kv.unsqueeze_dim(1)], Some(mask.clone()));
+            let values = vec![kv.clone().unsqueeze_dim(1), kv.clone().unsqueeze_dim(1)];
+            let out = att.forward(q.clone(), kv, values, Some(mask.clone()));
             out.into_iter().map(|o| o.squeeze_dim::<3>(1)).collect::<Vec<_>>()
         };
-        let (a, b) = (run(kv), run(kv2));
-        for (x, y) in a.into_iter().zip(b) {
-            let (x, y) = (values(x), values(y));
-            for (u, w) in x.iter().zip(&y) {
+        for (x, y) in run(kv).into_iter().zip(run(kv2)) {
+            for (u, w) in values(x).iter().zip(&values(y)) {
                 assert!((u - w).abs() < 1e-5, "masked keys changed the output: {u} vs {w}");
+            }
+        }
+    }
+
+    #[test]
+    fn streams_and_groups_match_per_head_reference() {
+        // Two value streams (1 group and 3 groups) pooled by one map must equal a per-head softmax(q kᵀ/√Dh) v
+        // computed separately for every stream and group.
+        let device = Device::flex();
+        device.seed(9);
+        let (h, dh) = (2, 3);
+        let att = SharedMapAttentionConfig::new(5, 4, vec![4, 6], vec![7, 2], h, dh).init(&device);
+        let query = Tensor::<3>::random([2, 3, 5], Distribution::Default, &device);
+        let key = Tensor::<3>::random([2, 4, 4], Distribution::Default, &device);
+        let v0 = Tensor::<4>::random([2, 1, 4, 4], Distribution::Default, &device);
+        let v1 = Tensor::<4>::random([2, 3, 4, 6], Distribution::Default, &device);
+        let out = att.forward(query.clone(), key.clone(), vec![v0.clone(), v1.clone()], None);
+        assert_eq!(out[0].dims(), [2, 1, 3, 7]);
+        assert_eq!(out[1].dims(), [2, 3, 3, 2]);
+        let q = att.to_q.forward(query).reshape([2, 3, h, dh]).swap_dims(1, 2);
+        let k = att.to_k.forward(key).reshape([2, 4, h, dh]).swap_dims(1, 2);
+        let map = burn::tensor::activation::softmax(q.matmul(k.swap_dims(2, 3)).div_scalar((dh as f64).sqrt()), 3);
+        let reference = |v: Tensor<4>, stream: usize, g: usize| {
+            let v: Tensor<3> = v.narrow(1, g, 1).squeeze_dim(1);
+            let v = att.to_v[stream].forward(v).reshape([2, 4, h, dh]).swap_dims(1, 2);
+            let pooled = map.clone().matmul(v).swap_dims(1, 2).reshape([2, 3, h * dh]);
+            att.to_out[stream].forward(pooled)
+        };
+        let mut checks = vec![(out[0].clone().narrow(1, 0, 1).squeeze_dim::<3>(1), reference(v0, 0, 0))];
+        for g in 0..3 {
+            checks.push((
+                out[1].clone().narrow(1, g, 1).squeeze_dim::<3>(1),
+                reference(v1.clone(), 1, g),
+            ));
+        }
+        for (i, (got, want)) in checks.into_iter().enumerate() {
+            for (u, w) in values(got).iter().zip(&values(want)) {
+                assert!((u - w).abs() < 1e-5, "stream/group {i}: {u} vs {w}");
             }
         }
     }

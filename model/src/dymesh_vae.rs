@@ -136,10 +136,16 @@ impl DyMeshVae {
         edges: &EdgeList,
     ) -> VaeEncoding {
         let [b, t, n, _] = frames.dims();
-        assert_eq!(t, self.frames, "DyMeshVae was built for {} frames, got {t}", self.frames);
+        assert_eq!(
+            t, self.frames,
+            "DyMeshVae was built for {} frames, got {t}",
+            self.frames
+        );
         let e0 = self.encode_shape(reference.clone(), edges);
         // Trajectory r = x̄_t − x̄₀ flattened per vertex with channel index t·3 + xyz (frame 0 included).
-        let offsets = (frames - reference.unsqueeze_dim(1)).swap_dims(1, 2).reshape([b, 1, n, 3 * t]);
+        let offsets = (frames - reference.unsqueeze_dim(1))
+            .swap_dims(1, 2)
+            .reshape([b, 1, n, 3 * t]);
         let motion = self.traj_embed.forward(offsets);
         let (z0, mu, logvar) = self.body.encode_tokens(e0.clone(), motion, vmask, fps);
         VaeEncoding { e0, z0, mu, logvar }
@@ -160,7 +166,11 @@ impl DyMeshVae {
     /// - returns `[B, T, N, 3]`
     pub fn decode(&self, e0: Tensor<3>, reference: Tensor<3>, z0: Tensor<3>, z: Tensor<4>) -> Tensor<4> {
         let [b, n, _] = reference.dims();
-        let offsets = self.body.decode_offsets(e0, z0, z).reshape([b, n, self.frames, 3]).swap_dims(1, 2);
+        let offsets = self
+            .body
+            .decode_offsets(e0, z0, z)
+            .reshape([b, n, self.frames, 3])
+            .swap_dims(1, 2);
         reference.unsqueeze_dim(1) + offsets
     }
 

@@ -105,9 +105,17 @@ impl SyncBlock {
         ];
         let mut pooled = self
             .attn
-            .forward(self.norm_q.forward(s.clone()), self.norm_k.forward(ctx_shape), values, key_mask)
+            .forward(
+                self.norm_q.forward(s.clone()),
+                self.norm_k.forward(ctx_shape),
+                values,
+                key_mask,
+            )
             .into_iter();
-        let (ds, dm) = (pooled.next().expect("shape stream"), pooled.next().expect("motion stream"));
+        let (ds, dm) = (
+            pooled.next().expect("shape stream"),
+            pooled.next().expect("motion stream"),
+        );
         let s = s + ds.squeeze_dim(1);
         let m = m + dm;
         let s = s.clone() + self.ff_shape.forward(self.norm_ff_shape.forward(s));
@@ -179,7 +187,9 @@ impl MeshVaeBodyConfig {
             point_embed: PointEmbedConfig::new(d).with_point_freqs(self.point_freqs).init(device),
             neighbour: NeighbourAttentionConfig::new(d, 2 * d).init(device),
             // Encoder: one head of width d (AAM).
-            encoder: (0..self.enc_blocks).map(|_| SyncBlock::new(d, 1, d, self.ffn_mult, device)).collect(),
+            encoder: (0..self.enc_blocks)
+                .map(|_| SyncBlock::new(d, 1, d, self.ffn_mult, device))
+                .collect(),
             z0_head: lin(d, c),
             mu_head: lin(d, c),
             logvar_head: lin(d, c),
@@ -247,7 +257,10 @@ impl MeshVaeBody {
         }
         let z0 = self.z0_head.forward(s);
         let mu = self.mu_head.forward(m.clone());
-        let logvar = self.logvar_head.forward(m).clamp(self.logvar_range.0, self.logvar_range.1);
+        let logvar = self
+            .logvar_head
+            .forward(m)
+            .clamp(self.logvar_range.0, self.logvar_range.1);
         (z0, mu, logvar)
     }
 
@@ -265,7 +278,12 @@ impl MeshVaeBody {
         let q = self.query_norm.forward(self.query_proj.forward(e0));
         let k = self.token_norm_k.forward(s);
         let v = self.token_norm_v.forward(m);
-        let pooled = self.query_attn.forward(q, k, vec![v], None).into_iter().next().expect("one stream");
+        let pooled = self
+            .query_attn
+            .forward(q, k, vec![v], None)
+            .into_iter()
+            .next()
+            .expect("one stream");
         self.to_offsets.forward(pooled)
     }
 }
@@ -290,7 +308,11 @@ pub fn reconstruction_loss(pred: Tensor<4>, target: Tensor<4>, vmask: Tensor<2, 
     let sq: Tensor<3> = (pred - target).powi_scalar(2).sum_dim(3).squeeze_dim(3);
     // Padded rows are replaced before the square root, so neither their value nor a zero distance
     // (∂√x at 0) can reach the gradient; clamp_min keeps real rows with zero error finite.
-    let dist = sq.mask_fill(padded.clone(), 1.0).clamp_min(1e-20).sqrt().mask_fill(padded, 0.0);
+    let dist = sq
+        .mask_fill(padded.clone(), 1.0)
+        .clamp_min(1e-20)
+        .sqrt()
+        .mask_fill(padded, 0.0);
     let real = vmask.int().sum().float().mul_scalar(t as f64);
     dist.sum() / real
 }
@@ -301,7 +323,10 @@ pub fn reconstruction_loss(pred: Tensor<4>, target: Tensor<4>, vmask: Tensor<2, 
 /// # Shapes
 /// - `mu`, `logvar`: `[B, G, P, C]` → `[1]`
 pub fn kl_loss(mu: Tensor<4>, logvar: Tensor<4>) -> Tensor<1> {
-    (mu.powi_scalar(2) + logvar.clone().exp() - logvar).sub_scalar(1.0).mul_scalar(0.5).mean()
+    (mu.powi_scalar(2) + logvar.clone().exp() - logvar)
+        .sub_scalar(1.0)
+        .mul_scalar(0.5)
+        .mean()
 }
 
 /// Loss terms of a VAE step.
@@ -425,7 +450,9 @@ impl FrameVaeConfig {
         };
         FrameVae {
             body: body.init(device),
-            offset_embed: OffsetEmbedConfig::new(3, self.width).with_offset_freqs(self.offset_freqs).init(device),
+            offset_embed: OffsetEmbedConfig::new(3, self.width)
+                .with_offset_freqs(self.offset_freqs)
+                .init(device),
             kl_weight: self.kl_weight,
         }
     }

@@ -23,7 +23,12 @@ pub struct LatentStats {
 impl LatentStats {
     /// Identity statistics (mean 0, std 1): standardization does nothing.
     pub fn identity() -> Self {
-        Self { shape_mean: 0.0, shape_std: 1.0, motion_mean: 0.0, motion_std: 1.0 }
+        Self {
+            shape_mean: 0.0,
+            shape_std: 1.0,
+            motion_mean: 0.0,
+            motion_std: 1.0,
+        }
     }
 
     /// (z₀ − mean) / std for shape latents of any shape.
@@ -99,7 +104,11 @@ impl Welford {
         }
         let std = (self.m2 / self.count as f64).sqrt();
         if !(std.is_finite() && std > 0.0 && self.mean.is_finite()) {
-            return Err(LatentStatsError::Degenerate { stream, mean: self.mean, std });
+            return Err(LatentStatsError::Degenerate {
+                stream,
+                mean: self.mean,
+                std,
+            });
         }
         Ok((self.mean, std))
     }
@@ -140,7 +149,12 @@ impl LatentStatsAccumulator {
     pub fn finish(&self) -> Result<LatentStats, LatentStatsError> {
         let (shape_mean, shape_std) = self.shape.finish("shape")?;
         let (motion_mean, motion_std) = self.motion.finish("motion")?;
-        Ok(LatentStats { shape_mean, shape_std, motion_mean, motion_std })
+        Ok(LatentStats {
+            shape_mean,
+            shape_std,
+            motion_mean,
+            motion_std,
+        })
     }
 }
 
@@ -167,8 +181,14 @@ mod tests {
         };
         let (ma, sa) = two_pass(&a);
         let (mb, sb) = two_pass(&b);
-        assert!((stats.shape_mean - ma).abs() < 1e-5 && (stats.shape_std - sa).abs() < 1e-5, "{stats:?}");
-        assert!((stats.motion_mean - mb).abs() < 1e-5 && (stats.motion_std - sb).abs() < 1e-5, "{stats:?}");
+        assert!(
+            (stats.shape_mean - ma).abs() < 1e-5 && (stats.shape_std - sa).abs() < 1e-5,
+            "{stats:?}"
+        );
+        assert!(
+            (stats.motion_mean - mb).abs() < 1e-5 && (stats.motion_std - sb).abs() < 1e-5,
+            "{stats:?}"
+        );
 
         let z = Tensor::<1>::from_floats(&b[..8], &device).reshape([1, 2, 2, 2]);
         let back = stats.destandardize_motion(stats.standardize_motion(z.clone()));
@@ -179,15 +199,26 @@ mod tests {
     #[test]
     fn empty_or_constant_streams_are_errors() {
         let device = Device::flex();
-        assert_eq!(LatentStatsAccumulator::new().finish(), Err(LatentStatsError::Empty { stream: "shape" }));
+        assert_eq!(
+            LatentStatsAccumulator::new().finish(),
+            Err(LatentStatsError::Empty { stream: "shape" })
+        );
         let mut acc = LatentStatsAccumulator::new();
         acc.update(Tensor::ones([1, 2, 2], &device), Tensor::ones([1, 1, 2, 2], &device));
-        assert!(matches!(acc.finish(), Err(LatentStatsError::Degenerate { stream: "shape", .. })));
+        assert!(matches!(
+            acc.finish(),
+            Err(LatentStatsError::Degenerate { stream: "shape", .. })
+        ));
     }
 
     #[test]
     fn stats_round_trip_through_json() {
-        let s = LatentStats { shape_mean: 0.25, shape_std: 1.5, motion_mean: -0.125, motion_std: 0.75 };
+        let s = LatentStats {
+            shape_mean: 0.25,
+            shape_std: 1.5,
+            motion_mean: -0.125,
+            motion_std: 0.75,
+        };
         let text = serde_json::to_string(&s).expect("serialize");
         assert_eq!(serde_json::from_str::<LatentStats>(&text).expect("deserialize"), s);
         assert!(serde_json::from_str::<LatentStats>(&text.replace("}", ",\"extra\":1}")).is_err());

@@ -65,12 +65,28 @@ pub struct MmditConfig {
 impl MmditConfig {
     /// The paper's size (SPEC §4.3) for a given keyframe mode and text width.
     pub fn paper(kf_mode: KfMode, text_dim: usize) -> Self {
-        Self { width: 512, blocks: 12, heads: 8, frames: 16, channels: 12, text_dim, kf_mode }
+        Self {
+            width: 512,
+            blocks: 12,
+            heads: 8,
+            frames: 16,
+            channels: 12,
+            text_dim,
+            kf_mode,
+        }
     }
 
     /// A few-thousand-parameter model for unit tests.
     pub fn tiny() -> Self {
-        Self { width: 32, blocks: 2, heads: 2, frames: 4, channels: 3, text_dim: 8, kf_mode: KfMode::InputMask }
+        Self {
+            width: 32,
+            blocks: 2,
+            heads: 2,
+            frames: 4,
+            channels: 3,
+            text_dim: 8,
+            kf_mode: KfMode::InputMask,
+        }
     }
 
     /// Input channels per token: (T+1)(C+1) with mask channels, (T+1)·C without (SPEC §4.1).
@@ -99,7 +115,10 @@ impl MmditConfig {
             }
         }
         if self.width % self.heads != 0 {
-            return Err(format!("model.width ({}) must be a multiple of model.heads ({})", self.width, self.heads));
+            return Err(format!(
+                "model.width ({}) must be a multiple of model.heads ({})",
+                self.width, self.heads
+            ));
         }
         Ok(())
     }
@@ -166,8 +185,10 @@ impl LinearInit {
             LinearInit::Zero => cfg.with_initializer(Initializer::Zeros).init(device),
             LinearInit::Aam => {
                 let std = 0.25 / (width as f64).sqrt();
-                let mut layer = cfg.with_initializer(Initializer::Normal { mean: 0.0, std }).init(device);
-                layer.bias = layer.bias.map(|b| b.map(|t| t.zeros_like()));
+                let mut layer = cfg
+                    .with_initializer(Initializer::Normal { mean: 0.0, std })
+                    .init(device);
+                layer.bias = Some(Initializer::Zeros.init([d_out], device));
                 layer
             }
         }
@@ -229,7 +250,12 @@ pub fn replace_keyframes(x: Tensor<4>, z_key: Tensor<4>, mask: Tensor<2>) -> Ten
 /// - state: `[B, P, T, C]` trajectory slots 1..T (already replaced where wanted)
 /// - mask: `[B, T]` mask channel values, 1 = observed
 /// - output: `[B, P, (T+1)(C+1)]` or `[B, P, (T+1)·C]`
-pub fn assemble_input(z0: Tensor<3>, state: Tensor<4>, mask: Tensor<2>, kf_mode: KfMode) -> Tensor<3> {
+pub fn assemble_input(
+    z0: Tensor<3>,
+    state: Tensor<4>,
+    mask: Tensor<2>,
+    kf_mode: KfMode,
+) -> Tensor<3> {
     let [b, p, t, c] = state.dims();
     let slots = Tensor::cat(vec![z0.unsqueeze_dim::<4>(2), state], 2); // [B, P, T+1, C]
     if !kf_mode.has_mask_channels() {
@@ -247,8 +273,18 @@ pub fn assemble_input(z0: Tensor<3>, state: Tensor<4>, mask: Tensor<2>, kf_mode:
 /// # Shapes
 /// - z0: `[B, P, C]`; x, z_key: `[B, P, T, C]`; mask: `[B, T]` (1 = observed)
 /// - output: `[B, P, in_channels]` with in_channels = (T+1)(C+1) or (T+1)·C
-pub fn build_input(z0: Tensor<3>, x: Tensor<4>, mask: Tensor<2>, z_key: Tensor<4>, kf_mode: KfMode) -> Tensor<3> {
-    let state = if kf_mode.replaces_keyframes() { replace_keyframes(x, z_key, mask.clone()) } else { x };
+pub fn build_input(
+    z0: Tensor<3>,
+    x: Tensor<4>,
+    mask: Tensor<2>,
+    z_key: Tensor<4>,
+    kf_mode: KfMode,
+) -> Tensor<3> {
+    let state = if kf_mode.replaces_keyframes() {
+        replace_keyframes(x, z_key, mask.clone())
+    } else {
+        x
+    };
     assemble_input(z0, state, mask, kf_mode)
 }
 
@@ -259,7 +295,10 @@ pub fn build_input(z0: Tensor<3>, x: Tensor<4>, mask: Tensor<2>, z_key: Tensor<4
 /// - output: `[B, P, T, C]`
 pub fn split_output(v: Tensor<3>, frames: usize) -> Tensor<4> {
     let [b, p, tc] = v.dims();
-    assert!(tc % frames == 0, "split_output: {tc} channels are not a multiple of {frames} frames");
+    assert!(
+        tc % frames == 0,
+        "split_output: {tc} channels are not a multiple of {frames} frames"
+    );
     v.reshape([b, p, frames, tc / frames])
 }
 
@@ -284,7 +323,8 @@ impl TimestepEmbedder {
     /// - tau: `[B]` raw flow time (τ, not 1 − τ)
     /// - output: `[B, W]`
     pub fn forward(&self, tau: Tensor<1>) -> Tensor<2> {
-        self.fc2.forward(gelu(self.fc1.forward(timestep_sinusoid(tau))))
+        self.fc2
+            .forward(gelu(self.fc1.forward(timestep_sinusoid(tau))))
     }
 }
 
@@ -303,9 +343,20 @@ pub struct Modulation {
 
 impl Modulation {
     fn from_linear(ada: &Linear, temb_act: Tensor<2>) -> Self {
-        let mut parts = ada.forward(temb_act).unsqueeze_dim::<3>(1).chunk(6, 2).into_iter();
+        let mut parts = ada
+            .forward(temb_act)
+            .unsqueeze_dim::<3>(1)
+            .chunk(6, 2)
+            .into_iter();
         let mut next = || parts.next().expect("six adaLN chunks");
-        Self { shift1: next(), scale1: next(), gate1: next(), shift2: next(), scale2: next(), gate2: next() }
+        Self {
+            shift1: next(),
+            scale1: next(),
+            gate1: next(),
+            shift2: next(),
+            scale2: next(),
+            gate2: next(),
+        }
     }
 }
 
@@ -337,8 +388,16 @@ impl MmditBlock {
     ) -> (Tensor<3>, Modulation, Modulation) {
         let mod_m = Modulation::from_linear(&self.ada_motion, temb_act.clone());
         let mod_t = Modulation::from_linear(&self.ada_text, temb_act);
-        let nm = modulate(plain_layer_norm(motion), mod_m.shift1.clone(), mod_m.scale1.clone());
-        let nt = modulate(plain_layer_norm(text), mod_t.shift1.clone(), mod_t.scale1.clone());
+        let nm = modulate(
+            plain_layer_norm(motion),
+            mod_m.shift1.clone(),
+            mod_m.scale1.clone(),
+        );
+        let nt = modulate(
+            plain_layer_norm(text),
+            mod_t.shift1.clone(),
+            mod_t.scale1.clone(),
+        );
         (Tensor::cat(vec![nm, nt], 1), mod_m, mod_t)
     }
 
@@ -351,10 +410,22 @@ impl MmditBlock {
         let [b, s, w] = joint.dims();
         let h = self.heads;
         let hd = w / h;
-        let qkv = self.qkv.forward(joint).reshape([b, s, h, 3 * hd]).swap_dims(1, 2); // [B, H, S, 3·hd]
+        let qkv = self
+            .qkv
+            .forward(joint)
+            .reshape([b, s, h, 3 * hd])
+            .swap_dims(1, 2); // [B, H, S, 3·hd]
         let mut parts = qkv.chunk(3, 3).into_iter();
-        let (q, k, v) = (parts.next().unwrap(), parts.next().unwrap(), parts.next().unwrap());
-        let options = AttentionModuleOptions { scale: None, softcap: None, is_causal: false };
+        let (q, k, v) = (
+            parts.next().unwrap(),
+            parts.next().unwrap(),
+            parts.next().unwrap(),
+        );
+        let options = AttentionModuleOptions {
+            scale: None,
+            softcap: None,
+            is_causal: false,
+        };
         let out = attention(q, k, v, None, None, options); // [B, H, S, hd]
         self.proj.forward(out.swap_dims(1, 2).reshape([b, s, w]))
     }
@@ -377,9 +448,19 @@ impl MmditBlock {
         let at = attn.narrow(1, p, l);
         let motion = motion + mod_m.gate1 * am;
         let text = text + mod_t.gate1 * at;
-        let mm = modulate(self.norm2_motion.forward(motion.clone()), mod_m.shift2, mod_m.scale2);
-        let mt = modulate(self.norm2_text.forward(text.clone()), mod_t.shift2, mod_t.scale2);
-        let f = self.fc2.forward(gelu(self.fc1.forward(Tensor::cat(vec![mm, mt], 1))));
+        let mm = modulate(
+            self.norm2_motion.forward(motion.clone()),
+            mod_m.shift2,
+            mod_m.scale2,
+        );
+        let mt = modulate(
+            self.norm2_text.forward(text.clone()),
+            mod_t.shift2,
+            mod_t.scale2,
+        );
+        let f = self
+            .fc2
+            .forward(gelu(self.fc1.forward(Tensor::cat(vec![mm, mt], 1))));
         let fm = f.clone().narrow(1, 0, p);
         let ft = f.narrow(1, p, l);
         (motion + mod_m.gate2 * fm, text + mod_t.gate2 * ft)
@@ -387,7 +468,12 @@ impl MmditBlock {
 
     /// # Shapes
     /// - motion `[B, P, W]`, text `[B, L, W]`, temb_act `[B, W]`; outputs `[B, P, W]`, `[B, L, W]`
-    pub fn forward(&self, motion: Tensor<3>, text: Tensor<3>, temb_act: Tensor<2>) -> (Tensor<3>, Tensor<3>) {
+    pub fn forward(
+        &self,
+        motion: Tensor<3>,
+        text: Tensor<3>,
+        temb_act: Tensor<2>,
+    ) -> (Tensor<3>, Tensor<3>) {
         let (joint, mod_m, mod_t) = self.pre_attention(motion.clone(), text.clone(), temb_act);
         let attn = self.joint_attention(joint);
         self.post_attention(motion, text, attn, mod_m, mod_t)
@@ -424,12 +510,29 @@ impl Mmdit {
     ///
     /// # Panics
     /// If the channel axes do not match the config (checked with a message naming the tensor).
-    pub fn forward(&self, input: Tensor<3>, text: Tensor<3>, keep_txt: Tensor<1>, tau: Tensor<1>) -> Tensor<3> {
+    pub fn forward(
+        &self,
+        input: Tensor<3>,
+        text: Tensor<3>,
+        keep_txt: Tensor<1>,
+        tau: Tensor<1>,
+    ) -> Tensor<3> {
         let [b, _, in_ch] = input.dims();
         let [bt, _, d_txt] = text.dims();
-        assert_eq!(in_ch, self.in_channels, "Mmdit::forward: input has {in_ch} channels, model expects {}", self.in_channels);
-        assert_eq!(d_txt, self.text_dim, "Mmdit::forward: text has width {d_txt}, model expects {}", self.text_dim);
-        assert_eq!(bt, b, "Mmdit::forward: text batch {bt} differs from input batch {b}");
+        assert_eq!(
+            in_ch, self.in_channels,
+            "Mmdit::forward: input has {in_ch} channels, model expects {}",
+            self.in_channels
+        );
+        assert_eq!(
+            d_txt, self.text_dim,
+            "Mmdit::forward: text has width {d_txt}, model expects {}",
+            self.text_dim
+        );
+        assert_eq!(
+            bt, b,
+            "Mmdit::forward: text batch {bt} differs from input batch {b}"
+        );
         let motion = self.input_norm.forward(self.input_proj.forward(input));
         let keep = keep_txt.reshape([b, 1, 1]);
         let text = self.text_norm.forward(self.text_proj.forward(text) * keep);

@@ -22,7 +22,9 @@ pub enum FourierOrder {
 pub fn fourier_features(x: Tensor<2>, freqs: usize, order: FourierOrder) -> (Tensor<2>, Tensor<2>) {
     let [m, c] = x.dims();
     let device = x.device();
-    let bands: Vec<f32> = (0..freqs).map(|k| (2f32).powi(k as i32) * std::f32::consts::PI).collect();
+    let bands: Vec<f32> = (0..freqs)
+        .map(|k| (2f32).powi(k as i32) * std::f32::consts::PI)
+        .collect();
     let bands = Tensor::<1>::from_floats(bands.as_slice(), &device);
     let proj: Tensor<2> = match order {
         FourierOrder::ChannelMajor => {
@@ -107,7 +109,10 @@ impl OffsetEmbedConfig {
     /// Builds the embedding on `device`.
     pub fn init(&self, device: &Device) -> OffsetEmbed {
         let features = self.d_input * (2 * self.offset_freqs + 1);
-        OffsetEmbed { linear: LinearConfig::new(features, self.d_model).init(device), freqs: self.offset_freqs }
+        OffsetEmbed {
+            linear: LinearConfig::new(features, self.d_model).init(device),
+            freqs: self.offset_freqs,
+        }
     }
 }
 

@@ -62,7 +62,11 @@ impl TauSampler {
 
     /// Draws B times from the device's random stream (seed it with `device.seed`).
     pub fn sample(self, batch: usize, device: &Device) -> Tensor<1> {
-        self.map(Tensor::random([batch], Distribution::Uniform(0.0, 1.0), device))
+        self.map(Tensor::random(
+            [batch],
+            Distribution::Uniform(0.0, 1.0),
+            device,
+        ))
     }
 }
 
@@ -80,7 +84,12 @@ pub enum KeyframeLoss {
 ///
 /// # Shapes
 /// - v_pred, v_target: `[B, P, T, C]`; mask: `[B, T]` (1 = keyframe); output `[1]`
-pub fn rf_loss(v_pred: Tensor<4>, v_target: Tensor<4>, mask: Tensor<2>, keyframe_loss: KeyframeLoss) -> Tensor<1> {
+pub fn rf_loss(
+    v_pred: Tensor<4>,
+    v_target: Tensor<4>,
+    mask: Tensor<2>,
+    keyframe_loss: KeyframeLoss,
+) -> Tensor<1> {
     let se = (v_pred - v_target).square();
     match keyframe_loss {
         KeyframeLoss::All => se.mean(), // (R5)
@@ -135,7 +144,13 @@ pub struct RfLossOptions {
 ///
 /// # Shapes
 /// - eps: `[B, P, T, C]`; tau: `[B]`; output `[1]`
-pub fn rf_training_loss(model: &Mmdit, batch: &RfBatch, eps: Tensor<4>, tau: Tensor<1>, opts: &RfLossOptions) -> Tensor<1> {
+pub fn rf_training_loss(
+    model: &Mmdit,
+    batch: &RfBatch,
+    eps: Tensor<4>,
+    tau: Tensor<1>,
+    opts: &RfLossOptions,
+) -> Tensor<1> {
     let [_, _, frames, _] = batch.z.dims();
     let x_tau = interpolant(eps.clone(), batch.z.clone(), tau.clone()); // (R1)
     let mask = match opts.kf_mode {
@@ -149,10 +164,24 @@ pub fn rf_training_loss(model: &Mmdit, batch: &RfBatch, eps: Tensor<4>, tau: Ten
             let state = replace_keyframes(x_tau, batch.z_key.clone(), mask);
             assemble_input(batch.z0.clone(), state, batch.mask.clone(), opts.kf_mode)
         }
-        _ => build_input(batch.z0.clone(), x_tau, mask.clone(), batch.z_key.clone(), opts.kf_mode), // (R3)
+        _ => build_input(
+            batch.z0.clone(),
+            x_tau,
+            mask.clone(),
+            batch.z_key.clone(),
+            opts.kf_mode,
+        ), // (R3)
     };
-    let v = split_output(model.forward(input, batch.text.clone(), batch.keep_txt.clone(), tau), frames); // (R4)
-    rf_loss(v, target_velocity(eps, batch.z.clone()), batch.mask.clone(), opts.keyframe_loss)
+    let v = split_output(
+        model.forward(input, batch.text.clone(), batch.keep_txt.clone(), tau),
+        frames,
+    ); // (R4)
+    rf_loss(
+        v,
+        target_velocity(eps, batch.z.clone()),
+        batch.mask.clone(),
+        opts.keyframe_loss,
+    )
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -196,7 +225,13 @@ pub struct SampleOptions {
 impl SampleOptions {
     /// Paper defaults: midpoint, 64 grid points, fixed replacement noise, τ* = 0.98.
     pub fn paper(kf_mode: KfMode) -> Self {
-        Self { n_grid: 64, solver: Solver::Midpoint, kf_mode, replace_noise: ReplaceNoise::Fixed, tau_star: 0.98 }
+        Self {
+            n_grid: 64,
+            solver: Solver::Midpoint,
+            kf_mode,
+            replace_noise: ReplaceNoise::Fixed,
+            tau_star: 0.98,
+        }
     }
 }
 
@@ -216,14 +251,22 @@ pub struct Conditioning {
 ///
 /// # Shapes
 /// - x: `[B, P, T, C]` ODE state; eps: `[B, P, T, C]` the initial noise; output `[B, P, in_channels]`
-pub fn sampler_input(cond: &Conditioning, x: Tensor<4>, eps: &Tensor<4>, tau: f64, opts: &SampleOptions) -> Tensor<3> {
+pub fn sampler_input(
+    cond: &Conditioning,
+    x: Tensor<4>,
+    eps: &Tensor<4>,
+    tau: f64,
+    opts: &SampleOptions,
+) -> Tensor<3> {
     let (z0, mask) = (cond.z0.clone(), cond.mask.clone());
     match opts.kf_mode {
         KfMode::InputMask => build_input(z0, x, mask, cond.z_key.clone(), KfMode::InputMask), // (R3)
         KfMode::ReplaceNoised => {
             let eps_key = match opts.replace_noise {
                 ReplaceNoise::Fixed => eps.clone(),
-                ReplaceNoise::Fresh => Tensor::random(eps.dims(), Distribution::Normal(0.0, 1.0), &eps.device()),
+                ReplaceNoise::Fresh => {
+                    Tensor::random(eps.dims(), Distribution::Normal(0.0, 1.0), &eps.device())
+                }
             };
             // (R7) keyframe latent noised to the state's level: (1 − τ) ε_key + τ Z_key
             let key_tau = eps_key.mul_scalar(1.0 - tau) + cond.z_key.clone().mul_scalar(tau);
@@ -231,7 +274,11 @@ pub fn sampler_input(cond: &Conditioning, x: Tensor<4>, eps: &Tensor<4>, tau: f6
         }
         KfMode::ImputeUntil => {
             // (R9) clean (or noisy-observed) keyframes imputed only while τ < τ*; the mask channel stays.
-            let state = if tau < opts.tau_star { replace_keyframes(x, cond.z_key.clone(), mask.clone()) } else { x };
+            let state = if tau < opts.tau_star {
+                replace_keyframes(x, cond.z_key.clone(), mask.clone())
+            } else {
+                x
+            };
             assemble_input(z0, state, mask, KfMode::ImputeUntil)
         }
         KfMode::None => assemble_input(z0, x, mask, KfMode::None),
@@ -247,11 +294,20 @@ pub fn sampler_input(cond: &Conditioning, x: Tensor<4>, eps: &Tensor<4>, tau: f6
 ///
 /// # Panics
 /// If `opts.n_grid < 2`.
-pub fn sample<F>(mut velocity: F, cond: &Conditioning, eps: Tensor<4>, opts: &SampleOptions) -> Tensor<4>
+pub fn sample<F>(
+    mut velocity: F,
+    cond: &Conditioning,
+    eps: Tensor<4>,
+    opts: &SampleOptions,
+) -> Tensor<4>
 where
     F: FnMut(Tensor<3>, Tensor<1>) -> Tensor<3>,
 {
-    assert!(opts.n_grid >= 2, "sample: n_grid must be at least 2, got {}", opts.n_grid);
+    assert!(
+        opts.n_grid >= 2,
+        "sample: n_grid must be at least 2, got {}",
+        opts.n_grid
+    );
     let [b, _, frames, _] = eps.dims();
     let device = eps.device();
     let mut eval = |x: Tensor<4>, tau: f64| -> Tensor<4> {
@@ -274,7 +330,9 @@ where
         };
     }
     match opts.kf_mode {
-        KfMode::InputMask | KfMode::ReplaceNoised => replace_keyframes(x, cond.z_key.clone(), cond.mask.clone()),
+        KfMode::InputMask | KfMode::ReplaceNoised => {
+            replace_keyframes(x, cond.z_key.clone(), cond.mask.clone())
+        }
         KfMode::ImputeUntil | KfMode::None => x,
     }
 }
@@ -290,14 +348,21 @@ pub fn cfg_combine(v_cond: Tensor<3>, v_uncond: Tensor<3>, guidance: f64) -> Ten
 ///
 /// # Shapes
 /// - text: `[B, L, D_txt]`; the closure maps `[B, P, in]`, `[B]` to `[B, P, T·C]`
-pub fn mmdit_velocity(model: &Mmdit, text: Tensor<3>, guidance: f64) -> impl FnMut(Tensor<3>, Tensor<1>) -> Tensor<3> + '_ {
+pub fn mmdit_velocity(
+    model: &Mmdit,
+    text: Tensor<3>,
+    guidance: f64,
+) -> impl FnMut(Tensor<3>, Tensor<1>) -> Tensor<3> + '_ {
     move |input: Tensor<3>, tau: Tensor<1>| {
         let [b, _, _] = input.dims();
         let device = input.device();
         if guidance == 1.0 {
             return model.forward(input, text.clone(), Tensor::ones([b], &device), tau);
         }
-        let keep = Tensor::cat(vec![Tensor::ones([b], &device), Tensor::zeros([b], &device)], 0);
+        let keep = Tensor::cat(
+            vec![Tensor::ones([b], &device), Tensor::zeros([b], &device)],
+            0,
+        );
         let v = model.forward(
             Tensor::cat(vec![input.clone(), input], 0),
             Tensor::cat(vec![text.clone(), text.clone()], 0),
@@ -324,4 +389,3 @@ pub fn sample_mmdit(
 ) -> Tensor<4> {
     sample(mmdit_velocity(model, text, guidance), cond, eps, opts)
 }
-

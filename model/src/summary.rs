@@ -16,7 +16,11 @@ struct TopLevelCounter {
 
 impl TopLevelCounter {
     fn add(&mut self, count: usize) {
-        let name = self.path.first().cloned().unwrap_or_else(|| "(root)".to_string());
+        let name = self
+            .path
+            .first()
+            .cloned()
+            .unwrap_or_else(|| "(root)".to_string());
         match self.rows.iter_mut().find(|(n, _)| *n == name) {
             Some((_, total)) => *total += count,
             None => self.rows.push((name, count)),
@@ -51,7 +55,11 @@ pub fn param_report<M: Module>(module: &M) -> Vec<(String, usize)> {
 
 /// Renders a report as aligned text lines (name, count, share of the total).
 pub fn format_report(title: &str, rows: &[(String, usize)]) -> String {
-    let total = rows.iter().find(|(n, _)| n == TOTAL).map_or(0, |(_, n)| *n).max(1);
+    let total = rows
+        .iter()
+        .find(|(n, _)| n == TOTAL)
+        .map_or(0, |(_, n)| *n)
+        .max(1);
     let width = rows.iter().map(|(n, _)| n.len()).max().unwrap_or(0).max(8);
     let mut out = format!("{title}\n");
     for (name, count) in rows {
@@ -94,7 +102,9 @@ pub fn time_rf_step(
         let tau = Tensor::<1>::random([batch], Distribution::Uniform(0.0, 1.0), &ad);
         let keep = Tensor::<1>::ones([batch], &ad);
         let start = std::time::Instant::now();
-        let loss = (model.forward(input, text, keep, tau) - target).square().mean();
+        let loss = (model.forward(input, text, keep, tau) - target)
+            .square()
+            .mean();
         let grads = loss.backward();
         drop(grads);
         if let Err(e) = ad.sync() {
@@ -103,10 +113,76 @@ pub fn time_rf_step(
         start.elapsed().as_secs_f64() * 1e3
     };
     step();
-    let mut steps_ms: Vec<f64> = (0..iters).map(|_| step()).collect();
-    let mut sorted = steps_ms.clone();
+    let steps_ms: Vec<f64> = (0..iters).map(|_| step()).collect();
+    StepTiming {
+        median_ms: median(&steps_ms),
+        steps_ms,
+    }
+}
+
+/// Times frame-wise VAE encode + decode (posterior mean, no gradients) of synthetic clips: a chain mesh of
+/// `vertices` vertices, `frames` frames, the first `tokens` vertices as FPS tokens; one warm-up, `iters` timed runs.
+///
+/// # Errors
+/// If the synthetic edge list is rejected (names the reason).
+pub fn time_vae_reconstruct(
+    cfg: &crate::frame_vae::FrameVaeConfig,
+    batch: usize,
+    vertices: usize,
+    tokens: usize,
+    frames: usize,
+    iters: usize,
+    device: &Device,
+) -> Result<StepTiming, String> {
+    use crate::frame_vae::{EdgeList, Posterior, VaeBatch};
+    use burn::tensor::{Distribution, TensorData};
+    let model = cfg.init(device);
+    let chain: Vec<[u32; 2]> = (0..vertices as u32 - 1).map(|i| [i, i + 1]).collect();
+    let edges = EdgeList::new(&vec![chain; batch], vertices, device)
+        .map_err(|e| format!("synthetic {e}"))?;
+    let reference = Tensor::<3>::random(
+        [batch, vertices, 3],
+        Distribution::Uniform(-1.0, 1.0),
+        device,
+    );
+    let motion = Tensor::<4>::random(
+        [batch, frames, vertices, 3],
+        Distribution::Normal(0.0, 0.05),
+        device,
+    );
+    let fps_ids: Vec<i64> = (0..batch).flat_map(|_| 0..tokens as i64).collect();
+    let vae_batch = VaeBatch {
+        frames: reference.clone().unsqueeze_dim::<4>(1) + motion,
+        reference,
+        vmask: Tensor::<2, Bool>::from_data(
+            TensorData::new(vec![true; batch * vertices], [batch, vertices]),
+            device,
+        ),
+        fps: Tensor::from_data(TensorData::new(fps_ids, [batch, tokens]), device),
+        edges,
+    };
+    let run = || {
+        let start = std::time::Instant::now();
+        let (recon, _) = model.reconstruct(&vae_batch, Posterior::Mean);
+        let _ = recon.into_data();
+        start.elapsed().as_secs_f64() * 1e3
+    };
+    run();
+    let steps_ms: Vec<f64> = (0..iters).map(|_| run()).collect();
+    Ok(StepTiming {
+        median_ms: median(&steps_ms),
+        steps_ms,
+    })
+}
+
+/// Median of a non-empty list (mean of the two middle values for an even count).
+fn median(values: &[f64]) -> f64 {
+    let mut sorted = values.to_vec();
     sorted.sort_by(f64::total_cmp);
-    let median_ms = sorted[sorted.len() / 2];
-    steps_ms.shrink_to_fit();
-    StepTiming { median_ms, steps_ms }
+    let n = sorted.len();
+    if n % 2 == 1 {
+        sorted[n / 2]
+    } else {
+        0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
+    }
 }

@@ -44,7 +44,10 @@ pub trait TextEncoder {
 pub enum TextError {
     /// Reading or writing a file failed.
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     /// The tokenizer library rejected a file or an input.
     #[error("{path}: tokenizer error: {message}")]
     Tokenizer { path: PathBuf, message: String },
@@ -53,7 +56,12 @@ pub enum TextError {
     MissingTensor { path: PathBuf, name: String },
     /// A tensor has another shape than the configured model expects.
     #[error("{path}: tensor '{name}' has shape {found:?}, expected {expected:?}")]
-    ShapeMismatch { path: PathBuf, name: String, expected: Vec<usize>, found: Vec<usize> },
+    ShapeMismatch {
+        path: PathBuf,
+        name: String,
+        expected: Vec<usize>,
+        found: Vec<usize>,
+    },
     /// Any other problem with a weight or config file.
     #[error("{path}: {message}")]
     Invalid { path: PathBuf, message: String },
@@ -75,22 +83,33 @@ pub struct PaddedIds {
 impl PaddedIds {
     /// Ids as a tensor `[B, L]`.
     pub fn ids_tensor(&self, device: &Device) -> Tensor<2, Int> {
-        Tensor::from_data(TensorData::new(self.ids.clone(), [self.batch, self.len]), device)
+        Tensor::from_data(
+            TensorData::new(self.ids.clone(), [self.batch, self.len]),
+            device,
+        )
     }
 
     /// Padding mask `[B, L]`, true = padding.
     pub fn pad_tensor(&self, device: &Device) -> Tensor<2, Bool> {
-        Tensor::from_data(TensorData::new(self.pad.clone(), [self.batch, self.len]), device)
+        Tensor::from_data(
+            TensorData::new(self.pad.clone(), [self.batch, self.len]),
+            device,
+        )
     }
 }
 
 /// Loads a `tokenizer.json`, with the file's own padding and truncation switched off (we pad ourselves).
 pub fn load_tokenizer(path: &Path) -> Result<tokenizers::Tokenizer, TextError> {
-    let mut tok = tokenizers::Tokenizer::from_file(path)
-        .map_err(|e| TextError::Tokenizer { path: path.to_path_buf(), message: e.to_string() })?;
+    let mut tok = tokenizers::Tokenizer::from_file(path).map_err(|e| TextError::Tokenizer {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
     tok.with_padding(None);
     tok.with_truncation(None)
-        .map_err(|e| TextError::Tokenizer { path: path.to_path_buf(), message: e.to_string() })?;
+        .map_err(|e| TextError::Tokenizer {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
     Ok(tok)
 }
 
@@ -109,7 +128,10 @@ pub fn pad_batch(
     for caption in captions {
         let enc = tok
             .encode(caption.as_str(), add_special_tokens)
-            .map_err(|e| TextError::Tokenizer { path: source.to_path_buf(), message: format!("{caption:?}: {e}") })?;
+            .map_err(|e| TextError::Tokenizer {
+                path: source.to_path_buf(),
+                message: format!("{caption:?}: {e}"),
+            })?;
         let mut row: Vec<u32> = enc.get_ids().to_vec();
         if row.len() > max_len {
             let last = *row.last().expect("non-empty");
@@ -122,7 +144,12 @@ pub fn pad_batch(
         pad.extend(std::iter::repeat_n(false, n));
         pad.extend(std::iter::repeat_n(true, max_len - n));
     }
-    Ok(PaddedIds { ids, pad, batch: captions.len(), len: max_len })
+    Ok(PaddedIds {
+        ids,
+        pad,
+        batch: captions.len(),
+        len: max_len,
+    })
 }
 
 /// Multi-head scaled dot-product self-attention of the text encoders.
@@ -146,7 +173,11 @@ pub(crate) fn text_self_attention(
             .mask_fill(p.reshape([b, 1, 1, l]), -1e9)
             .expand([b, heads, l, l])
     });
-    let options = AttentionModuleOptions { scale: None, softcap: None, is_causal: causal };
+    let options = AttentionModuleOptions {
+        scale: None,
+        softcap: None,
+        is_causal: causal,
+    };
     let out = attention(split(q), split(k), split(v), None, bias, options);
     out.swap_dims(1, 2).reshape([b, l, d])
 }
@@ -160,7 +191,10 @@ pub struct CachedEncoder<E: TextEncoder> {
 impl<E: TextEncoder> CachedEncoder<E> {
     /// Wraps a frozen encoder.
     pub fn new(inner: E) -> Self {
-        Self { inner, cache: Mutex::new(HashMap::new()) }
+        Self {
+            inner,
+            cache: Mutex::new(HashMap::new()),
+        }
     }
 
     /// Number of cached captions.
@@ -172,20 +206,38 @@ impl<E: TextEncoder> CachedEncoder<E> {
 impl<E: TextEncoder> TextEncoder for CachedEncoder<E> {
     fn encode(&self, captions: &[String], device: &Device) -> Result<TextBatch, TextError> {
         let (l, d) = (self.inner.max_len(), self.inner.dim());
-        let mut cache = self.cache.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        let mut cache = self
+            .cache
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
         let missing: Vec<String> = {
             let mut seen = std::collections::HashSet::new();
-            captions.iter().filter(|c| !cache.contains_key(*c) && seen.insert((*c).clone())).cloned().collect()
+            captions
+                .iter()
+                .filter(|c| !cache.contains_key(*c) && seen.insert((*c).clone()))
+                .cloned()
+                .collect()
         };
         if !missing.is_empty() {
             let batch = self.inner.encode(&missing, device)?;
-            let states: Vec<f32> = batch.states.into_data().convert::<f32>().try_into_vec().map_err(|e| {
-                TextError::Invalid { path: PathBuf::from("<cache>"), message: format!("{e:?}") }
-            })?;
-            let pad: Vec<bool> = batch.pad_mask.into_data().try_into_vec().map_err(|e| TextError::Invalid {
-                path: PathBuf::from("<cache>"),
-                message: format!("{e:?}"),
-            })?;
+            let states: Vec<f32> = batch
+                .states
+                .into_data()
+                .convert::<f32>()
+                .try_into_vec()
+                .map_err(|e| TextError::Invalid {
+                    path: PathBuf::from("<cache>"),
+                    message: format!("{e:?}"),
+                })?;
+            let pad: Vec<bool> =
+                batch
+                    .pad_mask
+                    .into_data()
+                    .try_into_vec()
+                    .map_err(|e| TextError::Invalid {
+                        path: PathBuf::from("<cache>"),
+                        message: format!("{e:?}"),
+                    })?;
             for (i, caption) in missing.into_iter().enumerate() {
                 let row = states[i * l * d..(i + 1) * l * d].to_vec();
                 cache.insert(caption, (row, pad[i * l..(i + 1) * l].to_vec()));
@@ -238,20 +290,33 @@ pub(crate) fn load_safetensors<M: burn::store::ModuleSnapshot>(
     }
     let result = module
         .load_from(&mut store)
-        .map_err(|e| TextError::Invalid { path: path.to_path_buf(), message: e.to_string() })?;
+        .map_err(|e| TextError::Invalid {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
     if let Some(err) = result.errors.first() {
         return Err(match err {
-            ApplyError::ShapeMismatch { path: name, expected, found } => TextError::ShapeMismatch {
+            ApplyError::ShapeMismatch {
+                path: name,
+                expected,
+                found,
+            } => TextError::ShapeMismatch {
                 path: path.to_path_buf(),
                 name: name.clone(),
                 expected: expected.to_vec(),
                 found: found.to_vec(),
             },
-            other => TextError::Invalid { path: path.to_path_buf(), message: other.to_string() },
+            other => TextError::Invalid {
+                path: path.to_path_buf(),
+                message: other.to_string(),
+            },
         });
     }
     if let Some((name, _)) = result.missing.first() {
-        return Err(TextError::MissingTensor { path: path.to_path_buf(), name: name.clone() });
+        return Err(TextError::MissingTensor {
+            path: path.to_path_buf(),
+            name: name.clone(),
+        });
     }
     Ok(())
 }

@@ -5,15 +5,17 @@
 use std::sync::Mutex;
 
 use any4d_model::mmdit::{
-    KfMode, Mmdit, MmditConfig, build_input, merge_slots, split_output, timestep_sinusoid, TIME_FREQS,
+    KfMode, Mmdit, MmditConfig, TIME_FREQS, build_input, merge_slots, split_output,
+    timestep_sinusoid,
 };
 use any4d_model::rectified_flow::{
-    Conditioning, KeyframeLoss, ReplaceNoise, RfBatch, RfLossOptions, SampleOptions, Solver, TauSampler,
-    cfg_combine, interpolant, mmdit_velocity, rf_loss, rf_training_loss, sample, target_velocity,
+    Conditioning, KeyframeLoss, ReplaceNoise, RfBatch, RfLossOptions, SampleOptions, Solver,
+    TauSampler, cfg_combine, interpolant, mmdit_velocity, rf_loss, rf_training_loss, sample,
+    target_velocity,
 };
 use any4d_model::summary::param_report;
 use burn::module::{Module, ModuleVisitor, Param};
-use burn::optim::{AdamWConfig, GradientsParams, Optimizer};
+use burn::optim::{AdamWConfig, GradientsParams};
 use burn::prelude::*;
 use burn::tensor::{Distribution, TensorData};
 
@@ -32,11 +34,18 @@ fn normal<const D: usize>(shape: [usize; D], device: &Device) -> Tensor<D> {
 }
 
 fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().convert::<f32>().try_into_vec().expect("f32 data")
+    t.into_data()
+        .convert::<f32>()
+        .try_into_vec()
+        .expect("f32 data")
 }
 
 fn max_abs_diff<const D: usize>(a: Tensor<D>, b: Tensor<D>) -> f32 {
-    values(a).iter().zip(values(b)).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+    values(a)
+        .iter()
+        .zip(values(b))
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
 }
 
 /// Keyframes at frames 0 and T−1 for every sample.
@@ -63,7 +72,11 @@ fn interpolant_is_noise_at_zero_and_data_at_one() {
     assert!(max_abs_diff(at0, eps.clone()) < 1e-7, "X_0 must be ε");
     assert!(max_abs_diff(at1, x1.clone()) < 1e-7, "X_1 must be the data");
     // Per-sample τ: sample 0 at τ = 0.25 is 0.75 ε + 0.25 x1.
-    let mixed = interpolant(eps.clone(), x1.clone(), Tensor::from_floats([0.25, 1.0], &d));
+    let mixed = interpolant(
+        eps.clone(),
+        x1.clone(),
+        Tensor::from_floats([0.25, 1.0], &d),
+    );
     let expect = eps.clone().mul_scalar(0.75) + x1.clone().mul_scalar(0.25);
     assert!(max_abs_diff(mixed.narrow(0, 0, 1), expect.narrow(0, 0, 1)) < 1e-6);
     // (R2) target points from noise to data.
@@ -80,9 +93,17 @@ fn oracle_velocity_maps_noise_to_data_euler_and_midpoint() {
     let (b, p, t, c) = (2, 6, 4, 3);
     let eps = normal([b, p, t, c], &d);
     let x1 = normal([b, p, t, c], &d);
-    let cond = Conditioning { z0: normal([b, p, c], &d), z_key: x1.zeros_like(), mask: Tensor::zeros([b, t], &d) };
+    let cond = Conditioning {
+        z0: normal([b, p, c], &d),
+        z_key: x1.zeros_like(),
+        mask: Tensor::zeros([b, t], &d),
+    };
     for solver in [Solver::Euler, Solver::Midpoint] {
-        let opts = SampleOptions { n_grid: 64, solver, ..SampleOptions::paper(KfMode::None) };
+        let opts = SampleOptions {
+            n_grid: 64,
+            solver,
+            ..SampleOptions::paper(KfMode::None)
+        };
         let oracle = merge_slots(x1.clone() - eps.clone());
         let out = sample(|_input, _tau| oracle.clone(), &cond, eps.clone(), &opts);
         let err = max_abs_diff(out, x1.clone());
@@ -101,16 +122,29 @@ fn replacement_noises_keyframes_to_the_state_level() {
     let eps = normal([b, p, t, c], &d);
     let z_key = normal([b, p, t, c], &d);
     let mask = Tensor::from_data(TensorData::new(vec![0f32, 1.0, 0.0, 0.0], [b, t]), &d);
-    let cond = Conditioning { z0: Tensor::zeros([b, p, c], &d), z_key: z_key.clone(), mask };
-    let opts = SampleOptions { n_grid: 5, solver: Solver::Euler, ..SampleOptions::paper(KfMode::ReplaceNoised) };
+    let cond = Conditioning {
+        z0: Tensor::zeros([b, p, c], &d),
+        z_key: z_key.clone(),
+        mask,
+    };
+    let opts = SampleOptions {
+        n_grid: 5,
+        solver: Solver::Euler,
+        ..SampleOptions::paper(KfMode::ReplaceNoised)
+    };
     let mut seen = Vec::new();
     let out = sample(
         |input: Tensor<3>, tau: Tensor<1>| {
-            assert_eq!(input.dims()[2], (t + 1) * c, "ReplaceNoised has no mask channels");
+            assert_eq!(
+                input.dims()[2],
+                (t + 1) * c,
+                "ReplaceNoised has no mask channels"
+            );
             let tau_v = values(tau)[0] as f64;
             // slot 2 (frame 1) occupies channels [2c, 3c) of the input
             let got = input.narrow(2, 2 * c, c);
-            let want = (eps.clone().mul_scalar(1.0 - tau_v) + z_key.clone().mul_scalar(tau_v)).narrow(2, 1, 1);
+            let want = (eps.clone().mul_scalar(1.0 - tau_v) + z_key.clone().mul_scalar(tau_v))
+                .narrow(2, 1, 1);
             seen.push((tau_v, max_abs_diff(got, want.reshape([b, p, c]))));
             Tensor::zeros([b, p, t * c], &d)
         },
@@ -120,7 +154,10 @@ fn replacement_noises_keyframes_to_the_state_level() {
     );
     assert_eq!(seen.len(), 4);
     for (tau, err) in &seen {
-        assert!(*err < 1e-6, "at τ = {tau} the keyframe slot is not (1−τ)ε + τ z_key (err {err})");
+        assert!(
+            *err < 1e-6,
+            "at τ = {tau} the keyframe slot is not (1−τ)ε + τ z_key (err {err})"
+        );
     }
     // Keyframe slots are clamped to Z_key at the end (exactly), others keep the state (here ε, zero velocity).
     let out_key = out.clone().narrow(2, 1, 1);
@@ -140,9 +177,22 @@ fn fresh_replacement_noise_differs_from_fixed() {
         mask: Tensor::ones([b, t], &d),
     };
     let first_input = |noise: ReplaceNoise| {
-        let opts = SampleOptions { n_grid: 2, solver: Solver::Euler, replace_noise: noise, ..SampleOptions::paper(KfMode::ReplaceNoised) };
+        let opts = SampleOptions {
+            n_grid: 2,
+            solver: Solver::Euler,
+            replace_noise: noise,
+            ..SampleOptions::paper(KfMode::ReplaceNoised)
+        };
         let mut got = None;
-        sample(|input: Tensor<3>, _| { got.get_or_insert(input); Tensor::zeros([b, p, t * c], &d) }, &cond, eps.clone(), &opts);
+        sample(
+            |input: Tensor<3>, _| {
+                got.get_or_insert(input);
+                Tensor::zeros([b, p, t * c], &d)
+            },
+            &cond,
+            eps.clone(),
+            &opts,
+        );
         got.expect("one evaluation")
     };
     let fixed = first_input(ReplaceNoise::Fixed);
@@ -160,17 +210,31 @@ fn sampler_passes_tau_increasing_from_zero() {
     let _g = lock();
     let d = dev();
     let (b, p, t, c) = (2, 3, 2, 2);
-    let cond = Conditioning { z0: Tensor::zeros([b, p, c], &d), z_key: Tensor::zeros([b, p, t, c], &d), mask: Tensor::zeros([b, t], &d) };
+    let cond = Conditioning {
+        z0: Tensor::zeros([b, p, c], &d),
+        z_key: Tensor::zeros([b, p, t, c], &d),
+        mask: Tensor::zeros([b, t], &d),
+    };
     for (solver, expected) in [
         (Solver::Euler, vec![0.0, 0.25, 0.5, 0.75]),
-        (Solver::Midpoint, vec![0.0, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875]),
+        (
+            Solver::Midpoint,
+            vec![0.0, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875],
+        ),
     ] {
-        let opts = SampleOptions { n_grid: 5, solver, ..SampleOptions::paper(KfMode::InputMask) };
+        let opts = SampleOptions {
+            n_grid: 5,
+            solver,
+            ..SampleOptions::paper(KfMode::InputMask)
+        };
         let mut taus = Vec::new();
         sample(
             |_, tau: Tensor<1>| {
                 let v = values(tau);
-                assert!(v.iter().all(|x| *x == v[0]), "one τ per evaluation for the whole batch");
+                assert!(
+                    v.iter().all(|x| *x == v[0]),
+                    "one τ per evaluation for the whole batch"
+                );
                 taus.push(v[0] as f64);
                 Tensor::zeros([b, p, t * c], &d)
             },
@@ -184,7 +248,10 @@ fn sampler_passes_tau_increasing_from_zero() {
     let emb = values(timestep_sinusoid(Tensor::from_floats([0.0, 1.0], &d)));
     assert!(emb[..TIME_FREQS].iter().all(|x| *x == 1.0));
     assert!(emb[TIME_FREQS..2 * TIME_FREQS].iter().all(|x| *x == 0.0));
-    assert!((emb[2 * TIME_FREQS] - 1f32.cos()).abs() < 1e-6, "first frequency is exp(0) = 1");
+    assert!(
+        (emb[2 * TIME_FREQS] - 1f32.cos()).abs() < 1e-6,
+        "first frequency is exp(0) = 1"
+    );
 }
 
 // ----------------------------------------------------------------------------------------------------------------
@@ -192,11 +259,23 @@ fn sampler_passes_tau_increasing_from_zero() {
 
 #[test]
 fn channel_counts_at_paper_size() {
-    assert_eq!(MmditConfig::paper(KfMode::InputMask, 768).in_channels(), 221);
-    assert_eq!(MmditConfig::paper(KfMode::ImputeUntil, 768).in_channels(), 221);
+    assert_eq!(
+        MmditConfig::paper(KfMode::InputMask, 768).in_channels(),
+        221
+    );
+    assert_eq!(
+        MmditConfig::paper(KfMode::ImputeUntil, 768).in_channels(),
+        221
+    );
     assert_eq!(MmditConfig::paper(KfMode::None, 768).in_channels(), 204);
-    assert_eq!(MmditConfig::paper(KfMode::ReplaceNoised, 768).in_channels(), 204);
-    assert_eq!(MmditConfig::paper(KfMode::InputMask, 768).out_channels(), 192);
+    assert_eq!(
+        MmditConfig::paper(KfMode::ReplaceNoised, 768).in_channels(),
+        204
+    );
+    assert_eq!(
+        MmditConfig::paper(KfMode::InputMask, 768).out_channels(),
+        192
+    );
 }
 
 #[test]
@@ -207,16 +286,37 @@ fn build_input_places_keyframes_state_and_mask() {
     let x = Tensor::<4>::full([b, p, t, c], -1.0, &d);
     let z_key = Tensor::<4>::full([b, p, t, c], 5.0, &d);
     let mask = Tensor::from_data(TensorData::new(vec![1f32, 0.0, 1.0], [b, t]), &d);
-    let input = build_input(z0.clone(), x.clone(), mask.clone(), z_key.clone(), KfMode::InputMask);
+    let input = build_input(
+        z0.clone(),
+        x.clone(),
+        mask.clone(),
+        z_key.clone(),
+        KfMode::InputMask,
+    );
     assert_eq!(input.dims(), [b, p, (t + 1) * (c + 1)]);
     // slot-major [z_s(2) ‖ m̂_s(1)]: shape slot, key (m=1), state (m=0), key (m=1); m̂ = [0; m]
     let row: Vec<f32> = values(input.clone().narrow(1, 0, 1));
-    assert_eq!(row, vec![7.0, 7.0, 0.0, 5.0, 5.0, 1.0, -1.0, -1.0, 0.0, 5.0, 5.0, 1.0]);
+    assert_eq!(
+        row,
+        vec![7.0, 7.0, 0.0, 5.0, 5.0, 1.0, -1.0, -1.0, 0.0, 5.0, 5.0, 1.0]
+    );
     // Without mask channels: 204-style layout, no replacement for None.
-    let plain = build_input(z0.clone(), x.clone(), mask.clone(), z_key.clone(), KfMode::None);
-    assert_eq!(values(plain.narrow(1, 0, 1)), vec![7.0, 7.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0]);
+    let plain = build_input(
+        z0.clone(),
+        x.clone(),
+        mask.clone(),
+        z_key.clone(),
+        KfMode::None,
+    );
+    assert_eq!(
+        values(plain.narrow(1, 0, 1)),
+        vec![7.0, 7.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0]
+    );
     let replaced = build_input(z0, x, mask, z_key, KfMode::ReplaceNoised);
-    assert_eq!(values(replaced.narrow(1, 0, 1)), vec![7.0, 7.0, 5.0, 5.0, -1.0, -1.0, 5.0, 5.0]);
+    assert_eq!(
+        values(replaced.narrow(1, 0, 1)),
+        vec![7.0, 7.0, 5.0, 5.0, -1.0, -1.0, 5.0, 5.0]
+    );
 }
 
 #[test]
@@ -235,7 +335,13 @@ fn split_output_inverts_merge_slots() {
 // ----------------------------------------------------------------------------------------------------------------
 // Backbone
 
-fn tiny_inputs(cfg: &MmditConfig, b: usize, p: usize, l: usize, d: &Device) -> (Tensor<3>, Tensor<3>, Tensor<1>, Tensor<1>) {
+fn tiny_inputs(
+    cfg: &MmditConfig,
+    b: usize,
+    p: usize,
+    l: usize,
+    d: &Device,
+) -> (Tensor<3>, Tensor<3>, Tensor<1>, Tensor<1>) {
     (
         normal([b, p, cfg.in_channels()], d),
         normal([b, l, cfg.text_dim], d),
@@ -253,7 +359,10 @@ fn forward_shapes_and_zero_velocity_at_init() {
     let (input, text, keep, tau) = tiny_inputs(&cfg, 2, 7, 5, &d);
     let v = model.forward(input, text, keep, tau);
     assert_eq!(v.dims(), [2, 7, cfg.out_channels()]);
-    assert!(values(v).iter().all(|x| *x == 0.0), "zero-initialised output projection gives v = 0");
+    assert!(
+        values(v).iter().all(|x| *x == 0.0),
+        "zero-initialised output projection gives v = 0"
+    );
 }
 
 #[test]
@@ -313,7 +422,11 @@ fn every_parameter_gets_a_gradient_after_one_step() {
     let cfg = MmditConfig::tiny();
     let mut model = cfg.init(&d);
     let batch = tiny_batch(&cfg, 2, 6, 3, &d);
-    let opts = RfLossOptions { kf_mode: KfMode::InputMask, keyframe_loss: KeyframeLoss::All, tau_star: 0.98 };
+    let opts = RfLossOptions {
+        kf_mode: KfMode::InputMask,
+        keyframe_loss: KeyframeLoss::All,
+        tau_star: 0.98,
+    };
     let mut optim = AdamWConfig::new().init();
     let eps = normal(batch.z.dims(), &d);
     let tau = Tensor::from_floats([0.3, 0.7], &d);
@@ -348,11 +461,19 @@ fn every_parameter_gets_a_gradient_after_one_step() {
             }
         }
     }
-    let mut check = Check { grads: &grads, path: Vec::new(), missing: Vec::new(), total: 0 };
+    let mut check = Check {
+        grads: &grads,
+        path: Vec::new(),
+        missing: Vec::new(),
+        total: 0,
+    };
     model.visit(&mut check);
     assert!(check.total > 30, "visited {} parameters", check.total);
     let last = cfg.blocks - 1;
-    let dead = [format!("blocks.{last}.norm2_text.gamma"), format!("blocks.{last}.norm2_text.beta")];
+    let dead = [
+        format!("blocks.{last}.norm2_text.beta"),
+        format!("blocks.{last}.norm2_text.gamma"),
+    ];
     let mut missing = check.missing.clone();
     missing.sort();
     assert_eq!(missing, dead.to_vec(), "parameters without gradient");
@@ -365,16 +486,42 @@ fn cfg_with_unit_guidance_equals_the_conditional_branch() {
     let cfg = MmditConfig::tiny();
     let model = trained_one_step(&cfg, &d);
     let (input, text, _, tau) = tiny_inputs(&cfg, 2, 5, 3, &d);
-    let v_cond = model.forward(input.clone(), text.clone(), Tensor::ones([2], &d), tau.clone());
-    let v_uncond = model.forward(input.clone(), text.clone(), Tensor::zeros([2], &d), tau.clone());
-    assert!(max_abs_diff(v_cond.clone(), v_uncond.clone()) > 1e-6, "text must matter after a step");
-    assert!(max_abs_diff(cfg_combine(v_cond.clone(), v_uncond.clone(), 1.0), v_cond.clone()) < 1e-6);
-    assert!(max_abs_diff(cfg_combine(v_cond.clone(), v_uncond.clone(), 0.0), v_uncond.clone()) < 1e-6);
+    let v_cond = model.forward(
+        input.clone(),
+        text.clone(),
+        Tensor::ones([2], &d),
+        tau.clone(),
+    );
+    let v_uncond = model.forward(
+        input.clone(),
+        text.clone(),
+        Tensor::zeros([2], &d),
+        tau.clone(),
+    );
+    assert!(
+        max_abs_diff(v_cond.clone(), v_uncond.clone()) > 1e-6,
+        "text must matter after a step"
+    );
+    assert!(
+        max_abs_diff(
+            cfg_combine(v_cond.clone(), v_uncond.clone(), 1.0),
+            v_cond.clone()
+        ) < 1e-6
+    );
+    assert!(
+        max_abs_diff(
+            cfg_combine(v_cond.clone(), v_uncond.clone(), 0.0),
+            v_uncond.clone()
+        ) < 1e-6
+    );
     let mut w1 = mmdit_velocity(&model, text.clone(), 1.0);
     assert!(max_abs_diff(w1(input.clone(), tau.clone()), v_cond.clone()) < 1e-5);
     let mut w3 = mmdit_velocity(&model, text, 3.0);
     let expect = v_uncond.clone() + (v_cond - v_uncond).mul_scalar(3.0);
-    assert!(max_abs_diff(w3(input, tau), expect) < 1e-4, "batched CFG branches match separate calls");
+    assert!(
+        max_abs_diff(w3(input, tau), expect) < 1e-4,
+        "batched CFG branches match separate calls"
+    );
 }
 
 /// A tiny model after one AdamW step (non-zero output layer), back on the plain device.
@@ -382,9 +529,19 @@ fn trained_one_step(cfg: &MmditConfig, d: &Device) -> Mmdit {
     let ad = d.clone().autodiff();
     let model = cfg.init(&ad);
     let batch = tiny_batch(cfg, 2, 6, 3, &ad);
-    let opts = RfLossOptions { kf_mode: cfg.kf_mode, keyframe_loss: KeyframeLoss::All, tau_star: 0.98 };
+    let opts = RfLossOptions {
+        kf_mode: cfg.kf_mode,
+        keyframe_loss: KeyframeLoss::All,
+        tau_star: 0.98,
+    };
     let eps = normal(batch.z.dims(), &ad);
-    let loss = rf_training_loss(&model, &batch, eps, Tensor::from_floats([0.2, 0.9], &ad), &opts);
+    let loss = rf_training_loss(
+        &model,
+        &batch,
+        eps,
+        Tensor::from_floats([0.2, 0.9], &ad),
+        &opts,
+    );
     let grads = GradientsParams::from_grads(loss.backward(), &model);
     AdamWConfig::new().init().step(1e-2, model, grads).valid()
 }
@@ -400,7 +557,11 @@ fn tiny_rf_overfits_one_batch() {
     let batch = tiny_batch(&cfg, 2, 8, 3, &d);
     let eps = normal(batch.z.dims(), &d);
     let tau = Tensor::from_floats([0.35, 0.65], &d);
-    let opts = RfLossOptions { kf_mode: KfMode::InputMask, keyframe_loss: KeyframeLoss::All, tau_star: 0.98 };
+    let opts = RfLossOptions {
+        kf_mode: KfMode::InputMask,
+        keyframe_loss: KeyframeLoss::All,
+        tau_star: 0.98,
+    };
     let mut optim = AdamWConfig::new().with_beta_2(0.99).init();
     let mut losses = Vec::new();
     for _ in 0..150 {
@@ -410,7 +571,10 @@ fn tiny_rf_overfits_one_batch() {
         model = optim.step(3e-3, model, grads);
     }
     let (first, last) = (losses[0], *losses.last().unwrap());
-    assert!(last * 10.0 <= first, "loss {first} → {last} did not fall 10×");
+    assert!(
+        last * 10.0 <= first,
+        "loss {first} → {last} did not fall 10×"
+    );
 }
 
 // ----------------------------------------------------------------------------------------------------------------
@@ -431,7 +595,12 @@ fn loss_on_non_keyframes_ignores_keyframe_slots() {
     }
     let pred = Tensor::from_data(TensorData::new(pred, [b, p, t, c]), &d);
     let mask = Tensor::from_data(TensorData::new(vec![1f32, 0.0, 0.0], [b, t]), &d);
-    let all = values(rf_loss(pred.clone(), target.clone(), mask.clone(), KeyframeLoss::All))[0];
+    let all = values(rf_loss(
+        pred.clone(),
+        target.clone(),
+        mask.clone(),
+        KeyframeLoss::All,
+    ))[0];
     let non = values(rf_loss(pred, target, mask, KeyframeLoss::NonKeyframesOnly))[0];
     assert!((all - (1.0 + 9.0) / 3.0).abs() < 1e-6, "all slots: {all}");
     assert!((non - 9.0 / 2.0).abs() < 1e-6, "non-keyframe slots: {non}");
@@ -443,7 +612,10 @@ fn cosmap_is_symmetric_and_maps_the_ends() {
     let u = Tensor::from_floats([0.0, 0.25, 0.5, 0.75, 1.0], &d);
     let v = values(TauSampler::Cosmap.map(u.clone()));
     assert!(v[0].abs() < 1e-7 && (v[4] - 1.0).abs() < 1e-6 && (v[2] - 0.5).abs() < 1e-6);
-    assert!((v[1] + v[3] - 1.0).abs() < 1e-6, "cosmap(u) + cosmap(1 − u) = 1");
+    assert!(
+        (v[1] + v[3] - 1.0).abs() < 1e-6,
+        "cosmap(u) + cosmap(1 − u) = 1"
+    );
     assert_eq!(values(TauSampler::Uniform.map(u.clone())), values(u));
 }
 
@@ -453,8 +625,17 @@ fn impute_until_stops_replacing_after_tau_star() {
     let d = dev();
     let (b, p, t, c) = (1, 2, 2, 2);
     let z_key = Tensor::<4>::full([b, p, t, c], 9.0, &d);
-    let cond = Conditioning { z0: Tensor::zeros([b, p, c], &d), z_key, mask: Tensor::ones([b, t], &d) };
-    let opts = SampleOptions { n_grid: 5, solver: Solver::Euler, tau_star: 0.5, ..SampleOptions::paper(KfMode::ImputeUntil) };
+    let cond = Conditioning {
+        z0: Tensor::zeros([b, p, c], &d),
+        z_key,
+        mask: Tensor::ones([b, t], &d),
+    };
+    let opts = SampleOptions {
+        n_grid: 5,
+        solver: Solver::Euler,
+        tau_star: 0.5,
+        ..SampleOptions::paper(KfMode::ImputeUntil)
+    };
     let mut seen = Vec::new();
     sample(
         |input: Tensor<3>, tau: Tensor<1>| {
@@ -467,7 +648,15 @@ fn impute_until_stops_replacing_after_tau_star() {
         Tensor::zeros([b, p, t, c], &d),
         &opts,
     );
-    assert_eq!(seen, vec![(0.0, 9.0, 1.0), (0.25, 9.0, 1.0), (0.5, 0.0, 1.0), (0.75, 0.0, 1.0)]);
+    assert_eq!(
+        seen,
+        vec![
+            (0.0, 9.0, 1.0),
+            (0.25, 9.0, 1.0),
+            (0.5, 0.0, 1.0),
+            (0.75, 0.0, 1.0)
+        ]
+    );
 }
 
 #[test]
@@ -486,4 +675,16 @@ fn param_report_sums_to_num_params() {
 fn paper_size_parameter_count() {
     let model = MmditConfig::paper(KfMode::InputMask, 768).init(&dev());
     assert_eq!(model.num_params(), 78_359_744);
+}
+
+#[test]
+#[ignore = "paper-size timing, about a minute on 2 cores; `any4d bench model` prints the same numbers"]
+fn paper_size_step_timing() {
+    let cfg = MmditConfig::paper(KfMode::InputMask, 768);
+    let t = any4d_model::summary::time_rf_step(&cfg, 1, 512, 77, 2, &dev());
+    println!(
+        "RF forward+backward, paper size, batch 1, flex: {:.1} ms/clip ({:?})",
+        t.median_ms, t.steps_ms
+    );
+    assert!(t.median_ms > 0.0);
 }

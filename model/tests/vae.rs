@@ -66,7 +66,11 @@ fn fixture() -> Fixture {
         }
         edges.push(e);
     }
-    Fixture { reference, frames, edges }
+    Fixture {
+        reference,
+        frames,
+        edges,
+    }
 }
 
 fn batch(fx: &Fixture, pad_value: Option<f32>, device: &Device) -> VaeBatch {
@@ -137,7 +141,13 @@ macro_rules! impl_vae {
     ($ty:ty, $groups:expr) => {
         impl Vae for $ty {
             fn encode_batch(&self, b: &VaeBatch) -> VaeEncoding {
-                self.encode(b.reference.clone(), b.frames.clone(), b.vmask.clone(), b.fps.clone(), &b.edges)
+                self.encode(
+                    b.reference.clone(),
+                    b.frames.clone(),
+                    b.vmask.clone(),
+                    b.fps.clone(),
+                    &b.edges,
+                )
             }
             fn decode_batch(&self, enc: &VaeEncoding, b: &VaeBatch, z: Tensor<4>) -> Tensor<4> {
                 self.decode(enc.e0.clone(), b.reference.clone(), enc.z0.clone(), z)
@@ -218,7 +228,10 @@ fn check_padding_invariance<M: Vae>(vae: &M, device: &Device) {
     let fx = fixture();
     let clean = outputs(vae, &batch(&fx, None, device), 11, device);
     let dirty = outputs(vae, &batch(&fx, Some(37.5), device), 11, device);
-    for (i, name) in ["e0", "z0", "mu", "logvar", "reconstruction", "loss"].iter().enumerate() {
+    for (i, name) in ["e0", "z0", "mu", "logvar", "reconstruction", "loss"]
+        .iter()
+        .enumerate()
+    {
         assert_close(&clean[i], &dirty[i], 1e-5, name);
     }
 }
@@ -242,8 +255,15 @@ fn visible_padding_keys_do_change_the_latents() {
     let fx = fixture();
     let clean = outputs(&vae, &batch(&fx, None, &device), 11, &device);
     let dirty = outputs(&vae, &batch(&fx, Some(37.5), &device), 11, &device);
-    let worst = clean[2].iter().zip(&dirty[2]).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
-    assert!(worst > 1e-3, "visible padded keys left μ unchanged (max difference {worst})");
+    let worst = clean[2]
+        .iter()
+        .zip(&dirty[2])
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
+    assert!(
+        worst > 1e-3,
+        "visible padded keys left μ unchanged (max difference {worst})"
+    );
 }
 
 /// Replaces every float parameter by N(0, 0.5²) noise, so zero-initialised projections are active.
@@ -251,7 +271,11 @@ struct Randomize;
 
 impl ModuleMapper for Randomize {
     fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
-        param.map(|t| t.random_like(Distribution::Normal(0.0, 0.5)))
+        param.map(|t| {
+            let tracked = t.device().is_autodiff();
+            let r = t.random_like(Distribution::Normal(0.0, 0.5));
+            if tracked { r.require_grad() } else { r }
+        })
     }
 }
 
@@ -266,13 +290,20 @@ fn vertex_without_neighbours_gets_zero_update_and_no_nan() {
     let edges = EdgeList::new(&[vec![[0, 1], [1, 2], [2, 3]], vec![]], 5, &device).expect("valid edges");
     let y = attn.forward(x.clone(), &edges);
     let (xs, ys) = (floats(x), floats(y));
-    assert!(ys.iter().all(|v| v.is_finite()), "NaN or inf in neighbour attention output");
+    assert!(
+        ys.iter().all(|v| v.is_finite()),
+        "NaN or inf in neighbour attention output"
+    );
     let row = |v: &[f32], b: usize, n: usize| v[(b * 5 + n) * 8..(b * 5 + n + 1) * 8].to_vec();
     assert_eq!(row(&ys, 0, 4), row(&xs, 0, 4), "isolated vertex must get a zero update");
     for n in 0..5 {
         assert_eq!(row(&ys, 1, n), row(&xs, 1, n), "edgeless clip must pass through");
     }
-    assert_ne!(row(&ys, 0, 0), row(&xs, 0, 0), "connected vertex must be updated (randomized weights)");
+    assert_ne!(
+        row(&ys, 0, 0),
+        row(&xs, 0, 0),
+        "connected vertex must be updated (randomized weights)"
+    );
 
     // The whole VAE with the isolated vertex of the fixture: finite loss and gradients.
     let ad = device.clone().autodiff();
@@ -280,9 +311,18 @@ fn vertex_without_neighbours_gets_zero_update_and_no_nan() {
     let loss = vae.loss(&batch(&fixture(), None, &ad)).total;
     assert!(scalar(loss.clone()).is_finite(), "loss not finite");
     let grads = loss.backward();
-    let mut check = GradCheck { grads: &grads, path: Vec::new(), missing: Vec::new(), zero: Vec::new() };
+    let mut check = GradCheck {
+        grads: &grads,
+        path: Vec::new(),
+        missing: Vec::new(),
+        zero: Vec::new(),
+    };
     vae.visit(&mut check);
-    assert!(check.missing.is_empty(), "parameters without gradient: {:?}", check.missing);
+    assert!(
+        check.missing.is_empty(),
+        "parameters without gradient: {:?}",
+        check.missing
+    );
 }
 
 #[test]
@@ -335,7 +375,12 @@ impl ModuleVisitor for GradCheck<'_> {
 
 fn grad_report<M: Vae>(vae: &M, b: &VaeBatch) -> (Vec<String>, Vec<String>) {
     let grads = vae.batch_loss(b).total.backward();
-    let mut check = GradCheck { grads: &grads, path: Vec::new(), missing: Vec::new(), zero: Vec::new() };
+    let mut check = GradCheck {
+        grads: &grads,
+        path: Vec::new(),
+        missing: Vec::new(),
+        zero: Vec::new(),
+    };
     vae.visit(&mut check);
     (check.missing, check.zero)
 }
@@ -345,9 +390,15 @@ fn check_every_parameter_gets_a_gradient<M: Vae>(vae: M, device: &Device) {
     // Step 0: the zero-initialised output projections (neighbour `to_out`, query `to_out`) make every
     // gradient upstream of them zero, but their own gradients are non-zero.
     let (missing, zero) = grad_report(&vae, &b);
+    println!(
+        "step 0: {} parameter tensors have an all-zero gradient (upstream of zero-init layers)",
+        zero.len()
+    );
     assert!(missing.is_empty(), "step 0: parameters without gradient: {missing:?}");
     assert!(
-        !zero.iter().any(|p| p.contains("neighbour.to_out") || p.contains("query_attn.to_out")),
+        !zero
+            .iter()
+            .any(|p| p.contains("neighbour.to_out") || p.contains("query_attn.to_out")),
         "step 0: a zero-initialised projection got a zero gradient: {zero:?}"
     );
     // After one optimiser step those projections are non-zero and every parameter must receive gradient.
@@ -430,4 +481,92 @@ fn paper_parameter_counts() {
         + (12 * d * d + 10 * d)
         + (2 * d * 3 + 3);
     assert_eq!(frame, expected);
+}
+
+#[test]
+fn frames_are_encoded_and_decoded_independently() {
+    // Frame-wise VAE: changing frame 2 may change only frame 2's latent and decoded frame.
+    let _guard = lock();
+    let device = Device::flex();
+    device.seed(6);
+    // Randomized weights: at initialisation the zero-init query projection makes every output independent of z.
+    let vae = frame_vae(&device).map(&mut Randomize);
+    let fx = fixture();
+    let mut moved = fixture();
+    for v in 0..N {
+        for b in 0..B {
+            let at = ((b * T + 2) * N + v) * 3;
+            moved.frames[at] += 0.3;
+        }
+    }
+    let run = |fx: &Fixture| {
+        let b = batch(fx, None, &device);
+        let enc = vae.encode_batch(&b);
+        let recon = vae.decode_batch(&enc, &b, enc.mu.clone());
+        (enc.mu, recon)
+    };
+    let ((mu_a, rec_a), (mu_b, rec_b)) = (run(&fx), run(&moved));
+    for f in 0..T {
+        let same = |a: Tensor<4>, b: Tensor<4>| {
+            let (a, b) = (floats(a.narrow(1, f, 1)), floats(b.narrow(1, f, 1)));
+            a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0f32, f32::max)
+        };
+        let (dmu, drec) = (same(mu_a.clone(), mu_b.clone()), same(rec_a.clone(), rec_b.clone()));
+        if f == 2 {
+            assert!(
+                dmu > 1e-4 && drec > 1e-6,
+                "frame 2 was moved but its latent/output did not change"
+            );
+        } else {
+            assert!(
+                dmu <= 1e-6 && drec <= 1e-6,
+                "frame {f} changed ({dmu}, {drec}) when only frame 2 moved"
+            );
+        }
+    }
+}
+
+/// Paper-size forward + backward on one clip (N = 4096, T = 16, P = 512) on the CPU; prints the time.
+/// Run: `cargo test -p any4d-model --test vae paper_size -- --ignored --nocapture`
+#[test]
+#[ignore = "paper-size model on the CPU; seconds to minutes"]
+fn paper_size_forward_backward_on_one_clip() {
+    let _guard = lock();
+    let device = Device::flex().autodiff();
+    device.seed(7);
+    let (n, t, p) = (4096usize, 16usize, 512usize);
+    let vae = FrameVaeConfig::new().init(&device);
+    let reference = Tensor::<3>::random([1, n, 3], Distribution::Uniform(-1.0, 1.0), &device);
+    let frames = reference.clone().unsqueeze_dim::<4>(1).repeat_dim(1, t)
+        + Tensor::<4>::random([1, t, n, 3], Distribution::Normal(0.0, 0.05), &device);
+    // A strip mesh over all vertices: about 2n undirected edges.
+    let edges: Vec<[u32; 2]> = (0..n as u32)
+        .flat_map(|v| {
+            [v + 1, v + 2]
+                .into_iter()
+                .filter(|&w| (w as usize) < n)
+                .map(move |w| [v, w])
+        })
+        .collect();
+    let stride = (n / p) as i64;
+    let b = VaeBatch {
+        reference,
+        frames,
+        vmask: Tensor::from_data(TensorData::new(vec![true; n], [1, n]), &device),
+        fps: Tensor::from_data(
+            TensorData::new((0..p as i64).map(|i| i * stride).collect::<Vec<_>>(), [1, p]),
+            &device,
+        ),
+        edges: EdgeList::new(&[edges], n, &device).expect("valid edges"),
+    };
+    let start = std::time::Instant::now();
+    let loss = vae.loss(&b).total;
+    let value = scalar(loss.clone());
+    let forward = start.elapsed();
+    let _grads = loss.backward();
+    println!(
+        "paper-size frame VAE, 1 clip: loss {value}, forward {forward:?}, forward+backward {:?}",
+        start.elapsed()
+    );
+    assert!(value.is_finite());
 }

@@ -2,7 +2,7 @@
 //!
 //! Code map: [`config`] (run TOML), [`backend`] (runtime device), [`run_folder`] + [`checkpoint`] +
 //! [`data_order`] (append-only runs that resume exactly), [`loop_common`] (the shared loop), [`progress`],
-//! [`plot`].
+//! [`plot`], [`vae_loop`] (SPEC §3), [`rf_loop`] (SPEC §4; config only so far).
 
 pub mod cli;
 
@@ -14,6 +14,8 @@ pub mod error;
 pub mod loop_common;
 pub mod plot;
 pub mod progress;
+pub mod rf_loop;
 pub mod run_folder;
+pub mod vae_loop;
 
 pub use error::{Result, TrainError};

@@ -23,12 +23,18 @@ pub fn read_bin_bytes(bytes: &[u8], source: &str) -> Result<Clip> {
     let value = pickle::loads(bytes, source)?;
     let err = |field: &str, reason: String| DataError::new(source, field, reason);
     if !matches!(value, Value::Dict(_)) {
-        return Err(err("pickle", format!("top-level object is a {}, expected a dict", value.kind())));
+        return Err(err(
+            "pickle",
+            format!("top-level object is a {}, expected a dict", value.kind()),
+        ));
     }
 
     let v = array(&value, "vertices", source)?;
     let [frames, n_vertices, 3] = v.shape[..] else {
-        return Err(err("vertices", format!("shape {:?}, expected (frames, vertices, 3)", v.shape)));
+        return Err(err(
+            "vertices",
+            format!("shape {:?}, expected (frames, vertices, 3)", v.shape),
+        ));
     };
     if frames == 0 {
         return Err(err("vertices", "zero frames".into()));
@@ -42,16 +48,27 @@ pub fn read_bin_bytes(bytes: &[u8], source: &str) -> Result<Clip> {
 
     let f = array(&value, "faces", source)?;
     let [_, 3] = f.shape[..] else {
-        return Err(err("faces", format!("shape {:?}, expected (faces, 3)", f.shape)));
+        return Err(err(
+            "faces",
+            format!("shape {:?}, expected (faces, 3)", f.shape),
+        ));
     };
     let ArrayData::Int(idx) = &f.data else {
-        return Err(err("faces", format!("dtype {}, expected integers", f.dtype.descr())));
+        return Err(err(
+            "faces",
+            format!("dtype {}, expected integers", f.dtype.descr()),
+        ));
     };
     let idx = idx
         .iter()
         .enumerate()
         .map(|(i, &x)| {
-            u32::try_from(x).map_err(|_| err("faces", format!("index {x} in face {} is not a vertex index", i / 3)))
+            u32::try_from(x).map_err(|_| {
+                err(
+                    "faces",
+                    format!("index {x} in face {} is not a vertex index", i / 3),
+                )
+            })
         })
         .collect::<Result<Vec<u32>>>()?;
     let faces = idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
@@ -61,17 +78,28 @@ pub fn read_bin_bytes(bytes: &[u8], source: &str) -> Result<Clip> {
         Some(Value::Str(s)) => s.clone(),
         Some(Value::Bytes(b)) => String::from_utf8(b.clone())
             .map_err(|e| err("caption", format!("bytes are not valid UTF-8: {e}")))?,
-        Some(other) => return Err(err("caption", format!("is a {}, expected str", other.kind()))),
+        Some(other) => {
+            return Err(err(
+                "caption",
+                format!("is a {}, expected str", other.kind()),
+            ));
+        }
     };
 
-    let id = Path::new(source).file_stem().map_or_else(|| source.to_string(), |s| s.to_string_lossy().into_owned());
+    let id = Path::new(source)
+        .file_stem()
+        .map_or_else(|| source.to_string(), |s| s.to_string_lossy().into_owned());
     Clip::new(id, vertices, frames, n_vertices, faces, caption, source)
 }
 
 fn array<'a>(dict: &'a Value, key: &str, source: &str) -> Result<&'a NdArray> {
     match dict.get(key) {
         Some(Value::NdArray(a)) => Ok(a),
-        Some(other) => Err(DataError::new(source, key, format!("is a {}, expected a numpy array", other.kind()))),
+        Some(other) => Err(DataError::new(
+            source,
+            key,
+            format!("is a {}, expected a numpy array", other.kind()),
+        )),
         None => Err(DataError::new(source, key, "missing key")),
     }
 }
@@ -91,7 +119,10 @@ pub fn bin_bytes(clip: &Clip) -> Result<Vec<u8>> {
     let dict = Value::Dict(vec![
         (Value::Str("vertices".into()), Value::NdArray(vertices)),
         (Value::Str("faces".into()), Value::NdArray(faces)),
-        (Value::Str("caption".into()), Value::Str(clip.caption.clone())),
+        (
+            Value::Str("caption".into()),
+            Value::Str(clip.caption.clone()),
+        ),
     ]);
     pickle::dumps(&dict)
 }
@@ -104,7 +135,9 @@ pub fn write_bin(path: &Path, clip: &Clip) -> Result<()> {
 
 /// Write `bytes` to a sibling temp file, then rename it over `path`.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path.file_name().ok_or_else(|| DataError::new(path, "file", "path has no file name"))?;
+    let name = path
+        .file_name()
+        .ok_or_else(|| DataError::new(path, "file", "path has no file name"))?;
     let tmp = path.with_file_name(format!(".{}.tmp", name.to_string_lossy()));
     std::fs::write(&tmp, bytes).map_err(|e| DataError::io(&tmp, e))?;
     std::fs::rename(&tmp, path).map_err(|e| DataError::io(path, e))
@@ -115,7 +148,9 @@ mod tests {
     use super::*;
 
     fn clip() -> Clip {
-        let v = (0..2).flat_map(|f| [[0.1, 0.0, f as f32], [1.0, 0.3, 0.0], [0.0, 1.0, -2.5]]).collect();
+        let v = (0..2)
+            .flat_map(|f| [[0.1, 0.0, f as f32], [1.0, 0.3, 0.0], [0.0, 1.0, -2.5]])
+            .collect();
         Clip::new("c", v, 2, 3, vec![[0, 1, 2]], "a caption", "c.bin").unwrap()
     }
 
@@ -123,23 +158,51 @@ mod tests {
     fn bytes_round_trip_exactly() {
         let c = clip();
         let back = read_bin_bytes(&bin_bytes(&c).unwrap(), "dir/c.bin").unwrap();
-        assert_eq!((back.vertices, back.faces, back.caption), (c.vertices, c.faces, c.caption));
+        assert_eq!(
+            (back.vertices, back.faces, back.caption),
+            (c.vertices, c.faces, c.caption)
+        );
         assert_eq!(back.id, "c");
     }
 
     #[test]
     fn bad_dicts_name_the_field() {
         let dict = |items: Vec<(&str, Value)>| {
-            Value::Dict(items.into_iter().map(|(k, v)| (Value::Str(k.into()), v)).collect())
+            Value::Dict(
+                items
+                    .into_iter()
+                    .map(|(k, v)| (Value::Str(k.into()), v))
+                    .collect(),
+            )
         };
-        let v3 = Value::NdArray(NdArray { shape: vec![2, 3, 3], dtype: DType::F8, data: ArrayData::Float(vec![0.0; 18]) });
-        let faces = |d: Vec<i64>| Value::NdArray(NdArray { shape: vec![d.len() / 3, 3], dtype: DType::I8, data: ArrayData::Int(d) });
+        let v3 = Value::NdArray(NdArray {
+            shape: vec![2, 3, 3],
+            dtype: DType::F8,
+            data: ArrayData::Float(vec![0.0; 18]),
+        });
+        let faces = |d: Vec<i64>| {
+            Value::NdArray(NdArray {
+                shape: vec![d.len() / 3, 3],
+                dtype: DType::I8,
+                data: ArrayData::Int(d),
+            })
+        };
         let read = |v: Value| read_bin_bytes(&pickle::dumps(&v).unwrap(), "x.bin").unwrap_err();
-        assert_eq!(read(dict(vec![("faces", faces(vec![0, 1, 2]))])).field, "vertices");
+        assert_eq!(
+            read(dict(vec![("faces", faces(vec![0, 1, 2]))])).field,
+            "vertices"
+        );
         assert_eq!(read(dict(vec![("vertices", v3.clone())])).field, "faces");
-        let e = read(dict(vec![("vertices", v3.clone()), ("faces", faces(vec![0, -1, 2]))]));
+        let e = read(dict(vec![
+            ("vertices", v3.clone()),
+            ("faces", faces(vec![0, -1, 2])),
+        ]));
         assert!(e.field == "faces" && e.reason.contains("-1"), "{e}");
-        let e = read(dict(vec![("vertices", v3), ("faces", faces(vec![0, 1, 2])), ("caption", Value::Bytes(vec![0xff]))]));
+        let e = read(dict(vec![
+            ("vertices", v3),
+            ("faces", faces(vec![0, 1, 2])),
+            ("caption", Value::Bytes(vec![0xff])),
+        ]));
         assert_eq!((e.path.as_str(), e.field.as_str()), ("x.bin", "caption"));
     }
 }

@@ -33,13 +33,22 @@ pub struct GltfReadOptions {
 
 impl Default for GltfReadOptions {
     fn default() -> Self {
-        Self { fps: DEFAULT_FPS, max_frames: None, mesh: None }
+        Self {
+            fps: DEFAULT_FPS,
+            max_frames: None,
+            mesh: None,
+        }
     }
 }
 
 type Mat = [[f64; 4]; 4]; // column-major, m[col][row], as glTF stores it
 
-const IDENTITY: Mat = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+const IDENTITY: Mat = [
+    [1.0, 0.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0, 0.0],
+    [0.0, 0.0, 1.0, 0.0],
+    [0.0, 0.0, 0.0, 1.0],
+];
 
 fn mul(a: &Mat, b: &Mat) -> Mat {
     let mut m = [[0.0; 4]; 4];
@@ -63,9 +72,21 @@ fn to_f64<const N: usize>(v: [f32; N]) -> [f64; N] {
 fn trs(t: [f64; 3], q: [f64; 4], s: [f64; 3]) -> Mat {
     let [x, y, z, w] = q;
     let r = [
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + z * w), 2.0 * (x * z - y * w)],
-        [2.0 * (x * y - z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + x * w)],
-        [2.0 * (x * z + y * w), 2.0 * (y * z - x * w), 1.0 - 2.0 * (x * x + y * y)],
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y + z * w),
+            2.0 * (x * z - y * w),
+        ],
+        [
+            2.0 * (x * y - z * w),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z + x * w),
+        ],
+        [
+            2.0 * (x * z + y * w),
+            2.0 * (y * z - x * w),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
     ];
     let mut m = IDENTITY;
     for c in 0..3 {
@@ -90,7 +111,11 @@ struct Track {
 
 impl Track {
     fn key(&self, k: usize, part: usize) -> &[f64] {
-        let stride = if self.interpolation == Interpolation::CubicSpline { 3 } else { 1 };
+        let stride = if self.interpolation == Interpolation::CubicSpline {
+            3
+        } else {
+            1
+        };
         let off = (k * stride + if stride == 3 { part } else { 0 }) * self.width;
         &self.values[off..off + self.width]
     }
@@ -143,9 +168,15 @@ fn slerp(a: &[f64], b: &[f64], u: f64) -> Vec<f64> {
         (1.0 - u, u)
     } else {
         let theta = dot.acos();
-        ((((1.0 - u) * theta).sin()) / theta.sin(), (u * theta).sin() / theta.sin())
+        (
+            (((1.0 - u) * theta).sin()) / theta.sin(),
+            (u * theta).sin() / theta.sin(),
+        )
     };
-    a.iter().zip(b).map(|(x, y)| wa * x + wb * sign * y).collect()
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| wa * x + wb * sign * y)
+        .collect()
 }
 
 /// Read and bake a `.gltf` / `.glb` clip. Errors name the file and the glTF part (field) at fault.
@@ -154,16 +185,29 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
     let source = path.display().to_string();
     let err = |field: &str, reason: String| DataError::new(path, field, reason);
     if !(opts.fps.is_finite() && opts.fps > 0.0) {
-        return Err(err("fps", format!("{} is not a positive frame rate", opts.fps)));
+        return Err(err(
+            "fps",
+            format!("{} is not a positive frame rate", opts.fps),
+        ));
     }
-    let gltf::Gltf { document: doc, blob } = gltf::Gltf::from_slice(&bytes).map_err(|e| err("gltf", e.to_string()))?;
-    let buffers = gltf::import_buffers(&doc, path.parent(), blob).map_err(|e| err("buffers", e.to_string()))?;
+    let gltf::Gltf {
+        document: doc,
+        blob,
+    } = gltf::Gltf::from_slice(&bytes).map_err(|e| err("gltf", e.to_string()))?;
+    let buffers = gltf::import_buffers(&doc, path.parent(), blob)
+        .map_err(|e| err("buffers", e.to_string()))?;
     let data = |b: gltf::Buffer| Some(&buffers[b.index()].0[..]);
 
-    let anim = doc.animations().next().ok_or_else(|| err("animations", "no animation".into()))?;
+    let anim = doc
+        .animations()
+        .next()
+        .ok_or_else(|| err("animations", "no animation".into()))?;
     let node = doc
         .nodes()
-        .find(|n| n.mesh().is_some_and(|m| opts.mesh.is_none_or(|i| m.index() == i)))
+        .find(|n| {
+            n.mesh()
+                .is_some_and(|m| opts.mesh.is_none_or(|i| m.index() == i))
+        })
         .ok_or_else(|| match opts.mesh {
             Some(i) => err("meshes", format!("no node instantiates mesh {i}")),
             None => err("meshes", "no node has a mesh".into()),
@@ -185,16 +229,28 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
         Some(i) => i.into_u32().collect(),
         None => (0..n as u32).collect(),
     };
-    if indices.len() % 3 != 0 {
-        return Err(err(&mesh_field, format!("{} indices is not a multiple of 3", indices.len())));
+    if !indices.len().is_multiple_of(3) {
+        return Err(err(
+            &mesh_field,
+            format!("{} indices is not a multiple of 3", indices.len()),
+        ));
     }
-    let faces: Vec<[u32; 3]> = indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let faces: Vec<[u32; 3]> = indices
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
     let targets: Vec<Vec<[f64; 3]>> = reader
         .read_morph_targets()
         .map(|(p, _, _)| p.map_or_else(|| vec![[0.0; 3]; n], |p| p.map(to_f64).collect()))
         .collect();
     if let Some(k) = targets.iter().position(|t| t.len() != n) {
-        return Err(err(&mesh_field, format!("morph target {k} has {} positions, base has {n}", targets[k].len())));
+        return Err(err(
+            &mesh_field,
+            format!(
+                "morph target {k} has {} positions, base has {n}",
+                targets[k].len()
+            ),
+        ));
     }
 
     // Skin: per-vertex (joint, weight) influences over all JOINTS_i / WEIGHTS_i sets.
@@ -209,7 +265,14 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
                 None => vec![IDENTITY; joints.len()],
             };
             if ibms.len() != joints.len() {
-                return Err(err("skins", format!("{} inverse bind matrices for {} joints", ibms.len(), joints.len())));
+                return Err(err(
+                    "skins",
+                    format!(
+                        "{} inverse bind matrices for {} joints",
+                        ibms.len(),
+                        joints.len()
+                    ),
+                ));
             }
             let mut set = 0;
             while let (Some(j), Some(w)) = (reader.read_joints(set), reader.read_weights(set)) {
@@ -217,7 +280,10 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
                     for (ji, wi) in j.into_iter().zip(w) {
                         if wi != 0.0 {
                             if ji as usize >= joints.len() {
-                                return Err(err(&format!("JOINTS_{set}"), format!("vertex {v} uses joint {ji} of {}", joints.len())));
+                                return Err(err(
+                                    &format!("JOINTS_{set}"),
+                                    format!("vertex {v} uses joint {ji} of {}", joints.len()),
+                                ));
                             }
                             influences[v].push((ji as usize, wi as f64));
                         }
@@ -226,7 +292,10 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
                 set += 1;
             }
             if set == 0 {
-                return Err(err(&mesh_field, "skinned node without JOINTS_0/WEIGHTS_0".into()));
+                return Err(err(
+                    &mesh_field,
+                    "skinned node without JOINTS_0/WEIGHTS_0".into(),
+                ));
             }
             if let Some(v) = influences.iter().position(|i| i.is_empty()) {
                 return Err(err("WEIGHTS_0", format!("vertex {v} has no joint weight")));
@@ -240,23 +309,54 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
     for ch in anim.channels() {
         let field = format!("animations[{}].channels[{}]", anim.index(), ch.index());
         let r = ch.reader(data);
-        let times: Vec<f32> = r.read_inputs().ok_or_else(|| err(&field, "no input times".into()))?.collect();
-        let (values, width): (Vec<f64>, usize) = match r.read_outputs().ok_or_else(|| err(&field, "no outputs".into()))? {
-            ReadOutputs::Translations(o) | ReadOutputs::Scales(o) => (o.flat_map(to_f64).collect(), 3),
+        let times: Vec<f32> = r
+            .read_inputs()
+            .ok_or_else(|| err(&field, "no input times".into()))?
+            .collect();
+        let (values, width): (Vec<f64>, usize) = match r
+            .read_outputs()
+            .ok_or_else(|| err(&field, "no outputs".into()))?
+        {
+            ReadOutputs::Translations(o) | ReadOutputs::Scales(o) => {
+                (o.flat_map(to_f64).collect(), 3)
+            }
             ReadOutputs::Rotations(o) => (o.into_f32().flat_map(to_f64).collect(), 4),
-            ReadOutputs::MorphTargetWeights(o) => (o.into_f32().map(f64::from).collect(), targets.len().max(1)),
+            ReadOutputs::MorphTargetWeights(o) => {
+                (o.into_f32().map(f64::from).collect(), targets.len().max(1))
+            }
         };
         let interpolation = ch.sampler().interpolation();
-        let per_key = if interpolation == Interpolation::CubicSpline { 3 * width } else { width };
+        let per_key = if interpolation == Interpolation::CubicSpline {
+            3 * width
+        } else {
+            width
+        };
         if times.is_empty() || values.len() != times.len() * per_key {
-            return Err(err(&field, format!("{} keys but {} output values ({per_key} per key expected)", times.len(), values.len())));
+            return Err(err(
+                &field,
+                format!(
+                    "{} keys but {} output values ({per_key} per key expected)",
+                    times.len(),
+                    values.len()
+                ),
+            ));
         }
         if times.windows(2).any(|w| w[1] < w[0]) || !times.iter().all(|t| t.is_finite()) {
             return Err(err(&field, "key times are not increasing".into()));
         }
-        tracks.push(Track { node: ch.target().node().index(), property: ch.target().property(), interpolation, times, values, width });
+        tracks.push(Track {
+            node: ch.target().node().index(),
+            property: ch.target().property(),
+            interpolation,
+            times,
+            values,
+            width,
+        });
     }
-    let duration = tracks.iter().map(|t| t.times[t.times.len() - 1]).fold(0.0f32, f32::max);
+    let duration = tracks
+        .iter()
+        .map(|t| t.times[t.times.len() - 1])
+        .fold(0.0f32, f32::max);
     let mut frames = (duration as f64 * opts.fps as f64 + 1e-4).floor() as usize + 1;
     if let Some(m) = opts.max_frames {
         frames = frames.min(m);
@@ -270,15 +370,28 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
             parent[c.index()] = Some(p.index());
         }
     }
-    let rest: Vec<([f64; 3], [f64; 4], [f64; 3])> =
-        doc.nodes().map(|nd| nd.transform().decomposed()).map(|(t, r, s)| (to_f64(t), to_f64(r), to_f64(s))).collect();
-    let rest_matrix: Vec<Mat> = doc.nodes().map(|nd| nd.transform().matrix().map(to_f64)).collect();
-    let default_weights: Vec<f64> = node
-        .weights()
-        .or(mesh.weights())
-        .map_or_else(|| vec![0.0; targets.len()], |w| w.iter().map(|&x| x as f64).collect());
+    let rest: Vec<([f64; 3], [f64; 4], [f64; 3])> = doc
+        .nodes()
+        .map(|nd| nd.transform().decomposed())
+        .map(|(t, r, s)| (to_f64(t), to_f64(r), to_f64(s)))
+        .collect();
+    let rest_matrix: Vec<Mat> = doc
+        .nodes()
+        .map(|nd| nd.transform().matrix().map(to_f64))
+        .collect();
+    let default_weights: Vec<f64> = node.weights().or(mesh.weights()).map_or_else(
+        || vec![0.0; targets.len()],
+        |w| w.iter().map(|&x| x as f64).collect(),
+    );
     if default_weights.len() != targets.len() {
-        return Err(err(&mesh_field, format!("{} default weights for {} morph targets", default_weights.len(), targets.len())));
+        return Err(err(
+            &mesh_field,
+            format!(
+                "{} default weights for {} morph targets",
+                default_weights.len(),
+                targets.len()
+            ),
+        ));
     }
 
     let mut vertices = Vec::with_capacity(frames * n);
@@ -309,7 +422,11 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
                 chain.push(p);
             }
             for &k in chain.iter().rev() {
-                let local = if animated[k] { trs(pose[k].0, pose[k].1, pose[k].2) } else { rest_matrix[k] };
+                let local = if animated[k] {
+                    trs(pose[k].0, pose[k].1, pose[k].2)
+                } else {
+                    rest_matrix[k]
+                };
                 global[k] = Some(match parent[k].and_then(|p| global[p]) {
                     Some(pm) => mul(&pm, &local),
                     None => local,
@@ -329,7 +446,11 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
         });
         if skin.is_some() {
             // (skin) v = Σ_i w_i · G(joint_i) · IBM_i · p, weights normalised to sum 1
-            let skin_mats: Vec<Mat> = joints.iter().zip(&ibms).map(|(&j, ibm)| mul(&world(j), ibm)).collect();
+            let skin_mats: Vec<Mat> = joints
+                .iter()
+                .zip(&ibms)
+                .map(|(&j, ibm)| mul(&world(j), ibm))
+                .collect();
             for (p, inf) in morphed.zip(&influences) {
                 let total: f64 = inf.iter().map(|(_, w)| w).sum();
                 let mut out = [0.0; 3];
@@ -346,7 +467,9 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
     }
 
     let caption = caption_of(&bytes).unwrap_or_else(|| MISSING_CAPTION.to_string());
-    let id = path.file_stem().map_or_else(|| source.clone(), |s| s.to_string_lossy().into_owned());
+    let id = path
+        .file_stem()
+        .map_or_else(|| source.clone(), |s| s.to_string_lossy().into_owned());
     Clip::new(id, vertices, frames, n, faces, caption, source)
 }
 
@@ -357,7 +480,11 @@ fn caption_of(bytes: &[u8]) -> Option<String> {
         Err(_) => bytes.to_vec(),
     };
     let v: serde_json::Value = serde_json::from_slice(&json_bytes).ok()?;
-    v.get("asset")?.get("extras")?.get("caption")?.as_str().map(str::to_string)
+    v.get("asset")?
+        .get("extras")?
+        .get("caption")?
+        .as_str()
+        .map(str::to_string)
 }
 
 /// Write `clip` as `.gltf` (embedded base64 buffer) or `.glb` (by extension): the frame-0 mesh as base, one morph
@@ -365,17 +492,23 @@ fn caption_of(bytes: &[u8]) -> Option<String> {
 /// one-hot vector of target `f`, so frame `f` shows exactly target `f`. The caption goes to `asset.extras.caption`.
 pub fn write_gltf(path: &Path, clip: &Clip, fps: f32) -> Result<()> {
     if !(fps.is_finite() && fps > 0.0) {
-        return Err(DataError::new(path, "fps", format!("{fps} is not a positive frame rate")));
+        return Err(DataError::new(
+            path,
+            "fps",
+            format!("{fps} is not a positive frame rate"),
+        ));
     }
-    let binary = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
-    let (t, n) = (clip.frames, clip.n_vertices);
+    let binary = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    let t = clip.frames;
     let mut buf: Vec<u8> = Vec::new();
     let mut views = Vec::new();
     let mut accessors = Vec::new();
     let mut push = |bytes: Vec<u8>, accessor: serde_json::Value| -> usize {
         views.push(json!({"buffer": 0, "byteOffset": buf.len(), "byteLength": bytes.len()}));
         buf.extend(bytes);
-        while buf.len() % 4 != 0 {
+        while !buf.len().is_multiple_of(4) {
             buf.push(0);
         }
         let mut a = accessor;
@@ -384,19 +517,42 @@ pub fn write_gltf(path: &Path, clip: &Clip, fps: f32) -> Result<()> {
         accessors.len() - 1
     };
     let vec3 = |rows: &[[f32; 3]]| {
-        let lo: Vec<f32> = (0..3).map(|c| rows.iter().map(|r| r[c]).fold(f32::INFINITY, f32::min)).collect();
-        let hi: Vec<f32> = (0..3).map(|c| rows.iter().map(|r| r[c]).fold(f32::NEG_INFINITY, f32::max)).collect();
-        let bytes = rows.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
-        (bytes, json!({"componentType": 5126, "count": rows.len(), "type": "VEC3", "min": lo, "max": hi}))
+        let lo: Vec<f32> = (0..3)
+            .map(|c| rows.iter().map(|r| r[c]).fold(f32::INFINITY, f32::min))
+            .collect();
+        let hi: Vec<f32> = (0..3)
+            .map(|c| rows.iter().map(|r| r[c]).fold(f32::NEG_INFINITY, f32::max))
+            .collect();
+        let bytes = rows
+            .iter()
+            .flatten()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        (
+            bytes,
+            json!({"componentType": 5126, "count": rows.len(), "type": "VEC3", "min": lo, "max": hi}),
+        )
     };
     let (b, a) = vec3(clip.frame(0));
     let position = push(b, a);
-    let idx: Vec<u8> = clip.faces.iter().flatten().flat_map(|i| i.to_le_bytes()).collect();
-    let indices = push(idx, json!({"componentType": 5125, "count": clip.faces.len() * 3, "type": "SCALAR"}));
+    let idx: Vec<u8> = clip
+        .faces
+        .iter()
+        .flatten()
+        .flat_map(|i| i.to_le_bytes())
+        .collect();
+    let indices = push(
+        idx,
+        json!({"componentType": 5125, "count": clip.faces.len() * 3, "type": "SCALAR"}),
+    );
     let mut targets = Vec::with_capacity(t);
     for f in 0..t {
-        let d: Vec<[f32; 3]> =
-            clip.frame(f).iter().zip(clip.frame(0)).map(|(p, q)| [p[0] - q[0], p[1] - q[1], p[2] - q[2]]).collect();
+        let d: Vec<[f32; 3]> = clip
+            .frame(f)
+            .iter()
+            .zip(clip.frame(0))
+            .map(|(p, q)| [p[0] - q[0], p[1] - q[1], p[2] - q[2]])
+            .collect();
         let (b, a) = vec3(&d);
         targets.push(json!({"POSITION": push(b, a)}));
     }
@@ -405,12 +561,19 @@ pub fn write_gltf(path: &Path, clip: &Clip, fps: f32) -> Result<()> {
         times.iter().flat_map(|x| x.to_le_bytes()).collect(),
         json!({"componentType": 5126, "count": t, "type": "SCALAR", "min": [times[0]], "max": [times[t - 1]]}),
     );
-    let onehot: Vec<u8> =
-        (0..t * t).flat_map(|i| if i / t == i % t { 1.0f32 } else { 0.0 }.to_le_bytes()).collect();
-    let weights_acc = push(onehot, json!({"componentType": 5126, "count": t * t, "type": "SCALAR"}));
+    let onehot: Vec<u8> = (0..t * t)
+        .flat_map(|i| if i / t == i % t { 1.0f32 } else { 0.0 }.to_le_bytes())
+        .collect();
+    let weights_acc = push(
+        onehot,
+        json!({"componentType": 5126, "count": t * t, "type": "SCALAR"}),
+    );
     let mut buffer = json!({"byteLength": buf.len()});
     if !binary {
-        buffer["uri"] = json!(format!("data:application/octet-stream;base64,{}", base64(&buf)));
+        buffer["uri"] = json!(format!(
+            "data:application/octet-stream;base64,{}",
+            base64(&buf)
+        ));
     }
     let names: Vec<String> = (0..t).map(|f| format!("frame_{f:04}")).collect();
     let doc = json!({
@@ -440,10 +603,10 @@ pub fn write_gltf(path: &Path, clip: &Clip, fps: f32) -> Result<()> {
 
 /// GLB container: 12-byte header, JSON chunk (space-padded), BIN chunk (zero-padded).
 fn glb(mut json: Vec<u8>, mut bin: Vec<u8>) -> Vec<u8> {
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let total = 12 + 8 + json.len() + 8 + bin.len();
@@ -465,7 +628,9 @@ fn base64(data: &[u8]) -> String {
     const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut s = String::with_capacity(data.len().div_ceil(3) * 4);
     for c in data.chunks(3) {
-        let w = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
+        let w = (c[0] as u32) << 16
+            | (*c.get(1).unwrap_or(&0) as u32) << 8
+            | *c.get(2).unwrap_or(&0) as u32;
         for k in 0..4 {
             if k <= c.len() {
                 s.push(A[(w >> (18 - 6 * k) & 63) as usize] as char);
@@ -483,7 +648,14 @@ mod tests {
 
     #[test]
     fn base64_matches_rfc4648_vectors() {
-        let cases = [("", ""), ("f", "Zg=="), ("fo", "Zm8="), ("foo", "Zm9v"), ("foob", "Zm9vYg=="), ("fooba", "Zm9vYmE=")];
+        let cases = [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+        ];
         for (raw, enc) in cases {
             assert_eq!(base64(raw.as_bytes()), enc);
         }
@@ -494,7 +666,10 @@ mod tests {
         let s = 0.5f64.sqrt();
         let m = trs([1.0, 0.0, 0.0], [0.0, 0.0, s, s], [2.0, 2.0, 2.0]);
         let p = apply(&m, [1.0, 0.0, 0.0]);
-        assert!((p[0] - 1.0).abs() < 1e-12 && (p[1] - 2.0).abs() < 1e-12 && p[2].abs() < 1e-12, "{p:?}");
+        assert!(
+            (p[0] - 1.0).abs() < 1e-12 && (p[1] - 2.0).abs() < 1e-12 && p[2].abs() < 1e-12,
+            "{p:?}"
+        );
         assert_eq!(mul(&IDENTITY, &m), m);
     }
 

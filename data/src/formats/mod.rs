@@ -40,11 +40,17 @@ impl Format {
             "bin" | "pkl" | "pickle" => Ok(Format::Bin),
             "gltf" => Ok(Format::Gltf),
             "glb" => Ok(Format::Glb),
-            "obj" => Err(DataError::new(path, "format", "a single .obj is one frame; give the folder of frames")),
+            "obj" => Err(DataError::new(
+                path,
+                "format",
+                "a single .obj is one frame; give the folder of frames",
+            )),
             other => Err(DataError::new(
                 path,
                 "format",
-                format!("unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb or a folder of .obj)"),
+                format!(
+                    "unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb or a folder of .obj)"
+                ),
             )),
         }
     }
@@ -74,12 +80,35 @@ mod tests {
 
     #[test]
     fn format_by_extension() {
-        assert_eq!(Format::from_path(Path::new("a/x.BIN")).unwrap(), Format::Bin);
-        assert_eq!(Format::from_path(Path::new("a/x.gltf")).unwrap(), Format::Gltf);
-        assert_eq!(Format::from_path(Path::new("a/x.glb")).unwrap(), Format::Glb);
-        assert_eq!(Format::from_path(Path::new("a/new_seq")).unwrap(), Format::ObjSeq);
-        assert_eq!(Format::from_path(Path::new(env!("CARGO_MANIFEST_DIR"))).unwrap(), Format::ObjSeq);
-        assert_eq!(Format::from_path(Path::new("x.fbx")).unwrap_err().field, "format");
-        assert!(Format::from_path(Path::new("x.obj")).unwrap_err().reason.contains("folder"));
+        assert_eq!(
+            Format::from_path(Path::new("a/x.BIN")).unwrap(),
+            Format::Bin
+        );
+        assert_eq!(
+            Format::from_path(Path::new("a/x.gltf")).unwrap(),
+            Format::Gltf
+        );
+        assert_eq!(
+            Format::from_path(Path::new("a/x.glb")).unwrap(),
+            Format::Glb
+        );
+        assert_eq!(
+            Format::from_path(Path::new("a/new_seq")).unwrap(),
+            Format::ObjSeq
+        );
+        assert_eq!(
+            Format::from_path(Path::new(env!("CARGO_MANIFEST_DIR"))).unwrap(),
+            Format::ObjSeq
+        );
+        assert_eq!(
+            Format::from_path(Path::new("x.fbx")).unwrap_err().field,
+            "format"
+        );
+        assert!(
+            Format::from_path(Path::new("x.obj"))
+                .unwrap_err()
+                .reason
+                .contains("folder")
+        );
     }
 }

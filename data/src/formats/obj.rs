@@ -33,14 +33,22 @@ pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
                     return Err(DataError::new(
                         file,
                         "vertices",
-                        format!("{} vertices, frame 0 ({}) has {n}", v.len(), files[0].display()),
+                        format!(
+                            "{} vertices, frame 0 ({}) has {n}",
+                            v.len(),
+                            files[0].display()
+                        ),
                     ));
                 }
                 if let Some(i) = (0..faces.len().max(f.len())).find(|&i| faces.get(i) != f.get(i)) {
                     return Err(DataError::new(
                         file,
                         "faces",
-                        format!("triangle {i} is {:?}, frame 0 has {:?}", f.get(i), faces.get(i)),
+                        format!(
+                            "triangle {i} is {:?}, frame 0 has {:?}",
+                            f.get(i),
+                            faces.get(i)
+                        ),
                     ));
                 }
             }
@@ -50,12 +58,27 @@ pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
     let (n_vertices, faces) = first.expect("at least one file");
     let caption_path = dir.join(CAPTION_FILE);
     let caption = match std::fs::read_to_string(&caption_path) {
-        Ok(s) => s.strip_suffix('\n').map(|s| s.strip_suffix('\r').unwrap_or(s)).unwrap_or(&s).to_string(),
+        Ok(s) => s
+            .strip_suffix('\n')
+            .map(|s| s.strip_suffix('\r').unwrap_or(s))
+            .unwrap_or(&s)
+            .to_string(),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => MISSING_CAPTION.to_string(),
         Err(e) => return Err(DataError::io(&caption_path, e)),
     };
-    let id = dir.file_name().map_or_else(|| dir.display().to_string(), |s| s.to_string_lossy().into_owned());
-    Clip::new(id, vertices, files.len(), n_vertices, faces, caption, dir.display().to_string())
+    let id = dir.file_name().map_or_else(
+        || dir.display().to_string(),
+        |s| s.to_string_lossy().into_owned(),
+    );
+    Clip::new(
+        id,
+        vertices,
+        files.len(),
+        n_vertices,
+        faces,
+        caption,
+        dir.display().to_string(),
+    )
 }
 
 /// The `.obj` files of `dir` in natural order.
@@ -64,11 +87,20 @@ fn frame_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
     for entry in entries {
         let path = entry.map_err(|e| DataError::io(dir, e))?.path();
-        if path.is_file() && path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) {
+        if path.is_file()
+            && path
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("obj"))
+        {
             files.push(path);
         }
     }
-    files.sort_by(|a, b| natural_cmp(&a.file_name().unwrap_or_default().to_string_lossy(), &b.file_name().unwrap_or_default().to_string_lossy()));
+    files.sort_by(|a, b| {
+        natural_cmp(
+            &a.file_name().unwrap_or_default().to_string_lossy(),
+            &b.file_name().unwrap_or_default().to_string_lossy(),
+        )
+    });
     Ok(files)
 }
 
@@ -91,7 +123,10 @@ pub fn natural_cmp(a: &str, b: &str) -> Ordering {
         let ord = match (x, y) {
             ((true, x), (true, y)) => {
                 let (tx, ty) = (x.trim_start_matches('0'), y.trim_start_matches('0'));
-                tx.len().cmp(&ty.len()).then_with(|| tx.cmp(ty)).then_with(|| x.len().cmp(&y.len()))
+                tx.len()
+                    .cmp(&ty.len())
+                    .then_with(|| tx.cmp(ty))
+                    .then_with(|| x.len().cmp(&y.len()))
             }
             ((_, x), (_, y)) => x.cmp(y),
         };
@@ -102,8 +137,11 @@ pub fn natural_cmp(a: &str, b: &str) -> Ordering {
     ra.len().cmp(&rb.len())
 }
 
+/// One parsed OBJ file: positions and triangles (0-based).
+pub type ObjFrame = (Vec<[f32; 3]>, Vec<[u32; 3]>);
+
 /// Parse one OBJ file: positions and fan-triangulated faces (0-based). Errors name the file and the line.
-pub fn parse_obj(text: &str, path: &Path) -> Result<(Vec<[f32; 3]>, Vec<[u32; 3]>)> {
+pub fn parse_obj(text: &str, path: &Path) -> Result<ObjFrame> {
     let mut positions = Vec::new();
     let mut faces = Vec::new();
     for (k, raw) in text.lines().enumerate() {
@@ -114,10 +152,16 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<(Vec<[f32; 3]>, Vec<[u32; 3]
             Some("v") => {
                 let xyz: Vec<f32> = tokens
                     .take(3)
-                    .map(|t| t.parse::<f32>().map_err(|e| line_err(format!("vertex coordinate `{t}`: {e}"))))
+                    .map(|t| {
+                        t.parse::<f32>()
+                            .map_err(|e| line_err(format!("vertex coordinate `{t}`: {e}")))
+                    })
                     .collect::<Result<_>>()?;
                 let [x, y, z] = xyz[..] else {
-                    return Err(line_err(format!("vertex has {} coordinates, expected 3", xyz.len())));
+                    return Err(line_err(format!(
+                        "vertex has {} coordinates, expected 3",
+                        xyz.len()
+                    )));
                 };
                 if !(x.is_finite() && y.is_finite() && z.is_finite()) {
                     return Err(line_err(format!("non-finite vertex ({x}, {y}, {z})")));
@@ -128,20 +172,29 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<(Vec<[f32; 3]>, Vec<[u32; 3]
                 let corners = tokens
                     .map(|t| {
                         let first = t.split('/').next().unwrap_or("");
-                        let i: i64 = first.parse().map_err(|e| line_err(format!("face corner `{t}`: {e}")))?;
+                        let i: i64 = first
+                            .parse()
+                            .map_err(|e| line_err(format!("face corner `{t}`: {e}")))?;
                         let n = positions.len() as i64;
                         // 1-based; negative counts back from the last vertex read so far.
                         let idx = if i > 0 { i - 1 } else { n + i };
                         if i == 0 || idx < 0 || idx >= n {
-                            return Err(line_err(format!("face index {i} outside the {n} vertices read so far")));
+                            return Err(line_err(format!(
+                                "face index {i} outside the {n} vertices read so far"
+                            )));
                         }
                         Ok(idx as u32)
                     })
                     .collect::<Result<Vec<u32>>>()?;
                 if corners.len() < 3 {
-                    return Err(line_err(format!("face has {} corners, expected at least 3", corners.len())));
+                    return Err(line_err(format!(
+                        "face has {} corners, expected at least 3",
+                        corners.len()
+                    )));
                 }
-                faces.extend((1..corners.len() - 1).map(|i| [corners[0], corners[i], corners[i + 1]]));
+                faces.extend(
+                    (1..corners.len() - 1).map(|i| [corners[0], corners[i], corners[i + 1]]),
+                );
             }
             _ => {}
         }
@@ -154,9 +207,17 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<(Vec<[f32; 3]>, Vec<[u32; 3]
 pub fn write_obj_seq(dir: &Path, clip: &Clip) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))?;
     if let Some(old) = frame_files(dir)?.first() {
-        return Err(DataError::new(dir, "frames", format!("folder already holds OBJ frames ({})", old.display())));
+        return Err(DataError::new(
+            dir,
+            "frames",
+            format!("folder already holds OBJ frames ({})", old.display()),
+        ));
     }
-    let faces: String = clip.faces.iter().map(|[a, b, c]| format!("f {} {} {}\n", a + 1, b + 1, c + 1)).collect();
+    let faces: String = clip
+        .faces
+        .iter()
+        .map(|[a, b, c]| format!("f {} {} {}\n", a + 1, b + 1, c + 1))
+        .collect();
     for f in 0..clip.frames {
         let mut text = format!("# any4d clip {} frame {f}\n", clip.id);
         for [x, y, z] in clip.frame(f) {
@@ -165,7 +226,10 @@ pub fn write_obj_seq(dir: &Path, clip: &Clip) -> Result<()> {
         text.push_str(&faces);
         write_atomic(&dir.join(format!("frame_{f:04}.obj")), text.as_bytes())?;
     }
-    write_atomic(&dir.join(CAPTION_FILE), format!("{}\n", clip.caption).as_bytes())
+    write_atomic(
+        &dir.join(CAPTION_FILE),
+        format!("{}\n", clip.caption).as_bytes(),
+    )
 }
 
 #[cfg(test)]

@@ -5,8 +5,10 @@
 //! protocol 2 uses for `bytes`; each is interpreted here as data. Any other global (`os.system`, `builtins.eval`, …)
 //! is an error naming it, raised when the global opcode is read, before any argument is looked at.
 //!
-//! Limitation: objects shared through the memo are copies; a memoised object that is later mutated (BUILD,
-//! SETITEMS, APPENDS while it is on the stack) has its memo entry refreshed, which covers what pickle emits.
+//! Objects shared through the memo are copies; a memoised object mutated while on the stack (BUILD, SETITEMS,
+//! APPENDS) updates its memo entry when it leaves the stack, which covers what pickle emits (self-referencing
+//! containers are not representable). Nesting deeper than 256 containers and memo/DUP copies beyond 2^24 units
+//! (pickle bombs) are errors.
 
 use std::collections::HashMap;
 
@@ -47,7 +49,10 @@ impl Value {
     /// The value under string key `key` when `self` is a dict.
     pub fn get(&self, key: &str) -> Option<&Value> {
         match self {
-            Value::Dict(items) => items.iter().find(|(k, _)| matches!(k, Value::Str(s) if s == key)).map(|(_, v)| v),
+            Value::Dict(items) => items
+                .iter()
+                .find(|(k, _)| matches!(k, Value::Str(s) if s == key))
+                .map(|(_, v)| v),
             _ => None,
         }
     }
@@ -140,7 +145,11 @@ pub enum ByteOrder {
 
 impl ByteOrder {
     fn native() -> Self {
-        if cfg!(target_endian = "big") { ByteOrder::Big } else { ByteOrder::Little }
+        if cfg!(target_endian = "big") {
+            ByteOrder::Big
+        } else {
+            ByteOrder::Little
+        }
     }
 }
 
@@ -184,7 +193,11 @@ enum Global {
 
 const ALLOWED_GLOBALS: &[(&str, &str, Global)] = &[
     ("numpy.core.multiarray", "_reconstruct", Global::Reconstruct),
-    ("numpy._core.multiarray", "_reconstruct", Global::Reconstruct),
+    (
+        "numpy._core.multiarray",
+        "_reconstruct",
+        Global::Reconstruct,
+    ),
     ("numpy", "ndarray", Global::NdArrayType),
     ("numpy", "dtype", Global::DTypeType),
     ("_codecs", "encode", Global::CodecsEncode),
@@ -232,7 +245,12 @@ impl Item {
     }
 
     fn into_value(self) -> std::result::Result<Value, String> {
-        let all = |items: Vec<Item>| items.into_iter().map(Item::into_value).collect::<std::result::Result<Vec<_>, _>>();
+        let all = |items: Vec<Item>| {
+            items
+                .into_iter()
+                .map(Item::into_value)
+                .collect::<std::result::Result<Vec<_>, _>>()
+        };
         Ok(match self {
             Item::None => Value::None,
             Item::Bool(b) => Value::Bool(b),
@@ -253,10 +271,40 @@ impl Item {
     }
 }
 
+/// Nesting depth and size (items, array elements, 8-byte words of text) of a stack item, kept so that limits cost
+/// nothing to check.
+#[derive(Debug, Clone, Copy, Default)]
+struct Meta {
+    depth: usize,
+    size: u64,
+}
+
+impl Meta {
+    /// Meta of a non-container item.
+    fn of(item: &Item) -> Meta {
+        let size = match item {
+            Item::Array(a) => 1 + a.data.len() as u64,
+            Item::Str(t) => 1 + t.len() as u64 / 8,
+            Item::Bytes(b) => 1 + b.len() as u64 / 8,
+            _ => 1,
+        };
+        Meta { depth: 0, size }
+    }
+
+    /// Combined meta of several items (deepest depth, total size).
+    fn all(metas: impl IntoIterator<Item = Meta>) -> Meta {
+        metas.into_iter().fold(Meta::default(), |a, b| Meta {
+            depth: a.depth.max(b.depth),
+            size: a.size.saturating_add(b.size),
+        })
+    }
+}
+
 /// A stack slot remembers the memo key it came from, so that mutations reach the memo too.
 struct Slot {
     item: Item,
     memo: Option<u64>,
+    meta: Meta,
 }
 
 struct Machine<'a> {
@@ -264,14 +312,28 @@ struct Machine<'a> {
     pos: usize,
     stack: Vec<Slot>,
     marks: Vec<usize>,
-    memo: HashMap<u64, Item>,
+    memo: HashMap<u64, (Item, Meta)>,
+    /// Units copied by BINGET/DUP so far.
+    copied: u64,
 }
+
+/// Deepest container nesting accepted; deeper input is an error, not a stack overflow.
+const MAX_DEPTH: usize = 256;
+/// Most units that memo references and DUP may copy (on top of the input size): stops exponential "pickle bombs".
+const MAX_COPIED: u64 = 1 << 22;
 
 type Step<T> = std::result::Result<T, String>;
 
 /// Decode pickle `bytes`. Errors name `source`, field `pickle` and the byte offset of the failing opcode.
 pub fn loads(bytes: &[u8], source: &str) -> Result<Value> {
-    let mut m = Machine { bytes, pos: 0, stack: Vec::new(), marks: Vec::new(), memo: HashMap::new() };
+    let mut m = Machine {
+        bytes,
+        pos: 0,
+        stack: Vec::new(),
+        marks: Vec::new(),
+        memo: HashMap::new(),
+        copied: 0,
+    };
     let mut op_pos = 0;
     let result = (|| -> Step<Value> {
         loop {
@@ -310,27 +372,60 @@ impl Machine<'_> {
     }
 
     fn text(&mut self, len_bytes: usize, what: &str) -> Step<String> {
-        String::from_utf8(self.sized(len_bytes, what)?).map_err(|e| format!("{what}: invalid UTF-8: {e}"))
+        String::from_utf8(self.sized(len_bytes, what)?)
+            .map_err(|e| format!("{what}: invalid UTF-8: {e}"))
     }
 
     fn line(&mut self, what: &str) -> Step<String> {
         let rest = &self.bytes[self.pos..];
-        let end = rest.iter().position(|&b| b == b'\n').ok_or(format!("truncated: {what} has no newline"))?;
-        let s = String::from_utf8(rest[..end].to_vec()).map_err(|e| format!("{what}: invalid UTF-8: {e}"))?;
+        let end = rest
+            .iter()
+            .position(|&b| b == b'\n')
+            .ok_or(format!("truncated: {what} has no newline"))?;
+        let s = String::from_utf8(rest[..end].to_vec())
+            .map_err(|e| format!("{what}: invalid UTF-8: {e}"))?;
         self.pos += end + 1;
         Ok(s)
     }
 
+    /// Push a non-container item, or an empty container.
     fn push(&mut self, item: Item) {
-        self.stack.push(Slot { item, memo: None });
+        let meta = Meta::of(&item);
+        self.stack.push(Slot {
+            item,
+            memo: None,
+            meta,
+        });
     }
 
-    fn pop(&mut self, what: &str) -> Step<Item> {
+    /// Push a container holding children of combined meta `children`.
+    fn push_container(&mut self, item: Item, children: Meta) -> Step<()> {
+        let meta = Meta {
+            depth: children.depth + 1,
+            size: children.size.saturating_add(1),
+        };
+        if meta.depth > MAX_DEPTH {
+            return Err(format!("containers nest deeper than {MAX_DEPTH}"));
+        }
+        self.stack.push(Slot {
+            item,
+            memo: None,
+            meta,
+        });
+        Ok(())
+    }
+
+    fn pop_meta(&mut self, what: &str) -> Step<(Item, Meta)> {
         let floor = self.marks.last().copied().unwrap_or(0);
         if self.stack.len() <= floor {
             return Err(format!("stack underflow in {what}"));
         }
-        Ok(self.stack.pop().map(|s| s.item).expect("checked above"))
+        let slot = self.stack.pop().expect("checked above");
+        Ok(self.release(slot))
+    }
+
+    fn pop(&mut self, what: &str) -> Step<Item> {
+        self.pop_meta(what).map(|(item, _)| item)
     }
 
     fn top(&mut self, what: &str) -> Step<&mut Slot> {
@@ -341,31 +436,67 @@ impl Machine<'_> {
         Ok(self.stack.last_mut().expect("checked above"))
     }
 
-    fn pop_mark(&mut self, what: &str) -> Step<Vec<Item>> {
+    /// The items above the last MARK and their combined meta.
+    fn pop_mark(&mut self, what: &str) -> Step<(Vec<Item>, Meta)> {
         let mark = self.marks.pop().ok_or(format!("{what} without MARK"))?;
-        Ok(self.stack.split_off(mark).into_iter().map(|s| s.item).collect())
+        let slots = self.stack.split_off(mark);
+        let (items, metas): (Vec<Item>, Vec<Meta>) =
+            slots.into_iter().map(|s| self.release(s)).unzip();
+        Ok((items, Meta::all(metas)))
     }
 
-    /// Refresh the memo entry of the top slot after it was mutated.
-    fn sync_top(&mut self) {
-        if let Some(slot) = self.stack.last()
-            && let Some(key) = slot.memo
-        {
-            self.memo.insert(key, slot.item.clone());
+    /// Add children of combined meta `children` to the top container (SETITEMS, APPENDS).
+    fn grow_top(&mut self, children: Meta) -> Step<()> {
+        let slot = self.top("grow")?;
+        slot.meta.depth = slot.meta.depth.max(children.depth + 1);
+        slot.meta.size = slot.meta.size.saturating_add(children.size);
+        if slot.meta.depth > MAX_DEPTH {
+            return Err(format!("containers nest deeper than {MAX_DEPTH}"));
         }
+        Ok(())
+    }
+
+    /// A slot leaves the stack: its memo entry gets the final state (after BUILD, SETITEMS, APPENDS on the stack).
+    fn release(&mut self, slot: Slot) -> (Item, Meta) {
+        if let Some(key) = slot.memo {
+            self.memo.insert(key, (slot.item.clone(), slot.meta));
+        }
+        (slot.item, slot.meta)
     }
 
     fn memo_put(&mut self, key: u64) -> Step<()> {
         let slot = self.top("memo put")?;
         slot.memo = Some(key);
-        let item = slot.item.clone();
-        self.memo.insert(key, item);
+        let entry = (slot.item.clone(), slot.meta);
+        self.memo.insert(key, entry);
+        Ok(())
+    }
+
+    /// Account for copying an item of `size` units (BINGET, DUP).
+    fn charge(&mut self, size: u64) -> Step<()> {
+        self.copied = self.copied.saturating_add(size);
+        if self.copied > MAX_COPIED + self.bytes.len() as u64 {
+            return Err(format!(
+                "memo references and DUP copy more than {MAX_COPIED} units (a pickle bomb?)"
+            ));
+        }
         Ok(())
     }
 
     fn memo_get(&mut self, key: u64) -> Step<()> {
-        let item = self.memo.get(&key).cloned().ok_or(format!("memo key {key} was never stored"))?;
-        self.stack.push(Slot { item, memo: Some(key) });
+        let size = self
+            .memo
+            .get(&key)
+            .ok_or(format!("memo key {key} was never stored"))?
+            .1
+            .size;
+        self.charge(size)?;
+        let (item, meta) = self.memo[&key].clone();
+        self.stack.push(Slot {
+            item,
+            memo: Some(key),
+            meta,
+        });
         Ok(())
     }
 
@@ -395,7 +526,10 @@ impl Machine<'_> {
             b'.' => {
                 let item = self.pop("STOP")?;
                 if !self.stack.is_empty() || !self.marks.is_empty() {
-                    return Err(format!("STOP with {} items left on the stack", self.stack.len()));
+                    return Err(format!(
+                        "STOP with {} items left on the stack",
+                        self.stack.len()
+                    ));
                 }
                 return Ok(Some(item));
             }
@@ -407,8 +541,14 @@ impl Machine<'_> {
                 self.pop_mark("POP_MARK")?;
             }
             b'2' => {
-                let item = self.top("DUP")?.item.clone();
-                self.push(item);
+                let top = self.top("DUP")?;
+                let (item, meta) = (top.item.clone(), top.meta);
+                self.charge(meta.size)?;
+                self.stack.push(Slot {
+                    item,
+                    memo: None,
+                    meta,
+                });
             }
             b'N' => self.push(Item::None),
             0x88 => self.push(Item::Bool(true)),
@@ -429,7 +569,10 @@ impl Machine<'_> {
                 let what = if op == 0x8a { "LONG1" } else { "LONG4" };
                 let b = self.sized(if op == 0x8a { 1 } else { 4 }, what)?;
                 if b.len() > 8 {
-                    return Err(format!("{what}: integer of {} bytes does not fit i64", b.len()));
+                    return Err(format!(
+                        "{what}: integer of {} bytes does not fit i64",
+                        b.len()
+                    ));
                 }
                 let mut v = b.iter().rev().fold(0i64, |acc, &x| (acc << 8) | x as i64);
                 if let Some(&last) = b.last()
@@ -441,8 +584,8 @@ impl Machine<'_> {
                 self.push(Item::Int(v));
             }
             b'G' => {
-                let b = self.take(8, "BINFLOAT")?;
-                self.push(Item::Float(f64::from_be_bytes(b.try_into().expect("8 bytes"))));
+                let b: [u8; 8] = self.take(8, "BINFLOAT")?.try_into().expect("8 bytes");
+                self.push(Item::Float(f64::from_be_bytes(b)));
             }
             b'X' => {
                 let s = self.text(4, "BINUNICODE")?;
@@ -477,30 +620,33 @@ impl Machine<'_> {
             0x85..=0x87 => {
                 let n = (op - 0x84) as usize;
                 let mut items = Vec::with_capacity(n);
+                let mut metas = Vec::with_capacity(n);
                 for _ in 0..n {
-                    items.push(self.pop("TUPLE1-3")?);
+                    let (item, meta) = self.pop_meta("TUPLE1-3")?;
+                    items.push(item);
+                    metas.push(meta);
                 }
                 items.reverse();
-                self.push(Item::Tuple(items));
+                self.push_container(Item::Tuple(items), Meta::all(metas))?;
             }
             b't' => {
-                let items = self.pop_mark("TUPLE")?;
-                self.push(Item::Tuple(items));
+                let (items, meta) = self.pop_mark("TUPLE")?;
+                self.push_container(Item::Tuple(items), meta)?;
             }
             b'l' => {
-                let items = self.pop_mark("LIST")?;
-                self.push(Item::List(items));
+                let (items, meta) = self.pop_mark("LIST")?;
+                self.push_container(Item::List(items), meta)?;
             }
             b'd' => {
-                let items = self.pop_mark("DICT")?;
+                let (items, meta) = self.pop_mark("DICT")?;
                 let pairs = pairs(items, "DICT")?;
-                self.push(Item::Dict(pairs));
+                self.push_container(Item::Dict(pairs), meta)?;
             }
             b's' | b'u' => {
-                let items = if op == b's' {
-                    let v = self.pop("SETITEM")?;
-                    let k = self.pop("SETITEM")?;
-                    vec![k, v]
+                let (items, meta) = if op == b's' {
+                    let (v, mv) = self.pop_meta("SETITEM")?;
+                    let (k, mk) = self.pop_meta("SETITEM")?;
+                    (vec![k, v], Meta::all([mk, mv]))
                 } else {
                     self.pop_mark("SETITEMS")?
                 };
@@ -509,15 +655,20 @@ impl Machine<'_> {
                     Item::Dict(d) => d.extend(pairs),
                     other => return Err(format!("SETITEM on a {}", other.kind())),
                 }
-                self.sync_top();
+                self.grow_top(meta)?;
             }
             b'a' | b'e' => {
-                let items = if op == b'a' { vec![self.pop("APPEND")?] } else { self.pop_mark("APPENDS")? };
+                let (items, meta) = if op == b'a' {
+                    let (item, meta) = self.pop_meta("APPEND")?;
+                    (vec![item], meta)
+                } else {
+                    self.pop_mark("APPENDS")?
+                };
                 match &mut self.top("APPEND")?.item {
                     Item::List(l) => l.extend(items),
                     other => return Err(format!("APPEND on a {}", other.kind())),
                 }
-                self.sync_top();
+                self.grow_top(meta)?;
             }
             b'c' => {
                 let module = self.line("GLOBAL module")?;
@@ -539,10 +690,16 @@ impl Machine<'_> {
                 let args = self.pop(what)?;
                 let callable = self.pop(what)?;
                 let Item::Tuple(args) = args else {
-                    return Err(format!("{what} arguments are a {}, not a tuple", args.kind()));
+                    return Err(format!(
+                        "{what} arguments are a {}, not a tuple",
+                        args.kind()
+                    ));
                 };
                 let Item::Global(g) = callable else {
-                    return Err(format!("{what} of a {}, not an allowed global", callable.kind()));
+                    return Err(format!(
+                        "{what} of a {}, not an allowed global",
+                        callable.kind()
+                    ));
                 };
                 self.push(call(g, args)?);
             }
@@ -551,7 +708,7 @@ impl Machine<'_> {
                 let slot = self.top("BUILD")?;
                 let obj = std::mem::replace(&mut slot.item, Item::None);
                 slot.item = build(obj, state)?;
-                self.sync_top();
+                slot.meta = Meta::of(&slot.item);
             }
             b'q' => {
                 let k = self.uint(1, "BINPUT")?;
@@ -566,7 +723,11 @@ impl Machine<'_> {
                 self.memo_put(k)?;
             }
             b'p' => {
-                let k = self.line("PUT")?.trim().parse::<u64>().map_err(|e| format!("PUT: {e}"))?;
+                let k = self
+                    .line("PUT")?
+                    .trim()
+                    .parse::<u64>()
+                    .map_err(|e| format!("PUT: {e}"))?;
                 self.memo_put(k)?;
             }
             b'h' => {
@@ -578,7 +739,11 @@ impl Machine<'_> {
                 self.memo_get(k)?;
             }
             b'g' => {
-                let k = self.line("GET")?.trim().parse::<u64>().map_err(|e| format!("GET: {e}"))?;
+                let k = self
+                    .line("GET")?
+                    .trim()
+                    .parse::<u64>()
+                    .map_err(|e| format!("GET: {e}"))?;
                 self.memo_get(k)?;
             }
             b'P' | b'Q' => return Err("persistent ids are not supported".into()),
@@ -592,8 +757,11 @@ impl Machine<'_> {
 }
 
 fn pairs(items: Vec<Item>, what: &str) -> Step<Vec<(Item, Item)>> {
-    if items.len() % 2 != 0 {
-        return Err(format!("{what} with an odd number ({}) of items", items.len()));
+    if !items.len().is_multiple_of(2) {
+        return Err(format!(
+            "{what} with an odd number ({}) of items",
+            items.len()
+        ));
     }
     let mut it = items.into_iter();
     let mut out = Vec::new();
@@ -604,11 +772,15 @@ fn pairs(items: Vec<Item>, what: &str) -> Step<Vec<(Item, Item)>> {
 }
 
 fn shape_of(item: &Item) -> Step<Vec<usize>> {
-    let Item::Tuple(dims) = item else { return Err(format!("array shape is a {}, not a tuple", item.kind())) };
+    let Item::Tuple(dims) = item else {
+        return Err(format!("array shape is a {}, not a tuple", item.kind()));
+    };
     dims.iter()
         .map(|d| match d {
             Item::Int(n) if *n >= 0 => Ok(*n as usize),
-            other => Err(format!("array dimension {other:?} is not a non-negative int")),
+            other => Err(format!(
+                "array dimension {other:?} is not a non-negative int"
+            )),
         })
         .collect()
 }
@@ -618,25 +790,49 @@ fn call(g: Global, args: Vec<Item>) -> Step<Item> {
     match (g, args.as_slice()) {
         (Global::Reconstruct, [Item::Global(Global::NdArrayType), _, _]) => Ok(Item::EmptyArray),
         (Global::DTypeType, [Item::Str(descr), ..]) => {
-            let (dtype, order) = DType::parse(descr).ok_or(format!("unsupported dtype `{descr}`"))?;
+            let (dtype, order) =
+                DType::parse(descr).ok_or(format!("unsupported dtype `{descr}`"))?;
             Ok(Item::DTypeObj(dtype, order))
         }
         (Global::CodecsEncode, [Item::Str(s), Item::Str(enc)]) => {
-            if !matches!(enc.to_ascii_lowercase().as_str(), "latin1" | "latin-1" | "iso-8859-1") {
-                return Err(format!("_codecs.encode with encoding `{enc}`; only latin1 is data"));
+            if !matches!(
+                enc.to_ascii_lowercase().as_str(),
+                "latin1" | "latin-1" | "iso-8859-1"
+            ) {
+                return Err(format!(
+                    "_codecs.encode with encoding `{enc}`; only latin1 is data"
+                ));
             }
             s.chars()
-                .map(|c| u8::try_from(c as u32).map_err(|_| format!("_codecs.encode: {c:?} is not latin1")))
+                .map(|c| {
+                    u8::try_from(c as u32)
+                        .map_err(|_| format!("_codecs.encode: {c:?} is not latin1"))
+                })
                 .collect::<Step<Vec<u8>>>()
                 .map(Item::Bytes)
         }
-        (Global::FromBuffer, [Item::Bytes(buf), Item::DTypeObj(dtype, order), shape, Item::Str(o)]) => {
+        (
+            Global::FromBuffer,
+            [
+                Item::Bytes(buf),
+                Item::DTypeObj(dtype, order),
+                shape,
+                Item::Str(o),
+            ],
+        ) => {
             let fortran = match o.as_str() {
                 "C" => false,
                 "F" => true,
                 _ => return Err(format!("_frombuffer order `{o}`")),
             };
-            decode_array(shape_of(shape)?, *dtype, order.unwrap_or(ByteOrder::native()), fortran, buf).map(Item::Array)
+            decode_array(
+                shape_of(shape)?,
+                *dtype,
+                order.unwrap_or(ByteOrder::native()),
+                fortran,
+                buf,
+            )
+            .map(Item::Array)
         }
         (g, args) => Err(format!(
             "unsupported call of {g:?} with arguments ({})",
@@ -647,18 +843,43 @@ fn call(g: Global, args: Vec<Item>) -> Step<Item> {
 
 /// BUILD: numpy `__setstate__` of an array or a dtype.
 fn build(obj: Item, state: Item) -> Step<Item> {
-    let Item::Tuple(state) = state else { return Err(format!("BUILD state is a {}, not a tuple", state.kind())) };
+    let Item::Tuple(state) = state else {
+        return Err(format!("BUILD state is a {}, not a tuple", state.kind()));
+    };
     match obj {
         Item::EmptyArray => {
             // (version, shape, dtype, is_fortran, raw data); numpy ≤ 1.x may omit the version.
-            let s = if state.len() == 5 { &state[1..] } else { &state[..] };
-            let [shape, Item::DTypeObj(dtype, order), Item::Bool(fortran), raw] = s else {
-                return Err(format!("ndarray state of {} items is not (version, shape, dtype, fortran, data)", state.len()));
+            let s = if state.len() == 5 {
+                &state[1..]
+            } else {
+                &state[..]
+            };
+            let [
+                shape,
+                Item::DTypeObj(dtype, order),
+                Item::Bool(fortran),
+                raw,
+            ] = s
+            else {
+                return Err(format!(
+                    "ndarray state of {} items is not (version, shape, dtype, fortran, data)",
+                    state.len()
+                ));
             };
             let Item::Bytes(raw) = raw else {
-                return Err(format!("ndarray data is a {} (object arrays are not supported)", raw.kind()));
+                return Err(format!(
+                    "ndarray data is a {} (object arrays are not supported)",
+                    raw.kind()
+                ));
             };
-            decode_array(shape_of(shape)?, *dtype, order.unwrap_or(ByteOrder::native()), *fortran, raw).map(Item::Array)
+            decode_array(
+                shape_of(shape)?,
+                *dtype,
+                order.unwrap_or(ByteOrder::native()),
+                *fortran,
+                raw,
+            )
+            .map(Item::Array)
         }
         Item::DTypeObj(dtype, _) => {
             let order = match state.get(1) {
@@ -677,11 +898,25 @@ fn build(obj: Item, state: Item) -> Step<Item> {
 }
 
 /// Decode raw array bytes to C-order widened elements.
-fn decode_array(shape: Vec<usize>, dtype: DType, order: ByteOrder, fortran: bool, raw: &[u8]) -> Step<NdArray> {
-    let count = shape.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).ok_or("array shape overflows")?;
+fn decode_array(
+    shape: Vec<usize>,
+    dtype: DType,
+    order: ByteOrder,
+    fortran: bool,
+    raw: &[u8],
+) -> Step<NdArray> {
+    let count = shape
+        .iter()
+        .try_fold(1usize, |a, &d| a.checked_mul(d))
+        .ok_or("array shape overflows")?;
     let size = dtype.item_size();
     if count.checked_mul(size) != Some(raw.len()) {
-        return Err(format!("array of shape {shape:?} and dtype {} needs {} bytes, found {}", dtype.descr(), count.saturating_mul(size), raw.len()));
+        return Err(format!(
+            "array of shape {shape:?} and dtype {} needs {} bytes, found {}",
+            dtype.descr(),
+            count.saturating_mul(size),
+            raw.len()
+        ));
     }
     let word = |chunk: &[u8]| -> u64 {
         let fold = |acc: u64, &x: &u8| (acc << 8) | x as u64;
@@ -699,7 +934,9 @@ fn decode_array(shape: Vec<usize>, dtype: DType, order: ByteOrder, fortran: bool
         DType::I2 => ArrayData::Int(chunks.map(|w| w as u16 as i16 as i64).collect()),
         DType::I4 => ArrayData::Int(chunks.map(|w| w as u32 as i32 as i64).collect()),
         DType::I8 => ArrayData::Int(chunks.map(|w| w as i64).collect()),
-        DType::U1 | DType::U2 | DType::U4 | DType::Bool => ArrayData::Int(chunks.map(|w| w as i64).collect()),
+        DType::U1 | DType::U2 | DType::U4 | DType::Bool => {
+            ArrayData::Int(chunks.map(|w| w as i64).collect())
+        }
         DType::U8 => ArrayData::Int(
             chunks
                 .map(|w| i64::try_from(w).map_err(|_| format!("u8 element {w} does not fit i64")))
@@ -835,7 +1072,11 @@ fn write_value(out: &mut Vec<u8>, value: &Value) -> Result<()> {
 fn write_array(out: &mut Vec<u8>, a: &NdArray) -> Result<()> {
     let count: usize = a.shape.iter().product();
     if count != a.data.len() {
-        return Err(DataError::new("pickle", "ndarray", format!("shape {:?} but {} elements", a.shape, a.data.len())));
+        return Err(DataError::new(
+            "pickle",
+            "ndarray",
+            format!("shape {:?} but {} elements", a.shape, a.data.len()),
+        ));
     }
     let raw = encode_elements(a)?;
     // _reconstruct(ndarray, (0,), b'b')
@@ -865,9 +1106,17 @@ fn write_array(out: &mut Vec<u8>, a: &NdArray) -> Result<()> {
 
 fn encode_elements(a: &NdArray) -> Result<Vec<u8>> {
     let mut raw = Vec::with_capacity(a.data.len() * a.dtype.item_size());
-    let mismatch = || DataError::new("pickle", "ndarray", format!("dtype {} does not match the element kind", a.dtype.descr()));
+    let mismatch = || {
+        DataError::new(
+            "pickle",
+            "ndarray",
+            format!("dtype {} does not match the element kind", a.dtype.descr()),
+        )
+    };
     match (&a.data, a.dtype) {
-        (ArrayData::Float(v), DType::F4) => v.iter().for_each(|&x| raw.extend((x as f32).to_le_bytes())),
+        (ArrayData::Float(v), DType::F4) => {
+            v.iter().for_each(|&x| raw.extend((x as f32).to_le_bytes()))
+        }
         (ArrayData::Float(v), DType::F8) => v.iter().for_each(|&x| raw.extend(x.to_le_bytes())),
         (ArrayData::Float(_), _) => return Err(mismatch()),
         (ArrayData::Int(_), d) if d.is_float() => return Err(mismatch()),
@@ -895,13 +1144,24 @@ mod tests {
         let mut p = vec![0x80, 2, b'}', b'(', b'X', 1, 0, 0, 0, b'a', b']', b'('];
         p.extend([b'K', 1, b'J', 0xfe, 0xff, 0xff, 0xff, b'G']);
         p.extend(3.5f64.to_be_bytes());
-        p.extend([b'N', 0x88, b'e', b'C', 1, b'b', b'C', 2, b'x', b'y', 0x85, b'u', b'.']);
+        p.extend([
+            b'N', 0x88, b'e', 0x8c, 1, b'b', b'C', 2, b'x', b'y', 0x85, b'u', b'.',
+        ]);
         let v = loads(&p, "t.bin").unwrap();
         assert_eq!(
             v.get("a"),
-            Some(&Value::List(vec![Value::Int(1), Value::Int(-2), Value::Float(3.5), Value::None, Value::Bool(true)]))
+            Some(&Value::List(vec![
+                Value::Int(1),
+                Value::Int(-2),
+                Value::Float(3.5),
+                Value::None,
+                Value::Bool(true)
+            ]))
         );
-        assert_eq!(v.get("b"), Some(&Value::Tuple(vec![Value::Bytes(b"xy".to_vec())])));
+        assert_eq!(
+            v.get("b"),
+            Some(&Value::Tuple(vec![Value::Bytes(b"xy".to_vec())]))
+        );
     }
 
     #[test]
@@ -916,14 +1176,21 @@ mod tests {
     fn hostile_global_is_refused_by_name() {
         let e = err(b"\x80\x02cos\nsystem\nX\x04\x00\x00\x00echo\x85R.");
         assert_eq!(e.field, "pickle");
-        assert!(e.reason.contains("`os.system`") && e.reason.contains("byte 2"), "{e}");
+        assert!(
+            e.reason.contains("`os.system`") && e.reason.contains("byte 2"),
+            "{e}"
+        );
         let e = err(b"\x80\x04\x8c\x08builtins\x8c\x04eval\x93.");
         assert!(e.reason.contains("`builtins.eval`"), "{e}");
     }
 
     #[test]
     fn truncated_unknown_and_underflow() {
-        assert!(err(&[0x80, 2, b'X', 9, 0, 0, 0, b'a']).reason.contains("truncated"));
+        assert!(
+            err(&[0x80, 2, b'X', 9, 0, 0, 0, b'a'])
+                .reason
+                .contains("truncated")
+        );
         assert!(err(&[0x80, 2, b'N']).reason.contains("before STOP"));
         assert!(err(&[0x80, 2, 0xff]).reason.contains("opcode 0xff"));
         assert!(err(&[0x80, 2, b't', b'.']).reason.contains("without MARK"));
@@ -932,29 +1199,73 @@ mod tests {
     }
 
     #[test]
+    fn bombs_and_deep_nesting_are_errors() {
+        let mut bomb = vec![0x80, 4, b'N'];
+        for _ in 0..40 {
+            bomb.extend([b'2', 0x86]); // DUP, TUPLE2: doubles the size each time
+        }
+        bomb.push(b'.');
+        assert!(err(&bomb).reason.contains("pickle bomb"), "{}", err(&bomb));
+        let mut deep = vec![0x80, 4];
+        deep.extend([b']'; 300]);
+        deep.extend([b'a'; 299]);
+        deep.push(b'.');
+        assert!(
+            err(&deep).reason.contains("deeper than 256"),
+            "{}",
+            err(&deep)
+        );
+        // 200 levels are fine.
+        let mut ok = vec![0x80, 4];
+        ok.extend([b']'; 200]);
+        ok.extend([b'a'; 199]);
+        ok.push(b'.');
+        assert!(loads(&ok, "t").is_ok());
+    }
+
+    #[test]
     fn half_floats_and_fortran_order() {
         assert_eq!(f16_to_f64(0x3c00), 1.0);
         assert_eq!(f16_to_f64(0xc000), -2.0);
         assert_eq!(f16_to_f64(0x0001), 2f64.powi(-24));
         // column-major [[0,1,2],[3,4,5]] stored as 0,3,1,4,2,5
-        assert_eq!(fortran_to_c(&[0, 3, 1, 4, 2, 5], &[2, 3]), vec![0, 1, 2, 3, 4, 5]);
+        assert_eq!(
+            fortran_to_c(&[0, 3, 1, 4, 2, 5], &[2, 3]),
+            vec![0, 1, 2, 3, 4, 5]
+        );
     }
 
     #[test]
     fn writer_round_trips_through_reader() {
         let v = Value::Dict(vec![
-            (Value::Str("vertices".into()), Value::NdArray(NdArray {
-                shape: vec![2, 1, 3],
-                dtype: DType::F4,
-                data: ArrayData::Float(vec![0.5, -1.0, 2.0, 3.25, 1e-3f32 as f64, 7.0]),
-            })),
-            (Value::Str("faces".into()), Value::NdArray(NdArray {
-                shape: vec![1, 3],
-                dtype: DType::I8,
-                data: ArrayData::Int(vec![0, 1, -2]),
-            })),
-            (Value::Str("caption".into()), Value::Str("a cat ".repeat(60))),
-            (Value::Str("n".into()), Value::List(vec![Value::Int(-70000), Value::Int(1 << 40), Value::Bool(false)])),
+            (
+                Value::Str("vertices".into()),
+                Value::NdArray(NdArray {
+                    shape: vec![2, 1, 3],
+                    dtype: DType::F4,
+                    data: ArrayData::Float(vec![0.5, -1.0, 2.0, 3.25, 1e-3f32 as f64, 7.0]),
+                }),
+            ),
+            (
+                Value::Str("faces".into()),
+                Value::NdArray(NdArray {
+                    shape: vec![1, 3],
+                    dtype: DType::I8,
+                    data: ArrayData::Int(vec![0, 1, -2]),
+                }),
+            ),
+            (
+                Value::Str("caption".into()),
+                Value::Str("a cat ".repeat(60)),
+            ),
+            (
+                Value::Str("n".into()),
+                Value::List(vec![
+                    Value::Int(-70000),
+                    Value::Int(1 << 40),
+                    Value::Bool(false),
+                ]),
+            ),
         ]);
         let bytes = dumps(&v).unwrap();
         assert_eq!(loads(&bytes, "t").unwrap(), v);

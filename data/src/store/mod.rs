@@ -231,12 +231,12 @@ mod tests {
         // Binomial(4000, 0.2): mean 800, sd 25; ±100 is 4 sd.
         assert!((700..=900).contains(&val), "{val} of 4000 in val");
         // Fixed values guard against an accidental change of the hash (which would move objects across splits).
-        let sides: String = (0..16).map(|i| Split::of_object(&format!("obj{i}"), SPLIT_SEED).as_str().as_bytes()[0] as char).collect();
-        let other: String = (0..16).map(|i| Split::of_object(&format!("obj{i}"), 1).as_str().as_bytes()[0] as char).collect();
+        let sides: String = (0..32).map(|i| Split::of_object(&format!("obj{i}"), SPLIT_SEED).as_str().as_bytes()[0] as char).collect();
+        let other: String = (0..32).map(|i| Split::of_object(&format!("obj{i}"), 1).as_str().as_bytes()[0] as char).collect();
         assert_ne!(sides, other, "the seed must matter");
         assert_eq!(sides, SPLIT_GOLDEN);
     }
 
-    /// `t` = train, `v` = val for obj0..obj15 under seed 666 (printed once by this test and frozen).
-    const SPLIT_GOLDEN: &str = "????????????????";
+    /// `t` = train, `v` = val for obj0..obj31 under seed 666 (printed once by this test and frozen).
+    const SPLIT_GOLDEN: &str = "tttttttttvttttttttvtttttttttvtvt";
 }

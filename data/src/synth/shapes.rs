@@ -347,9 +347,10 @@ pub(super) fn build(
                 p[0] *= k;
                 p[2] *= k;
             }
+            // Adjective order: size, then build.
+            body.words.extend(pick(height, 1.3, 1.9, "short", "tall"));
             body.words
                 .extend(pick(rad / height, 0.1, 0.15, "thin", "thick"));
-            body.words.extend(pick(height, 1.3, 1.9, "short", "tall"));
         }
         ShapeFamily::Humanoid => {
             let h = r.random_range(1.5f32..1.9);
@@ -476,8 +477,9 @@ pub(super) fn build(
             body.axis = 0;
             body.pivot = Pivot::Center;
             body.closed = false;
-            body.words.extend(pick(aspect, 0.6, 0.85, "long", "square"));
             body.words.extend(pick(lx, 1.3, 1.7, "small", "large"));
+            body.words
+                .extend(pick(aspect, 0.6, 0.85, "narrow", "square"));
         }
         ShapeFamily::Worm => {
             let len = r.random_range(1.0f32..2.5);
@@ -491,9 +493,9 @@ pub(super) fn build(
             body.axis = 0;
             body.pivot = Pivot::Center;
             body.forward = Some(0);
+            body.words.extend(pick(len, 1.5, 2.0, "short", "long"));
             body.words
                 .extend(pick(rad / len, 0.04, 0.055, "thin", "fat"));
-            body.words.extend(pick(len, 1.5, 2.0, "short", "long"));
         }
         ShapeFamily::Helix => {
             let height = r.random_range(0.8f32..1.8);

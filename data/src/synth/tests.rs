@@ -255,6 +255,27 @@ fn twist_and_bend_words_match_the_motion() {
     }
 }
 
+#[test]
+fn spin_words_match_the_motion() {
+    // Rigid spin: the yaw of offsets from the centroid, frame 0 → frame 4 (under half a turn).
+    for index in 0..12 {
+        let clip =
+            generate_with(&cfg(4), index, ShapeFamily::Quadruped, MotionFamily::Rigid).unwrap();
+        let (f0, f4) = (clip.frame(0), clip.frame(4));
+        let (c0, c4) = (centroid(f0), centroid(f4));
+        let yaw: f32 = f0
+            .iter()
+            .zip(f4)
+            .map(|(p, q)| {
+                let (u, v) = ([p[0] - c0[0], p[2] - c0[2]], [q[0] - c4[0], q[2] - c4[2]]);
+                u[1] * v[0] - u[0] * v[1]
+            })
+            .sum();
+        let ccw = clip.caption.contains("counterclockwise");
+        assert_eq!(yaw > 0.0, ccw, "{}: yaw sum {yaw}", clip.caption);
+    }
+}
+
 fn f0_y(clip: &Clip, v: usize) -> f32 {
     clip.frame(0)[v][1]
 }

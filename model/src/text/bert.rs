@@ -10,7 +10,10 @@ use burn::tensor::Bool;
 use burn::tensor::activation::gelu;
 use serde::{Deserialize, Serialize};
 
-use super::{TextBatch, TextEncoder, TextError, load_safetensors, load_tokenizer, pad_batch, text_self_attention};
+use super::{
+    TextBatch, TextEncoder, TextError, load_safetensors, load_tokenizer, pad_batch,
+    text_self_attention,
+};
 
 /// Padding token of the BERT uncased vocabulary.
 pub const PAD: &str = "[PAD]";
@@ -58,7 +61,11 @@ impl BertConfig {
     /// Builds the module with random weights.
     pub fn init(&self, device: &Device) -> BertModel {
         let w = self.width;
-        let ln = || LayerNormConfig::new(w).with_epsilon(self.layer_norm_eps).init(device);
+        let ln = || {
+            LayerNormConfig::new(w)
+                .with_epsilon(self.layer_norm_eps)
+                .init(device)
+        };
         let lin = |i, o| LinearConfig::new(i, o).init(device);
         BertModel {
             embeddings: BertEmbeddings {
@@ -71,11 +78,23 @@ impl BertConfig {
                 layer: (0..self.layers)
                     .map(|_| BertLayer {
                         attention: BertAttention {
-                            self_attn: BertSelfAttention { query: lin(w, w), key: lin(w, w), value: lin(w, w) },
-                            output: BertDenseNorm { dense: lin(w, w), layer_norm: ln() },
+                            self_attn: BertSelfAttention {
+                                query: lin(w, w),
+                                key: lin(w, w),
+                                value: lin(w, w),
+                            },
+                            output: BertDenseNorm {
+                                dense: lin(w, w),
+                                layer_norm: ln(),
+                            },
                         },
-                        intermediate: BertDense { dense: lin(w, self.intermediate) },
-                        output: BertDenseNorm { dense: lin(self.intermediate, w), layer_norm: ln() },
+                        intermediate: BertDense {
+                            dense: lin(w, self.intermediate),
+                        },
+                        output: BertDenseNorm {
+                            dense: lin(self.intermediate, w),
+                            layer_norm: ln(),
+                        },
                         heads: self.heads,
                     })
                     .collect(),
@@ -144,7 +163,10 @@ pub struct BertModel {
 }
 
 /// HF name → module path rewrites (`self` is a Rust keyword; burn fields are snake case).
-pub const NAME_REMAPS: [(&str, &str); 2] = [(r"\.LayerNorm\.", ".layer_norm."), (r"\.attention\.self\.", ".attention.self_attn.")];
+pub const NAME_REMAPS: [(&str, &str); 2] = [
+    (r"\.LayerNorm\.", ".layer_norm."),
+    (r"\.attention\.self\.", ".attention.self_attn."),
+];
 
 impl BertLayer {
     fn forward(&self, x: Tensor<3>, pad: Tensor<2, Bool>) -> Tensor<3> {
@@ -160,7 +182,9 @@ impl BertLayer {
         let out = &self.attention.output;
         let x = out.layer_norm.forward(out.dense.forward(ctx) + x);
         let h = gelu(self.intermediate.dense.forward(x.clone()));
-        self.output.layer_norm.forward(self.output.dense.forward(h) + x)
+        self.output
+            .layer_norm
+            .forward(self.output.dense.forward(h) + x)
     }
 }
 
@@ -207,15 +231,31 @@ impl BertTextEncoder {
         })?;
         let mut model = config.init(device);
         load_safetensors(&mut model, &dir.join("model.safetensors"), &NAME_REMAPS)?;
-        Ok(Self { tokenizer: tok, tokenizer_path, pad_id, config, model: model.no_grad() })
+        Ok(Self {
+            tokenizer: tok,
+            tokenizer_path,
+            pad_id,
+            config,
+            model: model.no_grad(),
+        })
     }
 }
 
 impl TextEncoder for BertTextEncoder {
     fn encode(&self, captions: &[String], device: &Device) -> Result<TextBatch, TextError> {
-        let ids = pad_batch(&self.tokenizer, captions, self.config.max_len, self.pad_id, true, &self.tokenizer_path)?;
+        let ids = pad_batch(
+            &self.tokenizer,
+            captions,
+            self.config.max_len,
+            self.pad_id,
+            true,
+            &self.tokenizer_path,
+        )?;
         let pad_mask = ids.pad_tensor(device);
-        let states = self.model.forward(ids.ids_tensor(device), pad_mask.clone()).detach();
+        let states = self
+            .model
+            .forward(ids.ids_tensor(device), pad_mask.clone())
+            .detach();
         Ok(TextBatch { states, pad_mask })
     }
 

@@ -10,7 +10,10 @@ use burn::prelude::*;
 use burn::tensor::activation::sigmoid;
 use serde::{Deserialize, Serialize};
 
-use super::{TextBatch, TextEncoder, TextError, load_safetensors, load_tokenizer, pad_batch, text_self_attention};
+use super::{
+    TextBatch, TextEncoder, TextError, load_safetensors, load_tokenizer, pad_batch,
+    text_self_attention,
+};
 
 /// End-of-text token of the CLIP BPE vocabulary; also the padding token (SD 1.5 tokenizer).
 pub const END_OF_TEXT: &str = "<|endoftext|>";
@@ -38,13 +41,25 @@ pub struct ClipTextConfig {
 impl ClipTextConfig {
     /// CLIP ViT-L/14 (the SD 1.5 text encoder, 123,060,480 parameters).
     pub fn vit_l14() -> Self {
-        Self { vocab_size: 49408, width: 768, layers: 12, heads: 12, intermediate: 3072, max_len: 77, layer_norm_eps: 1e-5 }
+        Self {
+            vocab_size: 49408,
+            width: 768,
+            layers: 12,
+            heads: 12,
+            intermediate: 3072,
+            max_len: 77,
+            layer_norm_eps: 1e-5,
+        }
     }
 
     /// Builds an uninitialised-weights module (random); load weights with [`ClipTextEncoder::load`].
     pub fn init(&self, device: &Device) -> ClipTextModel {
         let w = self.width;
-        let ln = || LayerNormConfig::new(w).with_epsilon(self.layer_norm_eps).init(device);
+        let ln = || {
+            LayerNormConfig::new(w)
+                .with_epsilon(self.layer_norm_eps)
+                .init(device)
+        };
         let layers = (0..self.layers)
             .map(|_| ClipEncoderLayer {
                 self_attn: ClipAttention {
@@ -161,7 +176,8 @@ impl ClipTextModel {
         let device = ids.device();
         let tm = &self.text_model;
         let pos = Tensor::<1, Int>::arange(0..l as i64, &device).unsqueeze_dim::<2>(0);
-        let mut x = tm.embeddings.token_embedding.forward(ids) + tm.embeddings.position_embedding.forward(pos);
+        let mut x = tm.embeddings.token_embedding.forward(ids)
+            + tm.embeddings.position_embedding.forward(pos);
         for layer in &tm.encoder.layers {
             x = layer.forward(x);
         }
@@ -181,15 +197,28 @@ pub struct ClipTextEncoder {
 impl ClipTextEncoder {
     /// Loads `weights` (HF `model.safetensors` of `CLIPTextModel` or `CLIPModel`; other towers are ignored) and
     /// `tokenizer` (HF `tokenizer.json`). Missing or misshaped tensors give an error naming the tensor.
-    pub fn load(config: ClipTextConfig, weights: &Path, tokenizer: &Path, device: &Device) -> Result<Self, TextError> {
+    pub fn load(
+        config: ClipTextConfig,
+        weights: &Path,
+        tokenizer: &Path,
+        device: &Device,
+    ) -> Result<Self, TextError> {
         let tok = load_tokenizer(tokenizer)?;
-        let pad_id = tok.token_to_id(END_OF_TEXT).ok_or_else(|| TextError::Tokenizer {
-            path: tokenizer.to_path_buf(),
-            message: format!("no {END_OF_TEXT} token (CLIP pads with it)"),
-        })?;
+        let pad_id = tok
+            .token_to_id(END_OF_TEXT)
+            .ok_or_else(|| TextError::Tokenizer {
+                path: tokenizer.to_path_buf(),
+                message: format!("no {END_OF_TEXT} token (CLIP pads with it)"),
+            })?;
         let mut model = config.init(device);
         load_safetensors(&mut model, weights, &[])?;
-        Ok(Self { tokenizer: tok, tokenizer_path: tokenizer.to_path_buf(), pad_id, config, model: model.no_grad() })
+        Ok(Self {
+            tokenizer: tok,
+            tokenizer_path: tokenizer.to_path_buf(),
+            pad_id,
+            config,
+            model: model.no_grad(),
+        })
     }
 
     /// The loaded network.
@@ -200,9 +229,19 @@ impl ClipTextEncoder {
 
 impl TextEncoder for ClipTextEncoder {
     fn encode(&self, captions: &[String], device: &Device) -> Result<TextBatch, TextError> {
-        let ids = pad_batch(&self.tokenizer, captions, self.config.max_len, self.pad_id, true, &self.tokenizer_path)?;
+        let ids = pad_batch(
+            &self.tokenizer,
+            captions,
+            self.config.max_len,
+            self.pad_id,
+            true,
+            &self.tokenizer_path,
+        )?;
         let states = self.model.forward(ids.ids_tensor(device)).detach();
-        Ok(TextBatch { states, pad_mask: ids.pad_tensor(device) })
+        Ok(TextBatch {
+            states,
+            pad_mask: ids.pad_tensor(device),
+        })
     }
 
     fn dim(&self) -> usize {

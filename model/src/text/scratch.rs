@@ -4,19 +4,23 @@
 
 use std::path::{Path, PathBuf};
 
-use burn::nn::{Embedding, EmbeddingConfig, Initializer, LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::module::Param;
+use burn::nn::{
+    Embedding, EmbeddingConfig, Initializer, LayerNorm, LayerNormConfig, Linear, LinearConfig,
+};
 use burn::prelude::*;
 use burn::tensor::Bool;
 use burn::tensor::activation::gelu;
 use serde::{Deserialize, Serialize};
-use tokenizers::models::wordpiece::{WordPiece, WordPieceTrainer};
 use tokenizers::models::TrainerWrapper;
+use tokenizers::models::wordpiece::{WordPiece, WordPieceTrainer};
 use tokenizers::normalizers::BertNormalizer;
 use tokenizers::pre_tokenizers::bert::BertPreTokenizer;
 use tokenizers::{AddedToken, Tokenizer};
 
-use super::{PaddedIds, TextBatch, TextEncoder, TextError, load_tokenizer, pad_batch, text_self_attention};
+use super::{
+    PaddedIds, TextBatch, TextEncoder, TextError, load_tokenizer, pad_batch, text_self_attention,
+};
 
 /// File name of the trained tokenizer inside its folder.
 pub const TOKENIZER_FILE: &str = "tokenizer.json";
@@ -37,27 +41,48 @@ impl ScratchTokenizer {
     /// `[PAD]` = 0 and `[UNK]` = 1).
     pub fn train(captions: &[String], vocab_size: usize) -> Result<Self, TextError> {
         let source = PathBuf::from("<captions>");
-        let err = |e: tokenizers::Error| TextError::Tokenizer { path: source.clone(), message: e.to_string() };
-        let mut tokenizer = Tokenizer::new(WordPiece::builder().unk_token(UNK.to_string()).build().map_err(err)?);
-        tokenizer.with_normalizer(Some(BertNormalizer::default())).map_err(err)?;
+        let err = |e: tokenizers::Error| TextError::Tokenizer {
+            path: source.clone(),
+            message: e.to_string(),
+        };
+        let mut tokenizer = Tokenizer::new(
+            WordPiece::builder()
+                .unk_token(UNK.to_string())
+                .build()
+                .map_err(err)?,
+        );
+        tokenizer
+            .with_normalizer(Some(BertNormalizer::default()))
+            .map_err(err)?;
         tokenizer.with_pre_tokenizer(Some(BertPreTokenizer));
         let trainer = WordPieceTrainer::builder()
             .vocab_size(vocab_size)
             .min_frequency(1)
             .show_progress(false)
-            .special_tokens(vec![AddedToken::from(PAD, true), AddedToken::from(UNK, true)])
+            .special_tokens(vec![
+                AddedToken::from(PAD, true),
+                AddedToken::from(UNK, true),
+            ])
             .build();
         let mut trainer = TrainerWrapper::WordPieceTrainer(trainer);
-        tokenizer.train(&mut trainer, captions.iter()).map_err(err)?;
+        tokenizer
+            .train(&mut trainer, captions.iter())
+            .map_err(err)?;
         Self::from_tokenizer(tokenizer, source)
     }
 
     fn from_tokenizer(tokenizer: Tokenizer, source: PathBuf) -> Result<Self, TextError> {
-        let pad_id = tokenizer.token_to_id(PAD).ok_or_else(|| TextError::Tokenizer {
-            path: source.clone(),
-            message: format!("no {PAD} token in the vocabulary"),
-        })?;
-        Ok(Self { tokenizer, pad_id, source })
+        let pad_id = tokenizer
+            .token_to_id(PAD)
+            .ok_or_else(|| TextError::Tokenizer {
+                path: source.clone(),
+                message: format!("no {PAD} token in the vocabulary"),
+            })?;
+        Ok(Self {
+            tokenizer,
+            pad_id,
+            source,
+        })
     }
 
     /// Writes `dir/tokenizer.json`.
@@ -65,7 +90,10 @@ impl ScratchTokenizer {
         let path = dir.join(TOKENIZER_FILE);
         self.tokenizer
             .save(&path, false)
-            .map_err(|e| TextError::Tokenizer { path: path.clone(), message: e.to_string() })
+            .map_err(|e| TextError::Tokenizer {
+                path: path.clone(),
+                message: e.to_string(),
+            })
     }
 
     /// Reads `dir/tokenizer.json`.
@@ -81,7 +109,14 @@ impl ScratchTokenizer {
 
     /// Token ids padded to `max_len` (no start/end tokens).
     pub fn pad_batch(&self, captions: &[String], max_len: usize) -> Result<PaddedIds, TextError> {
-        pad_batch(&self.tokenizer, captions, max_len, self.pad_id, false, &self.source)
+        pad_batch(
+            &self.tokenizer,
+            captions,
+            max_len,
+            self.pad_id,
+            false,
+            &self.source,
+        )
     }
 }
 
@@ -104,10 +139,15 @@ pub struct ScratchTextConfig {
 impl ScratchTextConfig {
     /// Builds the module (token and learned position embeddings N(0, 0.02²), pre-LN layers).
     pub fn init(&self, device: &Device) -> ScratchTextModel {
-        let emb_init = Initializer::Normal { mean: 0.0, std: 0.02 };
+        let emb_init = Initializer::Normal {
+            mean: 0.0,
+            std: 0.02,
+        };
         let w = self.width;
         ScratchTextModel {
-            token_embedding: EmbeddingConfig::new(self.vocab_size, w).with_initializer(emb_init.clone()).init(device),
+            token_embedding: EmbeddingConfig::new(self.vocab_size, w)
+                .with_initializer(emb_init.clone())
+                .init(device),
             position_embedding: emb_init.init([self.max_len, w], device),
             layers: (0..self.layers)
                 .map(|_| ScratchLayer {
@@ -142,8 +182,13 @@ impl ScratchLayer {
     fn forward(&self, x: Tensor<3>, pad: Tensor<2, Bool>) -> Tensor<3> {
         let qkv = self.qkv.forward(self.norm1.forward(x.clone())).chunk(3, 2);
         let [q, k, v]: [Tensor<3>; 3] = qkv.try_into().expect("three chunks");
-        let x = x + self.out.forward(text_self_attention(q, k, v, self.heads, Some(pad), false));
-        x.clone() + self.fc2.forward(gelu(self.fc1.forward(self.norm2.forward(x))))
+        let x = x + self
+            .out
+            .forward(text_self_attention(q, k, v, self.heads, Some(pad), false));
+        x.clone()
+            + self
+                .fc2
+                .forward(gelu(self.fc1.forward(self.norm2.forward(x))))
     }
 }
 
@@ -165,7 +210,11 @@ impl ScratchTextModel {
     pub fn forward(&self, ids: Tensor<2, Int>, pad: Tensor<2, Bool>) -> Tensor<3> {
         let [b, l] = ids.dims();
         let [_, d] = self.position_embedding.lazy_shape().dims::<2>();
-        let pos = self.position_embedding.val().narrow(0, 0, l).unsqueeze_dim::<3>(0);
+        let pos = self
+            .position_embedding
+            .val()
+            .narrow(0, 0, l)
+            .unsqueeze_dim::<3>(0);
         let mut x = self.token_embedding.forward(ids) + pos;
         for layer in &self.layers {
             x = layer.forward(x, pad.clone());

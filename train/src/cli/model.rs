@@ -4,9 +4,11 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Context, bail};
+use any4d_model::dymesh_vae::DyMeshVaeConfig;
+use any4d_model::frame_vae::FrameVaeConfig;
 use any4d_model::mmdit::{KfMode, MmditConfig};
-use any4d_model::summary::{format_report, param_report, time_rf_step};
+use any4d_model::summary::{format_report, param_report, time_rf_step, time_vae_reconstruct};
+use anyhow::{Context, bail};
 use burn::prelude::Device;
 use clap::{Args, Subcommand, ValueEnum};
 
@@ -26,9 +28,9 @@ pub struct SummaryArgs {
 /// Network size benchmarked by `any4d bench model`.
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum BenchSize {
-    /// configs/rf/paper.toml sizes (W 512, 12 blocks, P 512, L 77).
+    /// configs/rf/paper.toml sizes (W 512, 12 blocks, P 512, L 77); VAE d 128 on N 2048 vertices.
     Paper,
-    /// MmditConfig::tiny() with P 64, L 8.
+    /// MmditConfig::tiny() with P 64, L 8; FrameVaeConfig::tiny() on N 256.
     Tiny,
 }
 
@@ -61,39 +63,66 @@ pub fn run(cmd: ModelCmd) -> anyhow::Result<ExitCode> {
     }
 }
 
-/// Reads the `[model]` table of a config file as an RF backbone config; errors name the file and field.
-pub fn load_rf_model_config(path: &Path) -> anyhow::Result<MmditConfig> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let table: toml::Table = toml::from_str(&text).with_context(|| format!("{}: invalid TOML", path.display()))?;
+/// The network a config's `[model]` table describes, told apart by its keys: `kf_mode` → rectified-flow MMDiT,
+/// `frames` → sequence-wise DyMeshVAE, otherwise the frame-wise VAE.
+pub enum ModelConfig {
+    Rf(MmditConfig),
+    FrameVae(FrameVaeConfig),
+    DyMeshVae(DyMeshVaeConfig),
+}
+
+/// Reads the `[model]` table of a config file; errors name the file and field.
+pub fn load_model_config(path: &Path) -> anyhow::Result<ModelConfig> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let table: toml::Table =
+        toml::from_str(&text).with_context(|| format!("{}: invalid TOML", path.display()))?;
     let Some(model) = table.get("model") else {
         bail!("{}: no [model] table", path.display());
     };
     let Some(model_table) = model.as_table() else {
         bail!("{}: `model` must be a table", path.display());
     };
-    if !model_table.contains_key("kf_mode") {
-        bail!(
-            "{}: [model] has no `kf_mode`, so it is not a rectified-flow config (VAE summaries are not wired yet)",
-            path.display()
-        );
+    let ctx = || format!("{}: [model]", path.display());
+    if model_table.contains_key("kf_mode") {
+        let cfg: MmditConfig = model.clone().try_into().with_context(ctx)?;
+        cfg.validate()
+            .map_err(|msg| anyhow::anyhow!("{}: {msg}", path.display()))?;
+        Ok(ModelConfig::Rf(cfg))
+    } else if model_table.contains_key("frames") {
+        Ok(ModelConfig::DyMeshVae(
+            model.clone().try_into().with_context(ctx)?,
+        ))
+    } else {
+        Ok(ModelConfig::FrameVae(
+            model.clone().try_into().with_context(ctx)?,
+        ))
     }
-    let cfg: MmditConfig = model.clone().try_into().with_context(|| format!("{}: [model]", path.display()))?;
-    cfg.validate().map_err(|msg| anyhow::anyhow!("{}: {msg}", path.display()))?;
-    Ok(cfg)
 }
 
 fn summary(path: &Path) -> anyhow::Result<ExitCode> {
-    let cfg = load_rf_model_config(path)?;
     let device = Device::flex();
-    let model = cfg.init(&device);
-    let title = format!(
-        "{}: rectified-flow MMDiT, kf_mode {:?}, {} input / {} output channels per token",
-        path.display(),
-        cfg.kf_mode,
-        cfg.in_channels(),
-        cfg.out_channels()
-    );
-    print!("{}", format_report(&title, &param_report(&model)));
+    let (title, rows) = match load_model_config(path)? {
+        ModelConfig::Rf(cfg) => (
+            format!(
+                "{}: rectified-flow MMDiT, kf_mode {:?}, {} input / {} output channels per token",
+                path.display(),
+                cfg.kf_mode,
+                cfg.in_channels(),
+                cfg.out_channels()
+            ),
+            param_report(&cfg.init(&device)),
+        ),
+        ModelConfig::FrameVae(cfg) => (
+            format!("{}: frame-wise mesh VAE", path.display()),
+            param_report(&cfg.init(&device)),
+        ),
+        ModelConfig::DyMeshVae(cfg) => (
+            format!("{}: sequence-wise DyMeshVAE", path.display()),
+            param_report(&cfg.init(&device)),
+        ),
+    };
+    print!("{}", format_report(&title, &rows));
     Ok(ExitCode::SUCCESS)
 }
 
@@ -110,6 +139,18 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
         CpuBackend::Ndarray => Device::ndarray(),
     };
     let timing = time_rf_step(&cfg, args.batch, tokens, text_len, args.iters, &device);
+    let vae_cfg = match args.size {
+        BenchSize::Paper => FrameVaeConfig::new(),
+        BenchSize::Tiny => FrameVaeConfig::tiny(),
+    };
+    let vertices = match args.size {
+        BenchSize::Paper => 2048,
+        BenchSize::Tiny => 256,
+    };
+    let vae = time_vae_reconstruct(
+        &vae_cfg, args.batch, vertices, tokens, cfg.frames, args.iters, &device,
+    )
+    .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
     println!(
         "bench model: RF forward+backward, {:?} size (W {}, {} blocks, P {tokens}, L {text_len}), {:?}, batch {}, {} iters: \
          median {:.1} ms/step, {:.1} ms/clip",
@@ -121,6 +162,17 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
         args.iters,
         timing.median_ms,
         timing.median_ms / args.batch as f64
+    );
+    println!(
+        "bench model: frame-wise VAE encode+decode (posterior mean, no gradients), d {}, N {vertices}, P {tokens}, \
+         T {}, {:?}, batch {}, {} iters: median {:.1} ms/step, {:.1} ms/clip",
+        vae_cfg.width,
+        cfg.frames,
+        args.backend,
+        args.batch,
+        args.iters,
+        vae.median_ms,
+        vae.median_ms / args.batch as f64
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -1,0 +1,177 @@
+//! `any4d eval metrics` end to end (SPEC §6.1–§6.2): runs the built binary on clip files written with
+//! `any4d_data::formats::write_clip`, checks the JSON and table outputs and the errors on malformed input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use any4d_data::Clip;
+use any4d_data::formats::write_clip;
+
+const FRAMES: usize = 16;
+
+/// Ground truth: `n` vertices whose frame 0 spans [−1, 1]³ with centre 0 (so (D1)–(D3) is the identity), moving
+/// along y; the prediction is the same motion shifted by (d, 0, 0).
+fn clips(n: usize, d: f32) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
+    let corner = |i: usize| -> [f32; 3] {
+        let s = |b: usize| if (i >> b) & 1 == 1 { 1.0 } else { -1.0 };
+        [s(0), s(1), s(2)]
+    };
+    let gt: Vec<[f32; 3]> = (0..FRAMES)
+        .flat_map(|f| {
+            (0..n)
+                .map(move |i| corner(i))
+                .map(move |p| [p[0], p[1] + 0.01 * (f * f) as f32, p[2]])
+        })
+        .collect();
+    let pred = gt.iter().map(|p| [p[0] + d, p[1], p[2]]).collect();
+    (pred, gt)
+}
+
+fn write(dir: &Path, name: &str, vertices: Vec<[f32; 3]>, n: usize) -> PathBuf {
+    let path = dir.join(name);
+    let clip = Clip::new(
+        name,
+        vertices,
+        FRAMES,
+        n,
+        vec![[0, 1, 2]],
+        "a test clip",
+        path.display().to_string(),
+    )
+    .expect("valid test clip");
+    write_clip(&path, &clip).expect("write test clip");
+    path
+}
+
+fn any4d(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_any4d"))
+        .args(args)
+        .output()
+        .expect("run the any4d binary")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn json_reports_raw_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let (pred, gt) = clips(8, 0.3);
+    let (p, g) = (
+        write(dir.path(), "pred.bin", pred, 8),
+        write(dir.path(), "gt.bin", gt, 8),
+    );
+    let out = any4d(&[
+        "eval",
+        "metrics",
+        p.to_str().unwrap(),
+        g.to_str().unwrap(),
+        "--keyframes",
+        "0,7,15",
+        "--format",
+        "json",
+    ]);
+    assert!(out.status.success(), "stderr: {}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON");
+    for key in [
+        "rmse",
+        "mae_elem",
+        "chamfer",
+        "dtw",
+        "jerk",
+        "jerk_gt",
+        "accel",
+        "energy_ratio",
+        "keyframe_rmse",
+    ] {
+        assert!(json.get(key).is_some(), "missing key {key} in {json}");
+    }
+    // A shift by (0.3, 0, 0) on every non-keyframe: RMSE = 0.3/√3, mae_elem = 0.3/3, not × 100.
+    let rmse = json["rmse"].as_f64().unwrap();
+    assert!((rmse - 0.3 / 3f64.sqrt()).abs() < 1e-6, "{rmse}");
+    assert!((json["mae_elem"].as_f64().unwrap() - 0.1).abs() < 1e-6);
+    // Keyframes were exact copies of ground truth only after replacement: before it they are shifted too.
+    assert!((json["keyframe_rmse"].as_f64().unwrap() - rmse).abs() < 1e-6);
+}
+
+#[test]
+fn table_prints_times_100() {
+    let dir = tempfile::tempdir().unwrap();
+    let (pred, gt) = clips(8, 0.3);
+    let (p, g) = (
+        write(dir.path(), "pred.bin", pred, 8),
+        write(dir.path(), "gt.bin", gt, 8),
+    );
+    let out = any4d(&[
+        "eval",
+        "metrics",
+        p.to_str().unwrap(),
+        g.to_str().unwrap(),
+        "--keyframes",
+        "0,7,15",
+    ]);
+    assert!(out.status.success(), "stderr: {}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("RMSE ×100"))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let value: f64 = line.split_whitespace().last().unwrap().parse().unwrap();
+    assert!((value - 30.0 / 3f64.sqrt()).abs() < 1e-3, "{line}");
+    assert!(stdout.contains("jerk"), "{stdout}");
+}
+
+#[test]
+fn mismatched_vertex_counts_fail_with_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let (pred, _) = clips(5, 0.1);
+    let (_, gt) = clips(4, 0.1);
+    let (p, g) = (
+        write(dir.path(), "pred.bin", pred, 5),
+        write(dir.path(), "gt.bin", gt, 4),
+    );
+    let out = any4d(&[
+        "eval",
+        "metrics",
+        p.to_str().unwrap(),
+        g.to_str().unwrap(),
+        "--format",
+        "json",
+    ]);
+    assert!(!out.status.success());
+    let stderr = text(&out.stderr);
+    assert!(
+        stderr.contains("vertex counts differ: prediction has 5, ground truth has 4"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("pred.bin"), "{stderr}");
+}
+
+#[test]
+fn bad_keyframes_and_missing_files_fail() {
+    let dir = tempfile::tempdir().unwrap();
+    let (pred, gt) = clips(4, 0.1);
+    let (p, g) = (
+        write(dir.path(), "pred.bin", pred, 4),
+        write(dir.path(), "gt.bin", gt, 4),
+    );
+    let out = any4d(&[
+        "eval",
+        "metrics",
+        p.to_str().unwrap(),
+        g.to_str().unwrap(),
+        "--keyframes",
+        "0,16",
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        text(&out.stderr).contains("keyframe index 16 is out of range for 16 frames"),
+        "{}",
+        text(&out.stderr)
+    );
+    let missing = dir.path().join("nope.bin");
+    let out = any4d(&["eval", "metrics", missing.to_str().unwrap(), g.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(text(&out.stderr).contains("nope.bin"), "{}", text(&out.stderr));
+}
