@@ -122,7 +122,11 @@ pub fn summarize(dir: &Path) -> Result<Summary> {
 pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
     let width = (HIST_MAX - HIST_MIN) / HIST_BINS;
     let mut vertex_histogram: Vec<Bin> = (0..HIST_BINS)
-        .map(|b| Bin { lo: HIST_MIN + b * width, hi: if b + 1 == HIST_BINS { HIST_MAX } else { HIST_MIN + (b + 1) * width }, count: 0 })
+        .map(|b| Bin {
+            lo: HIST_MIN + b * width,
+            hi: if b + 1 == HIST_BINS { HIST_MAX } else { HIST_MIN + (b + 1) * width },
+            count: 0,
+        })
         .collect();
     let mut s = Summary {
         dir: dir.display().to_string(),
@@ -237,7 +241,11 @@ impl Summary {
         let _ = writeln!(o, "empty captions     {}", self.empty_captions);
         map_line(&mut o, "frames", &self.frames);
         map_line(&mut o, "formats", &self.formats);
-        let _ = writeln!(o, "vertices           below {}: {}, above {}: {}", HIST_MIN, self.vertices_below, HIST_MAX, self.vertices_above);
+        let _ = writeln!(
+            o,
+            "vertices           below {}: {}, above {}: {}",
+            HIST_MIN, self.vertices_below, HIST_MAX, self.vertices_above
+        );
         let max = self.vertex_histogram.iter().map(|b| b.count).max().unwrap_or(0).max(1);
         for b in &self.vertex_histogram {
             let bar = "#".repeat(b.count * 40 / max);

@@ -130,10 +130,7 @@ pub fn sample_keyframes(strategy: &KeyframeStrategy, t: usize, rng: &mut impl Rn
 /// As [`sample_keyframes`].
 pub fn keyframe_mask_batch(strategy: &KeyframeStrategy, b: usize, t: usize, seed: u64) -> Vec<f32> {
     let mut r: DataRng = rng(seed, KEYFRAME_STREAM);
-    (0..b)
-        .flat_map(|_| sample_keyframes(strategy, t, &mut r))
-        .map(|m| if m { 1.0 } else { 0.0 })
-        .collect()
+    (0..b).flat_map(|_| sample_keyframes(strategy, t, &mut r)).map(|m| if m { 1.0 } else { 0.0 }).collect()
 }
 
 #[cfg(test)]

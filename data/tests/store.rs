@@ -104,7 +104,8 @@ fn reimport_is_idempotent_and_unions_other_sources() {
     assert_eq!(std::fs::read(out.join("clips.bin")).unwrap(), bytes, "same import twice must give the same file");
     assert_eq!(read_index(&out).unwrap(), rows);
 
-    let more = store::import(&[src.join("objB_offset0_0-15.bin"), src.join("objS_offset0_0-15.bin")], &out, &opts()).unwrap();
+    let more =
+        store::import(&[src.join("objB_offset0_0-15.bin"), src.join("objS_offset0_0-15.bin")], &out, &opts()).unwrap();
     assert_eq!((more.added, more.kept, more.total), (1, 2, 3));
     let ids: Vec<String> = read_index(&out).unwrap().into_iter().map(|r| r.id).collect();
     // Sources are processed in canonical-path order (`nested/` sorts before `objA…`); kept clips come first.

@@ -108,7 +108,9 @@ impl WindowFrame {
             .flat_map(|p| (0..3).map(move |k| (p[k] - center[k]).abs()))
             .fold(0.0f32, f32::max);
         // (H1) c₁ = (max V_ov + min V_ov)/2, s₁ = max |V_ov − c₁|; s₁ = 1 if s₁ ≤ 0 or not finite.
-        let scale = if half > 0.0 && half.is_finite() {
+        // A non-finite coordinate makes s₁ non-finite in the paper's arithmetic: fall back to 1 as well.
+        let finite = frame.iter().all(|p| p.iter().all(|c| c.is_finite()));
+        let scale = if finite && half > 0.0 && half.is_finite() {
             half
         } else {
             1.0

@@ -21,7 +21,11 @@ fn p(path: &Path) -> &str {
 /// A clip of `n` vertices on a slowly moving grid, far from the origin, with a triangle strip.
 fn grid_clip(id: &str, frames: usize, n: usize) -> Clip {
     let vertices = (0..frames)
-        .flat_map(|f| (0..n).map(move |v| [5.0 + (v % 25) as f32 * 0.1 + 0.01 * f as f32, 2.0 + (v / 25) as f32 * 0.1, (v % 7) as f32 * 0.05]))
+        .flat_map(|f| {
+            (0..n).map(move |v| {
+                [5.0 + (v % 25) as f32 * 0.1 + 0.01 * f as f32, 2.0 + (v / 25) as f32 * 0.1, (v % 7) as f32 * 0.05]
+            })
+        })
         .collect();
     let faces = (0..n as u32 - 2).map(|i| [i, i + 1, i + 2]).collect();
     Clip::new(id, vertices, frames, n, faces, "a test grid", "test").unwrap()

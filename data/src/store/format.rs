@@ -47,7 +47,8 @@ impl StoreWriter {
         let file = File::create(&tmp).map_err(|e| DataError::io(&tmp, e))?;
         let frames = u32_field(frames, dest, "header.frames")?;
         let p = u32_field(p, dest, "header.p")?;
-        let mut w = Self { tmp, dest: dest.to_path_buf(), out: BufWriter::new(file), pos: 0, entries: Vec::new(), frames, p };
+        let mut w =
+            Self { tmp, dest: dest.to_path_buf(), out: BufWriter::new(file), pos: 0, entries: Vec::new(), frames, p };
         let mut header = Vec::with_capacity(HEADER_LEN as usize);
         header.extend_from_slice(MAGIC);
         for v in [VERSION, frames, p, 0] {
@@ -130,7 +131,9 @@ pub fn encode(c: &StoredClip, path: &Path) -> Result<Vec<u8>> {
         b.extend_from_slice(&u32_field(s.len(), path, field)?.to_le_bytes());
         b.extend_from_slice(s.as_bytes());
     }
-    for (field, v) in [("frames", clip.frames), ("vertices", clip.n_vertices), ("faces", clip.faces.len()), ("fps", c.fps.len())] {
+    for (field, v) in
+        [("frames", clip.frames), ("vertices", clip.n_vertices), ("faces", clip.faces.len()), ("fps", c.fps.len())]
+    {
         b.extend_from_slice(&u32_field(v, path, field)?.to_le_bytes());
     }
     for p in &clip.vertices {
@@ -180,15 +183,25 @@ pub fn read_catalog(path: &Path) -> Result<Catalog> {
     let size = file.metadata().map_err(|e| DataError::io(path, e))?.len();
     let err = |field: &str, reason: String| DataError::new(path, field, reason);
     if size < HEADER_LEN + TRAILER_LEN {
-        return Err(err("file", format!("{size} bytes is shorter than header + trailer ({} bytes)", HEADER_LEN + TRAILER_LEN)));
+        return Err(err(
+            "file",
+            format!("{size} bytes is shorter than header + trailer ({} bytes)", HEADER_LEN + TRAILER_LEN),
+        ));
     }
     let header = read_at(&mut file, path, 0, HEADER_LEN as usize, "header")?;
     if &header[..8] != MAGIC {
-        return Err(err("header.magic at byte 0", format!("expected {:?}, found {:?}: not an any4d store", as_text(MAGIC), as_text(&header[..8]))));
+        return Err(err(
+            "header.magic at byte 0",
+            format!("expected {:?}, found {:?}: not an any4d store", as_text(MAGIC), as_text(&header[..8])),
+        ));
     }
-    let word = |i: usize| u32::from_le_bytes([header[8 + 4 * i], header[9 + 4 * i], header[10 + 4 * i], header[11 + 4 * i]]);
+    let word =
+        |i: usize| u32::from_le_bytes([header[8 + 4 * i], header[9 + 4 * i], header[10 + 4 * i], header[11 + 4 * i]]);
     if word(0) != VERSION {
-        return Err(err("header.version at byte 8", format!("version {} is not supported (this build reads {VERSION})", word(0))));
+        return Err(err(
+            "header.version at byte 8",
+            format!("version {} is not supported (this build reads {VERSION})", word(0)),
+        ));
     }
     let (frames, p) = (word(1) as usize, word(2) as usize);
     let trailer_at = size - TRAILER_LEN;
@@ -196,7 +209,11 @@ pub fn read_catalog(path: &Path) -> Result<Catalog> {
     if &trailer[16..] != END_MAGIC {
         return Err(err(
             &format!("trailer.magic at byte {}", trailer_at + 16),
-            format!("expected {:?}, found {:?}: the file is truncated or was not finished", as_text(END_MAGIC), as_text(&trailer[16..])),
+            format!(
+                "expected {:?}, found {:?}: the file is truncated or was not finished",
+                as_text(END_MAGIC),
+                as_text(&trailer[16..])
+            ),
         ));
     }
     let table_offset = u64_at(&trailer, 0);
@@ -222,7 +239,10 @@ pub fn read_catalog(path: &Path) -> Result<Catalog> {
             ));
         }
         let split = Split::from_code(table[at + 8]).ok_or_else(|| {
-            err(&format!("table entry {i} split at byte {}", entry_at + 8), format!("unknown split code {}", table[at + 8]))
+            err(
+                &format!("table entry {i} split at byte {}", entry_at + 8),
+                format!("unknown split code {}", table[at + 8]),
+            )
         })?;
         entries.push(Entry { offset, len: end - offset, split });
     }
@@ -262,7 +282,10 @@ impl Cursor<'_> {
         if self.bytes.len() - self.at < n {
             return Err(self.error(
                 field,
-                format!("needs {n} bytes but the record has {} left (corrupt or truncated)", self.bytes.len() - self.at),
+                format!(
+                    "needs {n} bytes but the record has {} left (corrupt or truncated)",
+                    self.bytes.len() - self.at
+                ),
             ));
         }
         self.at += n;
@@ -283,19 +306,32 @@ impl Cursor<'_> {
         let start = self.at;
         let b = self.take(n, field)?.to_vec();
         String::from_utf8(b).map_err(|e| {
-            DataError::new(self.path, format!("clip {} {field} at byte {}", self.clip, self.base + start as u64), e.to_string())
+            DataError::new(
+                self.path,
+                format!("clip {} {field} at byte {}", self.clip, self.base + start as u64),
+                e.to_string(),
+            )
         })
     }
 
     /// `count` little-endian 4-byte words; the length is checked before anything is allocated.
     fn words(&mut self, count: Option<usize>, field: &str) -> Result<&[u8]> {
-        let n = count.and_then(|c| c.checked_mul(4)).ok_or_else(|| self.error(field, "element count overflows".into()))?;
+        let n =
+            count.and_then(|c| c.checked_mul(4)).ok_or_else(|| self.error(field, "element count overflows".into()))?;
         self.take(n, field)
     }
 }
 
 /// Decode record `index` (bytes `record`, starting at absolute `offset` of `path`) with its `split`.
-pub fn decode(record: &[u8], offset: u64, path: &Path, index: usize, split: Split, frames: usize, p: usize) -> Result<StoredClip> {
+pub fn decode(
+    record: &[u8],
+    offset: u64,
+    path: &Path,
+    index: usize,
+    split: Split,
+    frames: usize,
+    p: usize,
+) -> Result<StoredClip> {
     let mut c = Cursor { bytes: record, at: 0, base: offset, path, clip: index };
     let id = c.string("id")?;
     let caption = c.string("caption")?;
@@ -305,7 +341,9 @@ pub fn decode(record: &[u8], offset: u64, path: &Path, index: usize, split: Spli
     let m = c.u32("faces")? as usize;
     let np = c.u32("fps")? as usize;
     if t != frames || np != p {
-        return Err(c.error("frames/fps", format!("clip {id} has T = {t}, P = {np}; the header says T = {frames}, P = {p}")));
+        return Err(
+            c.error("frames/fps", format!("clip {id} has T = {t}, P = {np}; the header says T = {frames}, P = {p}"))
+        );
     }
     let vertices: Vec<[f32; 3]> = c
         .words(t.checked_mul(n).and_then(|x| x.checked_mul(3)), "vertices")?
@@ -321,10 +359,17 @@ pub fn decode(record: &[u8], offset: u64, path: &Path, index: usize, split: Spli
     let fps: Vec<u32> =
         c.words(Some(np), "fps")?.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
     if let Some(bad) = fps.iter().find(|&&i| i as usize >= n) {
-        return Err(DataError::new(path, format!("clip {index} fps at byte {}", offset + fps_at as u64), format!("index {bad} ≥ {n} vertices")));
+        return Err(DataError::new(
+            path,
+            format!("clip {index} fps at byte {}", offset + fps_at as u64),
+            format!("index {bad} ≥ {n} vertices"),
+        ));
     }
-    let norm: Vec<f32> =
-        c.words(Some(4), "normalization")?.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    let norm: Vec<f32> = c
+        .words(Some(4), "normalization")?
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
     if c.at != record.len() {
         return Err(c.error("end", format!("{} unread bytes after the record", record.len() - c.at)));
     }

@@ -17,7 +17,9 @@ use crate::fps::farthest_point_sampling;
 use crate::preprocess::{self, VertexFilter};
 use crate::synth::{self, SynthConfig};
 
-use super::{CLIPS_FILE, DEFAULT_P, IndexRow, SPLIT_SEED, Split, Status, Store, StoreWriter, StoredClip, read_index, write_index};
+use super::{
+    CLIPS_FILE, DEFAULT_P, IndexRow, SPLIT_SEED, Split, Status, Store, StoreWriter, StoredClip, read_index, write_index,
+};
 
 /// Vertex welding before anything else (SPEC §2.1 sources with split seams).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -145,7 +147,12 @@ pub fn import(sources: &[PathBuf], out: &Path, opts: &ImportOptions) -> Result<I
 }
 
 /// [`import`] with a progress callback.
-pub fn import_with_progress(sources: &[PathBuf], out: &Path, opts: &ImportOptions, progress: Progress) -> Result<ImportReport> {
+pub fn import_with_progress(
+    sources: &[PathBuf],
+    out: &Path,
+    opts: &ImportOptions,
+    progress: Progress,
+) -> Result<ImportReport> {
     check_options(opts)?;
     let existing = prepare_out(out, opts.frames, opts.p)?;
     let jobs = discover(sources, out)?;
@@ -168,15 +175,13 @@ pub fn write_synth_with(cfg: &SynthConfig, out: &Path, p: usize, progress: Progr
     let jobs: Vec<Job> =
         (0..cfg.clips).map(|index| Job::Synth { source: format!("synth:{}:{index}", cfg.seed), index }).collect();
     run_jobs(out, existing, &jobs, cfg.frames, p, progress, |job| match job {
-        Job::Synth { source, index } => {
-            match synth::generate_one(cfg, *index) {
-                Ok(mut clip) => {
-                    clip.source = source.clone();
-                    Outcome::Clips(preprocess_windows(&clip, cfg.frames, 1, p))
-                }
-                Err(e) => Outcome::Rejected(reason(&e, source)),
+        Job::Synth { source, index } => match synth::generate_one(cfg, *index) {
+            Ok(mut clip) => {
+                clip.source = source.clone();
+                Outcome::Clips(preprocess_windows(&clip, cfg.frames, 1, p))
             }
-        }
+            Err(e) => Outcome::Rejected(reason(&e, source)),
+        },
         Job::File { .. } => Outcome::Rejected("not a procedural clip".into()),
     })
 }
@@ -255,7 +260,10 @@ fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
             Err(e) => found.push((src.clone(), Err(DataError::io(src, e)))),
             Ok(path) if path.is_dir() => {
                 if path.join(CLIPS_FILE).exists() {
-                    found.push((path, Err(DataError::new(src, CLIPS_FILE, "this folder is an any4d store, not a source"))));
+                    found.push((
+                        path,
+                        Err(DataError::new(src, CLIPS_FILE, "this folder is an any4d store, not a source")),
+                    ));
                 } else {
                     walk(&path, &out_canon, &mut found);
                 }
@@ -276,13 +284,14 @@ fn walk(dir: &Path, out: &Path, found: &mut Vec<(PathBuf, Result<Format>)>) {
     if dir == out || dir.join(CLIPS_FILE).exists() {
         return;
     }
-    let mut entries: Vec<PathBuf> = match std::fs::read_dir(dir).and_then(|rd| rd.map(|e| e.map(|e| e.path())).collect()) {
-        Ok(v) => v,
-        Err(e) => {
-            found.push((dir.to_path_buf(), Err(DataError::io(dir, e))));
-            return;
-        }
-    };
+    let mut entries: Vec<PathBuf> =
+        match std::fs::read_dir(dir).and_then(|rd| rd.map(|e| e.map(|e| e.path())).collect()) {
+            Ok(v) => v,
+            Err(e) => {
+                found.push((dir.to_path_buf(), Err(DataError::io(dir, e))));
+                return;
+            }
+        };
     entries.sort();
     let ext = |p: &Path| p.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     if entries.iter().any(|p| p.is_file() && ext(p).as_deref() == Some("obj")) {
@@ -402,7 +411,8 @@ fn run_jobs(
     let mut rejected_rows = Vec::new();
     let mut kept = 0;
     if let Some((store, rows)) = existing {
-        let (old_ok, old_rejected): (Vec<IndexRow>, Vec<IndexRow>) = rows.into_iter().partition(|r| r.status == Status::Ok);
+        let (old_ok, old_rejected): (Vec<IndexRow>, Vec<IndexRow>) =
+            rows.into_iter().partition(|r| r.status == Status::Ok);
         for (i, row) in old_ok.into_iter().enumerate() {
             if replaced.contains(row.source.as_str()) {
                 continue;
@@ -413,7 +423,10 @@ fn run_jobs(
                 return Err(DataError::new(
                     out,
                     "index.parquet",
-                    format!("row {i} names clip {:?} but clips.bin holds {id:?} there: the store is inconsistent", row.id),
+                    format!(
+                        "row {i} names clip {:?} but clips.bin holds {id:?} there: the store is inconsistent",
+                        row.id
+                    ),
                 ));
             }
             writer.append_encoded(&raw, store.split(i)?)?;
@@ -450,7 +463,16 @@ fn run_jobs(
     let total = ok_rows.len();
     ok_rows.extend(rejected_rows);
     write_index(out, &ok_rows)?;
-    Ok(ImportReport { dir: out.to_path_buf(), sources: jobs.len(), added, kept, total, train: total - val, val, rejected })
+    Ok(ImportReport {
+        dir: out.to_path_buf(),
+        sources: jobs.len(),
+        added,
+        kept,
+        total,
+        train: total - val,
+        val,
+        rejected,
+    })
 }
 
 /// The id at the start of an encoded record, if it is well formed.

@@ -104,7 +104,9 @@ pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
         strs(name)?
             .into_iter()
             .enumerate()
-            .map(|(i, s)| s.ok_or_else(|| DataError::new(&path, format!("{name} row {i}"), "null in a required column")))
+            .map(|(i, s)| {
+                s.ok_or_else(|| DataError::new(&path, format!("{name} row {i}"), "null in a required column"))
+            })
             .collect()
     };
     let (id, source, format, caption, status, reason, object) = (

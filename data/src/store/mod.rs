@@ -51,7 +51,9 @@ use crate::error::{DataError, Result};
 use crate::preprocess::Normalization;
 
 pub use format::{Catalog, Entry, StoreWriter, encode, read_catalog};
-pub use import::{ImportOptions, ImportReport, Progress, Rejected, Weld, import, write_synth, write_synth_with};
+pub use import::{
+    ImportOptions, ImportReport, Progress, Rejected, Weld, import, import_with_progress, write_synth, write_synth_with,
+};
 pub use index::{IndexRow, Status, read_index, write_index};
 
 /// File name of the clip records inside a store folder.
@@ -231,8 +233,10 @@ mod tests {
         // Binomial(4000, 0.2): mean 800, sd 25; ±100 is 4 sd.
         assert!((700..=900).contains(&val), "{val} of 4000 in val");
         // Fixed values guard against an accidental change of the hash (which would move objects across splits).
-        let sides: String = (0..32).map(|i| Split::of_object(&format!("obj{i}"), SPLIT_SEED).as_str().as_bytes()[0] as char).collect();
-        let other: String = (0..32).map(|i| Split::of_object(&format!("obj{i}"), 1).as_str().as_bytes()[0] as char).collect();
+        let sides: String =
+            (0..32).map(|i| Split::of_object(&format!("obj{i}"), SPLIT_SEED).as_str().as_bytes()[0] as char).collect();
+        let other: String =
+            (0..32).map(|i| Split::of_object(&format!("obj{i}"), 1).as_str().as_bytes()[0] as char).collect();
         assert_ne!(sides, other, "the seed must matter");
         assert_eq!(sides, SPLIT_GOLDEN);
     }

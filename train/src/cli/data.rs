@@ -224,9 +224,7 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
     let clip = if a.path.is_dir() && a.path.join(store::CLIPS_FILE).exists() {
         let store = Store::open(&a.path)?;
         let i = match &a.clip {
-            Some(id) => store
-                .position(id)?
-                .with_context(|| format!("{}: no clip with id {id:?}", a.path.display()))?,
+            Some(id) => store.position(id)?.with_context(|| format!("{}: no clip with id {id:?}", a.path.display()))?,
             None if store.is_empty() => bail!("{}: the store holds no clip", a.path.display()),
             None => 0,
         };
