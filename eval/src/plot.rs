@@ -289,6 +289,8 @@ pub fn canvas_line_plot(
     if y1 - y0 < 1e-12 {
         y1 = y0 + 1.0;
     }
+    let pad = (x1 - x0) * 0.05;
+    let (x0, x1) = (x0 - pad, x1 + pad);
     let yt = nice_ticks(y0, y1, 5);
     y0 = y0.min(yt[0]);
     y1 = y1.max(*yt.last().unwrap_or(&y1));
@@ -312,11 +314,21 @@ pub fn canvas_line_plot(
             1,
         );
     }
-    let xt = nice_ticks(x0, x1, 6);
+    // Integer x values (such as K_x) get integer ticks; the x range is padded so end points clear the frame.
+    let integer_x = xs.iter().all(|x| x.fract() == 0.0) && x1 - x0 <= 12.0;
+    let xt = if integer_x {
+        (x0 as i64..=x1 as i64).map(|t| t as f64).collect()
+    } else {
+        nice_ticks(x0, x1, 6)
+    };
     let xstep = if xt.len() > 1 { xt[1] - xt[0] } else { 1.0 };
     for &t in xt.iter().filter(|t| **t >= x0 - 1e-12 && **t <= x1 + 1e-12) {
         c.line(px(t), top + ph, px(t), top + ph + 4, BLACK, 1);
-        let lab = tick_label(t, xstep);
+        let lab = if integer_x {
+            format!("{t:.0}")
+        } else {
+            tick_label(t, xstep)
+        };
         c.text(
             px(t) - i64::from(text_width(&lab, 1)) / 2,
             top + ph + 8,

@@ -291,6 +291,9 @@ fn header_for(opts: &RunOptions, manifest_path: &Path) -> TableHeader {
         h.data = format!("{} (validation split)", opts.data.display());
     }
     h.manifest = manifest_path.display().to_string();
+    if h.text_encoder.is_empty() {
+        h.text_encoder = "none (no method reads text)".into();
+    }
     for m in &opts.methods {
         h.checkpoints
             .entry(m.kind().label())

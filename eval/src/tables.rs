@@ -457,10 +457,16 @@ pub fn markdown(kind: TableKind, rows: &[SummaryRow], header: &TableHeader) -> S
     s.push_str(&"---|".repeat(cols.len()));
     s.push('\n');
     for r in rows {
+        // P-Table 2 has fixed keyframes every 15 frames, no K_x column of its own.
+        let k = if kind == TableKind::Table2 {
+            "–".to_string()
+        } else {
+            r.k_extra.to_string()
+        };
         let _ = write!(
             s,
             "| {} | {} | {} | {} |",
-            r.method, r.placement, r.k_extra, r.clips
+            r.method, r.placement, k, r.clips
         );
         for (v, c) in r.values.iter().zip(cols) {
             let _ = write!(s, " {} |", fmt_estimate(v, c.scale));

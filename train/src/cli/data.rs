@@ -1,6 +1,7 @@
 //! `any4d data …` and `any4d bench data`: parse arguments, call `any4d_data` (SPEC §2: clip files, the dataset
 //! store, inspection, contact sheets; the throughput benchmark of import + normalise (D1)–(D3) + FPS).
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 use std::time::Instant;
@@ -138,12 +139,20 @@ pub fn run(cmd: DataCmd) -> anyhow::Result<ExitCode> {
         DataCmd::Inspect(a) => {
             let found = inspect::inspect(&a.path)?;
             match a.format {
-                OutputFormat::Table => print!("{}", found.to_table()),
-                OutputFormat::Json => println!("{}", found.to_json()),
+                OutputFormat::Table => emit(&found.to_table())?,
+                OutputFormat::Json => emit(&format!("{}\n", found.to_json()))?,
             }
             Ok(ExitCode::SUCCESS)
         }
         DataCmd::Render(a) => render(a),
+    }
+}
+
+/// Print to stdout; a closed pipe (`any4d data inspect … | head`) ends the output quietly instead of panicking.
+fn emit(text: &str) -> anyhow::Result<()> {
+    match std::io::stdout().lock().write_all(text.as_bytes()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => Ok(other?),
     }
 }
 
@@ -195,7 +204,7 @@ fn import(a: ImportArgs) -> anyhow::Result<ExitCode> {
     };
     let report = store::import_with_progress(&a.sources, &a.out, &opts, Some(&tick))?;
     bar.finish_and_clear();
-    print!("{report}");
+    emit(&report.to_string())?;
     if report.rejected.is_empty() { Ok(ExitCode::SUCCESS) } else { Ok(ExitCode::from(EXIT_REJECTED)) }
 }
 
@@ -216,7 +225,7 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
     };
     let report = store::write_synth_with(&cfg, &a.out, a.p, Some(&tick))?;
     bar.finish_and_clear();
-    print!("{report}");
+    emit(&report.to_string())?;
     if report.rejected.is_empty() { Ok(ExitCode::SUCCESS) } else { Ok(ExitCode::from(EXIT_REJECTED)) }
 }
 
@@ -339,14 +348,10 @@ fn bench_in(a: &BenchArgs, dir: &Path) -> anyhow::Result<ExitCode> {
         formats::write_clip(&path, &bench_clip(i, a.frames, a.vertices)?)?;
         files.push(path);
     }
-    println!(
-        "bench data: {} clips × {} frames × {} vertices, P = {} ({} build)",
-        a.clips,
-        a.frames,
-        a.vertices,
-        a.p,
-        if cfg!(debug_assertions) { "debug" } else { "release" }
-    );
+    println!("bench data: {} clips × {} frames × {} vertices, P = {}", a.clips, a.frames, a.vertices, a.p);
+    if cfg!(debug_assertions) {
+        println!("note: debug build; run `cargo run --release -p any4d-train -- bench data` for representative numbers");
+    }
     // (a) ours: read + normalise (D1)–(D3) + FPS, one thread.
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let (seconds, checksum) = pool.install(|| -> anyhow::Result<(f64, u64)> {

@@ -114,15 +114,24 @@ fn table(m: &ClipMetrics) -> String {
     ] {
         s += &format!("{name:<24}{:>12.4}\n", 100.0 * v);
     }
-    s += &format!("{:<24}{:>12}{:>12}{:>10}\n", "", "prediction", "GT", "ratio");
+    s += &format!("{:<24}{:>14}{:>14}{:>14}\n", "", "prediction", "GT", "ratio");
     for (name, p, g, r) in [
         ("acceleration", m.accel, m.accel_gt, m.accel_ratio),
         ("jerk", m.jerk, m.jerk_gt, m.jerk_ratio),
         ("motion energy", m.energy, m.energy_gt, m.energy_ratio),
     ] {
-        s += &format!("{name:<24}{p:>12.6}{g:>12.6}{r:>10.4}\n");
+        s += &format!("{name:<24}{:>14}{:>14}{:>14}\n", number(p), number(g), number(r));
     }
     s
+}
+
+/// Six decimals, or scientific notation for values too small or large for them.
+fn number(v: f64) -> String {
+    if v != 0.0 && v.is_finite() && !(1e-3..1e6).contains(&v.abs()) {
+        format!("{v:.4e}")
+    } else {
+        format!("{v:.6}")
+    }
 }
 
 #[derive(Args, Debug)]
