@@ -350,7 +350,9 @@ fn bench_in(a: &BenchArgs, dir: &Path) -> anyhow::Result<ExitCode> {
     }
     println!("bench data: {} clips × {} frames × {} vertices, P = {}", a.clips, a.frames, a.vertices, a.p);
     if cfg!(debug_assertions) {
-        println!("note: debug build; run `cargo run --release -p any4d-train -- bench data` for representative numbers");
+        println!(
+            "note: debug build; run `cargo run --release -p any4d-train -- bench data` for representative numbers"
+        );
     }
     // (a) ours: read + normalise (D1)–(D3) + FPS, one thread.
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
