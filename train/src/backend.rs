@@ -41,7 +41,11 @@ pub enum BackendError {
     NotCompiled { backend: Backend, feature: &'static str },
     /// The precision is not available on this backend.
     #[error("precision {precision:?} is not supported on backend `{backend}` ({reason})")]
-    Precision { backend: Backend, precision: Precision, reason: String },
+    Precision {
+        backend: Backend,
+        precision: Precision,
+        reason: String,
+    },
 }
 
 impl Backend {
@@ -86,11 +90,17 @@ fn base_device(backend: Backend) -> Result<Device, BackendError> {
         #[cfg(feature = "vulkan")]
         Backend::Vulkan => Ok(Device::vulkan(burn::tensor::DeviceKind::DiscreteGpu(0))),
         #[cfg(not(feature = "vulkan"))]
-        Backend::Vulkan => Err(BackendError::NotCompiled { backend, feature: "vulkan" }),
+        Backend::Vulkan => Err(BackendError::NotCompiled {
+            backend,
+            feature: "vulkan",
+        }),
         #[cfg(feature = "cuda")]
         Backend::Cuda => Ok(Device::cuda(0)),
         #[cfg(not(feature = "cuda"))]
-        Backend::Cuda => Err(BackendError::NotCompiled { backend, feature: "cuda" }),
+        Backend::Cuda => Err(BackendError::NotCompiled {
+            backend,
+            feature: "cuda",
+        }),
     }
 }
 
@@ -105,17 +115,22 @@ fn bf16_device(backend: Backend, #[allow(unused_mut)] mut device: Device) -> Res
     #[cfg(feature = "cuda")]
     {
         use burn::tensor::FloatDType;
-        device.configure(FloatDType::BF16).map_err(|err| BackendError::Precision {
-            backend,
-            precision: Precision::Bf16,
-            reason: format!("{err:?}"),
-        })?;
+        device
+            .configure(FloatDType::BF16)
+            .map_err(|err| BackendError::Precision {
+                backend,
+                precision: Precision::Bf16,
+                reason: format!("{err:?}"),
+            })?;
         Ok(device)
     }
     #[cfg(not(feature = "cuda"))]
     {
         let _ = device;
-        Err(BackendError::NotCompiled { backend, feature: "cuda" })
+        Err(BackendError::NotCompiled {
+            backend,
+            feature: "cuda",
+        })
     }
 }
 

@@ -57,8 +57,13 @@ pub fn save<M: Module + Clone>(dir: &Path, model: &M, optim: &ModuleOptimizer, s
         path: tmp.clone(),
         reason: format!("{what}: {e}"),
     };
-    model.clone().save_file(tmp.join(MODEL_FILE)).map_err(|e| ckpt_err("save model", e))?;
-    optim.save(tmp.join(OPTIM_FILE)).map_err(|e| ckpt_err("save optimiser", e))?;
+    model
+        .clone()
+        .save_file(tmp.join(MODEL_FILE))
+        .map_err(|e| ckpt_err("save model", e))?;
+    optim
+        .save(tmp.join(OPTIM_FILE))
+        .map_err(|e| ckpt_err("save optimiser", e))?;
     let json = serde_json::to_vec_pretty(state).map_err(|e| TrainError::Checkpoint {
         path: tmp.clone(),
         reason: format!("serialise state: {e}"),
@@ -66,7 +71,9 @@ pub fn save<M: Module + Clone>(dir: &Path, model: &M, optim: &ModuleOptimizer, s
     write_atomic(&tmp.join(STATE_FILE), &json)?;
     for f in [MODEL_FILE, OPTIM_FILE] {
         let p = tmp.join(f);
-        fs::File::open(&p).and_then(|f| f.sync_all()).map_err(io_err("sync", &p))?;
+        fs::File::open(&p)
+            .and_then(|f| f.sync_all())
+            .map_err(io_err("sync", &p))?;
     }
     if final_dir.exists() {
         // An incomplete step folder cannot come from this code (rename is atomic); refuse to touch it.
@@ -85,7 +92,10 @@ pub fn list(dir: &Path) -> Result<Vec<(u64, PathBuf)>> {
     for entry in fs::read_dir(dir).map_err(io_err("list", dir))? {
         let entry = entry.map_err(io_err("list", dir))?;
         let name = entry.file_name();
-        let Some(step) = name.to_str().and_then(|n| n.strip_prefix("step_")).and_then(|s| s.parse::<u64>().ok())
+        let Some(step) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix("step_"))
+            .and_then(|s| s.parse::<u64>().ok())
         else {
             continue;
         };
@@ -110,13 +120,19 @@ pub fn read_state(ckpt: &Path) -> Result<TrainState> {
         path: p.clone(),
         reason: format!("bad state: {e}"),
     })?;
-    Ok(TrainState { order: state.order.restored(), ..state })
+    Ok(TrainState {
+        order: state.order.restored(),
+        ..state
+    })
 }
 
 /// Loads the parameters of a checkpoint into `model` (built from the same config).
 pub fn load_model<M: Module>(model: M, ckpt: &Path) -> Result<M> {
     let p = ckpt.join(MODEL_FILE);
-    model.try_load_file(&p).map_err(|e| TrainError::Checkpoint { path: p, reason: e.to_string() })
+    model.try_load_file(&p).map_err(|e| TrainError::Checkpoint {
+        path: p,
+        reason: e.to_string(),
+    })
 }
 
 /// Loads model, optimiser state and [`TrainState`] of a checkpoint.
@@ -124,7 +140,10 @@ pub fn load<M: Module>(ckpt: &Path, model: M, optim: ModuleOptimizer) -> Result<
     let state = read_state(ckpt)?;
     let model = load_model(model, ckpt)?;
     let p = ckpt.join(OPTIM_FILE);
-    let optim = optim.load(&p).map_err(|e| TrainError::Checkpoint { path: p, reason: e.to_string() })?;
+    let optim = optim.load(&p).map_err(|e| TrainError::Checkpoint {
+        path: p,
+        reason: e.to_string(),
+    })?;
     Ok((model, optim, state))
 }
 

@@ -85,7 +85,10 @@ impl TrainConfig {
     /// Checks value ranges; `file` names the config in the error.
     pub fn validate(&self, file: &Path) -> Result<()> {
         let bad = |field: &str, reason: String| {
-            Err(TrainError::Config { path: file.to_path_buf(), reason: format!("train.{field}: {reason}") })
+            Err(TrainError::Config {
+                path: file.to_path_buf(),
+                reason: format!("train.{field}: {reason}"),
+            })
         };
         if self.batch_size == 0 || self.micro_batch == 0 {
             return bad("batch_size", "batch_size and micro_batch must be positive".into());
@@ -93,11 +96,17 @@ impl TrainConfig {
         if self.batch_size % self.micro_batch != 0 {
             return bad(
                 "micro_batch",
-                format!("batch_size {} is not a multiple of micro_batch {}", self.batch_size, self.micro_batch),
+                format!(
+                    "batch_size {} is not a multiple of micro_batch {}",
+                    self.batch_size, self.micro_batch
+                ),
             );
         }
         if self.checkpoint_every == 0 || self.valid_every == 0 {
-            return bad("checkpoint_every", "checkpoint_every and valid_every must be positive".into());
+            return bad(
+                "checkpoint_every",
+                "checkpoint_every and valid_every must be positive".into(),
+            );
         }
         if self.keep_last == 0 {
             return bad("keep_last", "must keep at least one checkpoint".into());
@@ -146,7 +155,10 @@ impl OptimConfig {
 
 /// Parses TOML text into the strict run-config type `C`; `file` names the source in errors.
 pub fn parse_strict<C: DeserializeOwned>(text: &str, file: &Path) -> Result<C> {
-    toml::from_str(text).map_err(|e| TrainError::Config { path: file.to_path_buf(), reason: e.to_string() })
+    toml::from_str(text).map_err(|e| TrainError::Config {
+        path: file.to_path_buf(),
+        reason: e.to_string(),
+    })
 }
 
 /// Reads a TOML file into `C`.
@@ -157,7 +169,10 @@ pub fn load_strict<C: DeserializeOwned>(file: &Path) -> Result<C> {
 
 /// Serialises a resolved config to TOML (the run folder's `config.toml`).
 pub fn to_toml<C: Serialize>(config: &C) -> Result<String> {
-    toml::to_string(config).map_err(|e| TrainError::Config { path: "<resolved>".into(), reason: e.to_string() })
+    toml::to_string(config).map_err(|e| TrainError::Config {
+        path: "<resolved>".into(),
+        reason: e.to_string(),
+    })
 }
 
 /// Deserialises a model `Config` (lenient in burn) from `table` and rejects any key it does not know or any
@@ -167,7 +182,10 @@ pub fn strict_model_config<M>(table: &toml::Value, section: &str, file: &Path) -
 where
     M: DeserializeOwned + Serialize,
 {
-    let err = |reason: String| TrainError::Config { path: file.to_path_buf(), reason };
+    let err = |reason: String| TrainError::Config {
+        path: file.to_path_buf(),
+        reason,
+    };
     let parsed: M = table.clone().try_into().map_err(|e| err(format!("[{section}]: {e}")))?;
     let back = toml::Value::try_from(&parsed).map_err(|e| err(format!("[{section}]: {e}")))?;
     compare_keys(table, &back, section).map_err(err)?;
@@ -239,7 +257,12 @@ precision = "f32"
         let err = parse_strict::<Run>(&typo, p).unwrap_err().to_string();
         assert!(err.contains("keep_lats") && err.contains("t.toml"), "{err}");
         let missing = TEXT.replace("eps = 1e-8\n", "");
-        assert!(parse_strict::<Run>(&missing, p).unwrap_err().to_string().contains("eps"));
+        assert!(
+            parse_strict::<Run>(&missing, p)
+                .unwrap_err()
+                .to_string()
+                .contains("eps")
+        );
         let bad_backend = TEXT.replace("\"flex\"", "\"tpu\"");
         assert!(parse_strict::<Run>(&bad_backend, p).is_err());
     }

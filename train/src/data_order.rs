@@ -25,7 +25,13 @@ impl DataOrder {
     /// Starts at epoch 0, position 0. `len` must be positive.
     pub fn new(seed: u64, len: usize) -> Self {
         assert!(len > 0, "DataOrder needs at least one example");
-        let mut order = DataOrder { seed, len, epoch: 0, cursor: 0, perm: Vec::new() };
+        let mut order = DataOrder {
+            seed,
+            len,
+            epoch: 0,
+            cursor: 0,
+            perm: Vec::new(),
+        };
         order.shuffle();
         order
     }

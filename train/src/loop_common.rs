@@ -105,7 +105,15 @@ pub struct LoopSetup<'a> {
 /// Trains `model` with `objective` until the configured duration, a stop request or a non-finite value.
 /// Returns the trained model and how the run ended. Checkpoints go to `run/checkpoints/`.
 pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>) -> Result<(O::Model, Outcome)> {
-    let LoopSetup { run, train: cfg, optim: optim_cfg, device, stop, progress, resume } = setup;
+    let LoopSetup {
+        run,
+        train: cfg,
+        optim: optim_cfg,
+        device,
+        stop,
+        progress,
+        resume,
+    } = setup;
     let ckpt_dir = run.path(CHECKPOINTS_DIR);
     let len = objective.train_len();
     if len == 0 {
@@ -131,7 +139,10 @@ pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>)
     if state.order.len != len {
         return Err(TrainError::Checkpoint {
             path: resume.unwrap_or_default(),
-            reason: format!("saved with {} training examples, the data now has {len}", state.order.len),
+            reason: format!(
+                "saved with {} training examples, the data now has {len}",
+                state.order.len
+            ),
         });
     }
     run.log(&format!(
@@ -153,10 +164,20 @@ pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>)
     while state.step < total_steps {
         if stop.is_set() {
             let ckpt = save(&ckpt_dir, &model, &optim, &state, cfg)?;
-            run.log(&format!("stopped by request after step {}; checkpoint {}", state.step, ckpt.display()))?;
+            run.log(&format!(
+                "stopped by request after step {}; checkpoint {}",
+                state.step,
+                ckpt.display()
+            ))?;
             bar.finish();
             finish_plot(run)?;
-            return Ok((model, Outcome::Interrupted { step: state.step, checkpoint: ckpt }));
+            return Ok((
+                model,
+                Outcome::Interrupted {
+                    step: state.step,
+                    checkpoint: ckpt,
+                },
+            ));
         }
         let step = state.step + 1;
         let t0 = Instant::now();
@@ -220,7 +241,13 @@ pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>)
     };
     run.log(&format!("finished {} steps; checkpoint {}", state.step, ckpt.display()))?;
     finish_plot(run)?;
-    Ok((model, Outcome::Finished { steps: state.step, checkpoint: ckpt }))
+    Ok((
+        model,
+        Outcome::Finished {
+            steps: state.step,
+            checkpoint: ckpt,
+        },
+    ))
 }
 
 fn save<M: Module + Clone>(
@@ -257,7 +284,12 @@ fn guard(value: f64, step: u64, what: &str, last_good: &Option<PathBuf>) -> Resu
     if value.is_finite() {
         Ok(())
     } else {
-        Err(TrainError::NonFinite { step, what: what.to_string(), value, last_good: last_good.clone() })
+        Err(TrainError::NonFinite {
+            step,
+            what: what.to_string(),
+            value,
+            last_good: last_good.clone(),
+        })
     }
 }
 
@@ -290,11 +322,17 @@ pub fn clip_global_norm<M: Module>(model: &M, mut grads: GradientsParams, max_no
             }
         }
     }
-    let mut norm = SquaredNorm { grads: &grads, sum: None };
+    let mut norm = SquaredNorm {
+        grads: &grads,
+        sum: None,
+    };
     model.visit(&mut norm);
     let total = norm.sum.map_or(0.0, |s| scalar(s).sqrt());
     if total > max_norm {
-        let mut scale = Scale { grads: &mut grads, factor: max_norm / (total + 1e-6) };
+        let mut scale = Scale {
+            grads: &mut grads,
+            factor: max_norm / (total + 1e-6),
+        };
         model.visit(&mut scale);
     }
     (grads, total)

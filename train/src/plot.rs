@@ -14,7 +14,14 @@ const LEFT: u32 = 70;
 const RIGHT: u32 = 160;
 const TOP: u32 = 20;
 const BOTTOM: u32 = 40;
-const PALETTE: [[u8; 3]; 6] = [[31, 119, 180], [255, 127, 14], [44, 160, 44], [148, 103, 189], [140, 86, 75], [23, 190, 207]];
+const PALETTE: [[u8; 3]; 6] = [
+    [31, 119, 180],
+    [255, 127, 14],
+    [44, 160, 44],
+    [148, 103, 189],
+    [140, 86, 75],
+    [23, 190, 207],
+];
 const VALID_COLOUR: [u8; 3] = [214, 39, 40];
 
 /// A named series of (step, value) points.
@@ -47,7 +54,11 @@ pub fn plot_run(metrics: &Path, valid: &Path, out: &Path) -> Result<()> {
         if !v.rows.is_empty() {
             series.push(Series {
                 name: "valid".into(),
-                points: v.rows.iter().map(|(s, vals)| (*s as f64, *vals.last().unwrap_or(&f64::NAN))).collect(),
+                points: v
+                    .rows
+                    .iter()
+                    .map(|(s, vals)| (*s as f64, *vals.last().unwrap_or(&f64::NAN)))
+                    .collect(),
                 colour: VALID_COLOUR,
                 dots: true,
             });
@@ -55,7 +66,8 @@ pub fn plot_run(metrics: &Path, valid: &Path, out: &Path) -> Result<()> {
     }
     let img = render(&series);
     let tmp = out.with_file_name(".tmp_plot.png");
-    img.save(&tmp).map_err(|e| TrainError::Other(format!("write plot {}: {e}", tmp.display())))?;
+    img.save(&tmp)
+        .map_err(|e| TrainError::Other(format!("write plot {}: {e}", tmp.display())))?;
     std::fs::rename(&tmp, out).map_err(crate::error::io_err("rename plot into place", out))
 }
 
@@ -65,7 +77,9 @@ pub fn render(series: &[Series]) -> RgbImage {
     let usable = |&(x, y): &(f64, f64)| x.is_finite() && y.is_finite() && y > 0.0;
     let pts = || series.iter().flat_map(|s| s.points.iter().copied().filter(usable));
     let (mut x0, mut x1) = pts().fold((f64::MAX, f64::MIN), |(a, b), (x, _)| (a.min(x), b.max(x)));
-    let (mut y0, mut y1) = pts().fold((f64::MAX, f64::MIN), |(a, b), (_, y)| (a.min(y.log10()), b.max(y.log10())));
+    let (mut y0, mut y1) = pts().fold((f64::MAX, f64::MIN), |(a, b), (_, y)| {
+        (a.min(y.log10()), b.max(y.log10()))
+    });
     if x0 > x1 {
         (x0, x1, y0, y1) = (0.0, 1.0, -1.0, 0.0);
     }
@@ -90,11 +104,31 @@ pub fn render(series: &[Series]) -> RgbImage {
         let xp = px(x);
         line(&mut img, xp, (H - BOTTOM) as f64, xp, (H - BOTTOM + 4) as f64, black);
         let label = format!("{}", x.round() as i64);
-        text(&mut img, xp as i64 - 4 * label.len() as i64, (H - BOTTOM + 10) as i64, &label, black);
+        text(
+            &mut img,
+            xp as i64 - 4 * label.len() as i64,
+            (H - BOTTOM + 10) as i64,
+            &label,
+            black,
+        );
     }
     text(&mut img, (W - RIGHT) as i64 - 40, (H - 14) as i64, "step", black);
-    line(&mut img, LEFT as f64, TOP as f64, LEFT as f64, (H - BOTTOM) as f64, black);
-    line(&mut img, LEFT as f64, (H - BOTTOM) as f64, (W - RIGHT) as f64, (H - BOTTOM) as f64, black);
+    line(
+        &mut img,
+        LEFT as f64,
+        TOP as f64,
+        LEFT as f64,
+        (H - BOTTOM) as f64,
+        black,
+    );
+    line(
+        &mut img,
+        LEFT as f64,
+        (H - BOTTOM) as f64,
+        (W - RIGHT) as f64,
+        (H - BOTTOM) as f64,
+        black,
+    );
     for (k, s) in series.iter().enumerate() {
         let c = Rgb(s.colour);
         let mut prev: Option<(f64, f64)> = None;
@@ -132,7 +166,12 @@ fn line(img: &mut RgbImage, xa: f64, ya: f64, xb: f64, yb: f64, c: Rgb<u8>) {
     let n = ((xb - xa).abs().max((yb - ya).abs()).ceil() as i64).max(1);
     for i in 0..=n {
         let t = i as f64 / n as f64;
-        put(img, (xa + t * (xb - xa)).round() as i64, (ya + t * (yb - ya)).round() as i64, c);
+        put(
+            img,
+            (xa + t * (xb - xa)).round() as i64,
+            (ya + t * (yb - ya)).round() as i64,
+            c,
+        );
     }
 }
 

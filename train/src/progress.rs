@@ -88,7 +88,10 @@ impl Progress {
 pub fn compact_line(step: u64, total: u64, loss: f64, steps_per_s: f64) -> String {
     let pct = 100.0 * step as f64 / total.max(1) as f64;
     let eta = (total.saturating_sub(step)) as f64 / steps_per_s.max(1e-9);
-    format!("step {step}/{total} ({pct:.1}%) loss {loss:.4e} {steps_per_s:.2} steps/s ETA {}", hms(eta))
+    format!(
+        "step {step}/{total} ({pct:.1}%) loss {loss:.4e} {steps_per_s:.2} steps/s ETA {}",
+        hms(eta)
+    )
 }
 
 fn hms(secs: f64) -> String {

@@ -74,7 +74,10 @@ impl RfRunConfig {
     /// Parses and validates an RF run config; unknown or missing keys anywhere are errors naming `file`.
     pub fn parse(text: &str, file: &Path) -> Result<Self> {
         let cfg: RfRunConfig = parse_strict(text, file)?;
-        let bad = |reason: String| TrainError::Config { path: file.to_path_buf(), reason };
+        let bad = |reason: String| TrainError::Config {
+            path: file.to_path_buf(),
+            reason,
+        };
         cfg.model.validate().map_err(bad)?;
         cfg.train.validate(file)?;
         cfg.optim.validate(file)?;
@@ -89,7 +92,10 @@ impl RfRunConfig {
             return Err(bad(format!("rf.keyframe_noise {} is negative", rf.keyframe_noise)));
         }
         if rf.k_max > cfg.model.frames {
-            return Err(bad(format!("rf.k_max {} exceeds model.frames {}", rf.k_max, cfg.model.frames)));
+            return Err(bad(format!(
+                "rf.k_max {} exceeds model.frames {}",
+                rf.k_max, cfg.model.frames
+            )));
         }
         Ok(cfg)
     }

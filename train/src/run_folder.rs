@@ -47,7 +47,11 @@ impl RunFolder {
             .find_map(|candidate| match fs::create_dir(&candidate) {
                 Ok(()) => Some(Ok(candidate)),
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => None,
-                Err(e) => Some(Err(TrainError::Io { op: "create run folder", path: candidate, source: e })),
+                Err(e) => Some(Err(TrainError::Io {
+                    op: "create run folder",
+                    path: candidate,
+                    source: e,
+                })),
             })
             .expect("an unbounded range always yields a candidate")?;
         let run = RunFolder { root };
@@ -76,7 +80,9 @@ impl RunFolder {
                 });
             }
         }
-        Ok(RunFolder { root: root.to_path_buf() })
+        Ok(RunFolder {
+            root: root.to_path_buf(),
+        })
     }
 
     /// The folder itself.
@@ -115,7 +121,10 @@ impl RunFolder {
 
     fn append(&self, file: &str, text: &str) -> Result<()> {
         let p = self.path(file);
-        let mut f = OpenOptions::new().append(true).open(&p).map_err(io_err("open for append", &p))?;
+        let mut f = OpenOptions::new()
+            .append(true)
+            .open(&p)
+            .map_err(io_err("open for append", &p))?;
         f.write_all(text.as_bytes()).map_err(io_err("append to", &p))
     }
 }
@@ -133,7 +142,10 @@ fn csv_row(step: u64, values: &[f64]) -> String {
 /// Writes `bytes` to `path` through a temporary sibling and a rename, so readers see the old file or the new
 /// one, never a torn one.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let file_name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let tmp = path.with_file_name(format!(".tmp_{file_name}"));
     {
         let mut f = File::create(&tmp).map_err(io_err("create", &tmp))?;
@@ -178,7 +190,10 @@ pub fn read_table(path: &Path) -> Result<Table> {
             .map(|f| f.parse::<f64>().map_err(|e| bad(i + 2, format!("`{f}`: {e}"))))
             .collect::<Result<Vec<_>>>()?;
         if values.len() + 1 != header.len() {
-            return Err(bad(i + 2, format!("{} columns, header has {}", values.len() + 1, header.len())));
+            return Err(bad(
+                i + 2,
+                format!("{} columns, header has {}", values.len() + 1, header.len()),
+            ));
         }
         rows.retain(|(s, _)| *s < step);
         rows.push((step, values));

@@ -87,7 +87,13 @@ impl VaeRunConfig {
         };
         t.train.validate(file)?;
         t.optim.validate(file)?;
-        Ok(VaeRunConfig { vae: t.vae, model, train: t.train, optim: t.optim, device: t.device })
+        Ok(VaeRunConfig {
+            vae: t.vae,
+            model,
+            train: t.train,
+            optim: t.optim,
+            device: t.device,
+        })
     }
 
     /// Reads a config file.
@@ -102,7 +108,10 @@ impl VaeRunConfig {
             VaeModelConfig::Framewise(c) => toml::Value::try_from(c),
             VaeModelConfig::Sequencewise(c) => toml::Value::try_from(c),
         }
-        .map_err(|e| TrainError::Config { path: "<resolved>".into(), reason: e.to_string() })?;
+        .map_err(|e| TrainError::Config {
+            path: "<resolved>".into(),
+            reason: e.to_string(),
+        })?;
         to_toml(&VaeTables {
             vae: self.vae.clone(),
             model,
@@ -126,7 +135,13 @@ impl MeshVae for FrameVae {
         self.loss(batch)
     }
     fn vae_encode(&self, b: &VaeBatch) -> VaeEncoding {
-        self.encode(b.reference.clone(), b.frames.clone(), b.vmask.clone(), b.fps.clone(), &b.edges)
+        self.encode(
+            b.reference.clone(),
+            b.frames.clone(),
+            b.vmask.clone(),
+            b.fps.clone(),
+            &b.edges,
+        )
     }
 }
 
@@ -135,7 +150,13 @@ impl MeshVae for DyMeshVae {
         self.loss(batch)
     }
     fn vae_encode(&self, b: &VaeBatch) -> VaeEncoding {
-        self.encode(b.reference.clone(), b.frames.clone(), b.vmask.clone(), b.fps.clone(), &b.edges)
+        self.encode(
+            b.reference.clone(),
+            b.frames.clone(),
+            b.vmask.clone(),
+            b.fps.clone(),
+            &b.edges,
+        )
     }
 }
 
@@ -183,7 +204,13 @@ impl<V> VaeObjective<V> {
         let store = Store::open(data).map_err(|e| TrainError::Other(e.to_string()))?;
         let train = store.indices(Split::Train);
         let valid = store.indices(Split::Val);
-        Ok(VaeObjective { store, train, valid, micro_batch, _vae: std::marker::PhantomData })
+        Ok(VaeObjective {
+            store,
+            train,
+            valid,
+            micro_batch,
+            _vae: std::marker::PhantomData,
+        })
     }
 }
 
@@ -202,7 +229,10 @@ impl<V: MeshVae> Objective for VaeObjective<V> {
         let ids: Vec<usize> = idx.iter().map(|&i| self.train[i]).collect();
         let (clips, _) = load_clips(&self.store, &ids, device)?;
         let l = model.vae_loss(&vae_batch(&clips, device)?); // (V1)–(V3)
-        Ok(Losses { total: l.total, terms: vec![l.rec, l.kl] })
+        Ok(Losses {
+            total: l.total,
+            terms: vec![l.rec, l.kl],
+        })
     }
 
     fn validate(&self, model: &V, device: &Device) -> Result<Option<Vec<f64>>> {
@@ -280,7 +310,10 @@ pub fn resume_vae(run_dir: &Path, backend: Option<backend::Backend>, opts: &VaeR
         cfg.device.backend = b;
     }
     let ckpt = crate::checkpoint::latest(&run.path(crate::run_folder::CHECKPOINTS_DIR))?.ok_or_else(|| {
-        TrainError::Checkpoint { path: run_dir.to_path_buf(), reason: "no complete checkpoint to resume".into() }
+        TrainError::Checkpoint {
+            path: run_dir.to_path_buf(),
+            reason: "no complete checkpoint to resume".into(),
+        }
     })?;
     run_vae(&cfg, &run, opts, Some(ckpt))
 }
@@ -304,8 +337,14 @@ fn fit<V: MeshVae>(
     device: &Device,
 ) -> Result<Outcome> {
     let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch)?;
-    run.log(&format!("VAE {:?} on {} ({} train / {} val clips), backend {}", cfg.vae.kind, opts.data.display(),
-        objective.train.len(), objective.valid.len(), cfg.device.backend))?;
+    run.log(&format!(
+        "VAE {:?} on {} ({} train / {} val clips), backend {}",
+        cfg.vae.kind,
+        opts.data.display(),
+        objective.train.len(),
+        objective.valid.len(),
+        cfg.device.backend
+    ))?;
     let setup = LoopSetup {
         run,
         train: &cfg.train,
@@ -319,7 +358,13 @@ fn fit<V: MeshVae>(
     if let Outcome::Finished { steps, .. } = &outcome {
         let inference = device.clone().without_autodiff();
         inference.seed(cfg.train.seed);
-        let stats = latent_stats(&model.valid(), &objective.store, &objective.train, cfg.train.micro_batch, &inference)?;
+        let stats = latent_stats(
+            &model.valid(),
+            &objective.store,
+            &objective.train,
+            cfg.train.micro_batch,
+            &inference,
+        )?;
         let json = serde_json::to_vec_pretty(&StoredLatentStats { step: *steps, stats })
             .map_err(|e| TrainError::Other(format!("serialise latent stats: {e}")))?;
         write_atomic(&run.path(LATENT_STATS_FILE), &json)?;

@@ -30,7 +30,10 @@ fn parse_any(text: &str, path: &Path) -> Result<(), String> {
     } else if table.contains_key("rf") {
         RfRunConfig::parse(text, path).map(|_| ()).map_err(|e| e.to_string())
     } else {
-        Err(format!("{}: neither a [vae] nor an [rf] table: not a run config", path.display()))
+        Err(format!(
+            "{}: neither a [vae] nor an [rf] table: not a run config",
+            path.display()
+        ))
     }
 }
 
@@ -39,7 +42,10 @@ fn every_config_and_experiment_toml_is_complete_and_known() {
     let mut files = Vec::new();
     tomls(&root().join("configs"), &mut files);
     tomls(&root().join("experiments"), &mut files);
-    assert!(files.len() >= 7, "expected the presets of configs/vae and configs/rf, found {files:?}");
+    assert!(
+        files.len() >= 7,
+        "expected the presets of configs/vae and configs/rf, found {files:?}"
+    );
     let errors: Vec<String> = files
         .iter()
         .filter_map(|f| parse_any(&std::fs::read_to_string(f).expect("readable"), f).err())
@@ -53,16 +59,19 @@ fn typos_and_omissions_are_rejected_in_every_table() {
     let text = std::fs::read_to_string(&vae).expect("configs/vae/tiny.toml");
     assert!(parse_any(&text, &vae).is_ok());
     for (from, to, needle) in [
-        ("width = 32", "widht = 32", "width"),                // [model]: reported as the missing `width`
+        ("width = 32", "widht = 32", "width"), // [model]: reported as the missing `width`
         ("width = 32\n", "width = 32\nwidth_mult = 2\n", "model.width_mult"), // unknown [model] key
-        ("kl_weight = 1e-4\n", "", "kl_weight"),                // missing [model] key
-        ("keep_last = 3", "keep_lats = 3", "keep_lats"),       // [train]
-        ("grad_clip = 1.0", "grad_clip = 0.0", "optim"),       // out of range
+        ("kl_weight = 1e-4\n", "", "kl_weight"), // missing [model] key
+        ("keep_last = 3", "keep_lats = 3", "keep_lats"), // [train]
+        ("grad_clip = 1.0", "grad_clip = 0.0", "optim"), // out of range
         ("kind = \"framewise\"", "kind = \"framewize\"", "framewize"),
     ] {
         assert!(text.contains(from), "{from}");
         let err = parse_any(&text.replacen(from, to, 1), &vae).unwrap_err();
-        assert!(err.contains(needle) && err.contains("tiny.toml"), "{from} → {to}: {err}");
+        assert!(
+            err.contains(needle) && err.contains("tiny.toml"),
+            "{from} → {to}: {err}"
+        );
     }
     let rf = root().join("configs/rf/tiny.toml");
     let text = std::fs::read_to_string(&rf).expect("configs/rf/tiny.toml");
@@ -79,8 +88,17 @@ fn resolved_configs_round_trip() {
     let cfg = VaeRunConfig::load(&vae).unwrap();
     let again = VaeRunConfig::parse(&cfg.to_toml().unwrap(), Path::new("resolved.toml")).unwrap();
     assert_eq!(again.to_toml().unwrap(), cfg.to_toml().unwrap());
-    assert_eq!((cfg.train.batch_size, cfg.optim.lr, cfg.optim.beta2), (256, 1e-4, 0.999));
+    assert_eq!(
+        (cfg.train.batch_size, cfg.optim.lr, cfg.optim.beta2),
+        (256, 1e-4, 0.999)
+    );
     let rf = RfRunConfig::load(&root().join("configs/rf/paper.toml")).unwrap();
-    assert_eq!(RfRunConfig::parse(&rf.to_toml().unwrap(), Path::new("r.toml")).unwrap(), rf);
-    assert_eq!((rf.train.batch_size, rf.optim.lr, rf.optim.beta2, rf.optim.weight_decay), (256, 2e-4, 0.99, 0.01));
+    assert_eq!(
+        RfRunConfig::parse(&rf.to_toml().unwrap(), Path::new("r.toml")).unwrap(),
+        rf
+    );
+    assert_eq!(
+        (rf.train.batch_size, rf.optim.lr, rf.optim.beta2, rf.optim.weight_decay),
+        (256, 2e-4, 0.99, 0.01)
+    );
 }

@@ -33,7 +33,11 @@ struct Mlp {
 impl Mlp {
     fn new(device: &Device) -> Self {
         device.seed(1);
-        Mlp { fc1: LinearConfig::new(4, 16).init(device), fc2: LinearConfig::new(16, 1).init(device), act: Relu::new() }
+        Mlp {
+            fc1: LinearConfig::new(4, 16).init(device),
+            fc2: LinearConfig::new(16, 1).init(device),
+            act: Relu::new(),
+        }
     }
     fn forward(&self, x: Tensor<2>) -> Tensor<2> {
         self.fc2.forward(self.act.forward(self.fc1.forward(x)))
@@ -55,7 +59,12 @@ impl Toy {
             let f = i as f32;
             [(f * 0.37).sin(), (f * 0.71).cos(), (f * 0.13).sin(), (f * 1.3).cos()]
         });
-        Toy { xs: xs.collect(), stop_after_calls: None, nan_at_call: None, calls: Cell::new(0) }
+        Toy {
+            xs: xs.collect(),
+            stop_after_calls: None,
+            nan_at_call: None,
+            calls: Cell::new(0),
+        }
     }
 }
 
@@ -86,7 +95,10 @@ impl Objective for Toy {
         if self.nan_at_call == Some(calls) {
             mse = mse.div_scalar(0.0).mul_scalar(0.0);
         }
-        Ok(Losses { total: mse.clone(), terms: vec![mse] })
+        Ok(Losses {
+            total: mse.clone(),
+            terms: vec![mse],
+        })
     }
     fn validate(&self, model: &Mlp, device: &Device) -> Result<Option<Vec<f64>>> {
         let flat: Vec<f32> = self.xs[32..].iter().flatten().copied().collect();
@@ -108,17 +120,18 @@ fn cfgs(steps: u64) -> (TrainConfig, OptimConfig) {
         valid_every: 4,
         progress_every_secs: 5.0,
     };
-    let optim = OptimConfig { lr: 1e-2, beta1: 0.9, beta2: 0.99, weight_decay: 0.01, eps: 1e-8, grad_clip: 1.0 };
+    let optim = OptimConfig {
+        lr: 1e-2,
+        beta1: 0.9,
+        beta2: 0.99,
+        weight_decay: 0.01,
+        eps: 1e-8,
+        grad_clip: 1.0,
+    };
     (train, optim)
 }
 
-fn run_loop(
-    toy: &Toy,
-    run: &RunFolder,
-    steps: u64,
-    stop: StopFlag,
-    resume: Option<&Path>,
-) -> Result<(Mlp, Outcome)> {
+fn run_loop(toy: &Toy, run: &RunFolder, steps: u64, stop: StopFlag, resume: Option<&Path>) -> Result<(Mlp, Outcome)> {
     let (train_cfg, optim_cfg) = cfgs(steps);
     let dev = device(Backend::Flex, Precision::F32)?.autodiff();
     let setup = LoopSetup {
@@ -164,19 +177,33 @@ fn resume_after_ctrl_c_equals_training_straight_through() {
     toy.stop_after_calls = Some((2 * n as usize, stop.clone()));
     let split_run = new_run(dir.path(), "split");
     let (_, outcome) = run_loop(&toy, &split_run, 2 * n, stop, None).unwrap();
-    let Outcome::Interrupted { step, checkpoint } = outcome else { panic!("not interrupted: {outcome:?}") };
+    let Outcome::Interrupted { step, checkpoint } = outcome else {
+        panic!("not interrupted: {outcome:?}")
+    };
     assert_eq!(step, n);
     let (resumed, outcome) = run_loop(&Toy::new(), &split_run, 2 * n, StopFlag::new(), Some(&checkpoint)).unwrap();
     assert!(matches!(outcome, Outcome::Finished { steps: 10, .. }), "{outcome:?}");
-    assert_eq!(params(&straight), params(&resumed), "resumed parameters differ from straight training");
+    assert_eq!(
+        params(&straight),
+        params(&resumed),
+        "resumed parameters differ from straight training"
+    );
 
     // The loss went down, metrics and the plot are there, old checkpoints were pruned.
     let t = read_table(&straight_run.path(METRICS_FILE)).unwrap();
     assert_eq!(t.rows.len(), 10);
     let v = read_table(&straight_run.path(VALID_FILE)).unwrap();
-    assert!(v.rows.last().unwrap().1[1] < v.rows[0].1[1], "validation loss did not drop: {:?}", v.rows);
+    assert!(
+        v.rows.last().unwrap().1[1] < v.rows[0].1[1],
+        "validation loss did not drop: {:?}",
+        v.rows
+    );
     assert!(straight_run.path(PLOT_FILE).is_file());
-    let kept: Vec<u64> = checkpoint::list(&straight_run.path("checkpoints")).unwrap().iter().map(|c| c.0).collect();
+    let kept: Vec<u64> = checkpoint::list(&straight_run.path("checkpoints"))
+        .unwrap()
+        .iter()
+        .map(|c| c.0)
+        .collect();
     assert!(kept.len() <= 3 && kept.contains(&10), "{kept:?}");
 }
 
@@ -188,7 +215,9 @@ fn nan_loss_stops_with_a_message_and_keeps_the_last_good_checkpoint() {
     let mut toy = Toy::new();
     toy.nan_at_call = Some(2 * 4 + 1); // first micro-batch of step 5; checkpoints at 3 (and 4: best valid)
     let err = run_loop(&toy, &run, 10, StopFlag::new(), None).unwrap_err();
-    let TrainError::NonFinite { step, last_good, .. } = &err else { panic!("wrong error: {err}") };
+    let TrainError::NonFinite { step, last_good, .. } = &err else {
+        panic!("wrong error: {err}")
+    };
     assert_eq!(*step, 5);
     let good = last_good.clone().expect("a checkpoint existed");
     assert!(good.ends_with("step_4"), "{}", good.display());

@@ -23,7 +23,13 @@ static SERIAL: Mutex<()> = Mutex::new(());
 
 fn store(dir: &Path) -> std::path::PathBuf {
     let out = dir.join("store");
-    let cfg = SynthConfig { clips: 10, seed: 3, frames: 4, min_vertices: 256, max_vertices: 512 };
+    let cfg = SynthConfig {
+        clips: 10,
+        seed: 3,
+        frames: 4,
+        min_vertices: 256,
+        max_vertices: 512,
+    };
     write_synth_with(&cfg, &out, 32, None).expect("synthetic store");
     out
 }
@@ -43,7 +49,8 @@ fn params(m: &FrameVae) -> Vec<f32> {
     struct Collect(Vec<f32>);
     impl ModuleVisitor for Collect {
         fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            self.0.extend(p.val().into_data().try_to_vec::<f32>().expect("f32 parameters"));
+            self.0
+                .extend(p.val().into_data().try_to_vec::<f32>().expect("f32 parameters"));
         }
     }
     let mut c = Collect(Vec::new());
@@ -70,7 +77,10 @@ fn tiny_vae_run_lowers_its_loss_and_stores_latent_stats() {
     let loss = t.header.iter().position(|h| h == "loss").unwrap() - 1;
     let mean = |rows: &[(u64, Vec<f64>)]| rows.iter().map(|r| r.1[loss]).sum::<f64>() / rows.len() as f64;
     let (first, last) = (mean(&t.rows[..5]), mean(&t.rows[25..]));
-    assert!(last < 0.8 * first, "loss did not drop: first 5 steps {first}, last 5 {last}");
+    assert!(
+        last < 0.8 * first,
+        "loss did not drop: first 5 steps {first}, last 5 {last}"
+    );
     let stats: StoredLatentStats =
         serde_json::from_str(&std::fs::read_to_string(run.path(LATENT_STATS_FILE)).unwrap()).unwrap();
     assert_eq!(stats.step, 30);
@@ -85,7 +95,9 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
     let n = 3;
     let go = |run: &RunFolder, steps: u64, resume: Option<std::path::PathBuf>| {
         let cfg = tiny(steps);
-        let VaeModelConfig::Framewise(m) = &cfg.model else { panic!("tiny is frame-wise") };
+        let VaeModelConfig::Framewise(m) = &cfg.model else {
+            panic!("tiny is frame-wise")
+        };
         let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
         dev.seed(cfg.train.seed);
         let model = m.init(&dev);
@@ -106,7 +118,13 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
     let (straight, _) = go(&straight_run, 2 * n, None);
     let split_run = RunFolder::create(&runs, "split", "", &["rec", "kl"]).unwrap();
     let (_, first) = go(&split_run, n, None);
-    let Outcome::Finished { checkpoint, .. } = first else { panic!("{first:?}") };
+    let Outcome::Finished { checkpoint, .. } = first else {
+        panic!("{first:?}")
+    };
     let (resumed, _) = go(&split_run, 2 * n, Some(checkpoint));
-    assert_eq!(params(&straight), params(&resumed), "resumed VAE differs from straight training");
+    assert_eq!(
+        params(&straight),
+        params(&resumed),
+        "resumed VAE differs from straight training"
+    );
 }

@@ -298,7 +298,10 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
         Err(e) => println!("reference skipped: {e:#}"),
     }
     if cfg!(debug_assertions) {
-        println!("note: debug build (our crates unoptimised); build with --release for representative numbers");
+        println!(
+            "note: dev-profile binary; with any4d-eval at opt-level 0 the k-d tree code (generic, instantiated in \
+             any4d-eval) runs unoptimised: use --release, or cargo --config 'profile.dev.package.any4d-eval.opt-level=3'"
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

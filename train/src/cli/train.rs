@@ -91,7 +91,12 @@ pub fn run(cmd: TrainCmd) -> anyhow::Result<ExitCode> {
             if let Some(b) = args.backend {
                 cfg.device.backend = b;
             }
-            let opts = RfRunOptions { data: args.data, vae_run: args.vae, runs_dir: args.runs_dir, name: args.run };
+            let opts = RfRunOptions {
+                data: args.data,
+                vae_run: args.vae,
+                runs_dir: args.runs_dir,
+                name: args.run,
+            };
             train_rf(&cfg, &opts)?;
             Ok(ExitCode::SUCCESS)
         }
@@ -131,7 +136,10 @@ fn report(outcome: &Outcome) -> ExitCode {
             ExitCode::SUCCESS
         }
         Outcome::Interrupted { step, checkpoint } => {
-            println!("interrupted after step {step}; checkpoint {} (resume with --resume)", checkpoint.display());
+            println!(
+                "interrupted after step {step}; checkpoint {} (resume with --resume)",
+                checkpoint.display()
+            );
             ExitCode::from(130)
         }
     }
@@ -142,7 +150,10 @@ fn report(outcome: &Outcome) -> ExitCode {
 pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
     let base = VaeRunConfig::load(&args.config)?;
     let runs = tempfile_dir()?;
-    println!("backend  steps  median steps/s  median samples/s  wall s   ({})", args.config.display());
+    println!(
+        "backend  steps  median steps/s  median samples/s  wall s   ({})",
+        args.config.display()
+    );
     for backend in &args.backends {
         let mut cfg = base.clone();
         cfg.device.backend = *backend;
@@ -169,14 +180,21 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
             v.sort_by(f64::total_cmp);
             v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
         };
-        println!("{backend:<8} {:>5}  {:>14.3}  {:>16.2}  {wall:>6.1}", args.steps, median(sps), median(xps));
+        println!(
+            "{backend:<8} {:>5}  {:>14.3}  {:>16.2}  {wall:>6.1}",
+            args.steps,
+            median(sps),
+            median(xps)
+        );
     }
     println!("(run folders under {})", runs.display());
     Ok(ExitCode::SUCCESS)
 }
 
 fn tempfile_dir() -> anyhow::Result<PathBuf> {
-    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?.as_secs();
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)?
+        .as_secs();
     let dir = std::env::temp_dir().join(format!("any4d-bench-train-{secs}-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     Ok(dir)
