@@ -67,6 +67,9 @@ pub enum EvalError {
 
 pub type Result<T, E = EvalError> = std::result::Result<T, E>;
 
+/// Owned vertex rows, frame-major `[T * N]` xyz.
+pub type Rows = Vec<[f32; 3]>;
+
 /// A borrowed vertex sequence `[T, N, 3]`, frame-major.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Motion<'a> {
@@ -528,7 +531,7 @@ pub fn replace_keyframes(pred: Motion, gt: Motion, keyframes: &[usize]) -> Resul
 ///
 /// # Shapes
 /// `pred`, `gt`: `[T, N, 3]`; returns both as `[T * N]` rows.
-pub fn normalise_by_gt(pred: Motion, gt: Motion) -> Result<(Vec<[f32; 3]>, Vec<[f32; 3]>)> {
+pub fn normalise_by_gt(pred: Motion, gt: Motion) -> Result<(Rows, Rows)> {
     check_pair(pred, gt)?;
     let norm = Normalization::from_frame(gt.frame(0)); // (D1), (D2) from GT frame 0
     let (c, s) = (norm.center, norm.scale);

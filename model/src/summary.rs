@@ -134,9 +134,51 @@ pub fn time_vae_reconstruct(
     iters: usize,
     device: &Device,
 ) -> Result<StepTiming, String> {
-    use crate::frame_vae::{EdgeList, Posterior, VaeBatch};
-    use burn::tensor::{Distribution, TensorData};
+    use crate::frame_vae::Posterior;
     let model = cfg.init(device);
+    let vae_batch = synthetic_vae_batch(batch, vertices, tokens, frames, device)?;
+    Ok(time_runs(iters, || {
+        let (recon, _) = model.reconstruct(&vae_batch, Posterior::Mean);
+        let _ = recon.into_data();
+    }))
+}
+
+/// Times sequence-wise DyMeshVAE (SPEC §3.5) encode + decode on the same synthetic clips as
+/// [`time_vae_reconstruct`]; `cfg.frames` gives the clip length.
+///
+/// # Errors
+/// If the synthetic edge list is rejected (names the reason).
+pub fn time_dymesh_reconstruct(
+    cfg: &crate::dymesh_vae::DyMeshVaeConfig,
+    batch: usize,
+    vertices: usize,
+    tokens: usize,
+    iters: usize,
+    device: &Device,
+) -> Result<StepTiming, String> {
+    use crate::frame_vae::Posterior;
+    let model = cfg.init(device);
+    let vae_batch = synthetic_vae_batch(batch, vertices, tokens, cfg.frames, device)?;
+    Ok(time_runs(iters, || {
+        let (recon, _) = model.reconstruct(&vae_batch, Posterior::Mean);
+        let _ = recon.into_data();
+    }))
+}
+
+/// Synthetic VAE batch: a chain mesh (vertex i joined to i + 1), uniform reference in [−1, 1]³, N(0, 0.05)
+/// motion, all vertices real, the first `tokens` vertices as FPS tokens.
+///
+/// # Shapes
+/// - `frames` `[batch, frames, vertices, 3]`, `reference` `[batch, vertices, 3]`, `fps` `[batch, tokens]`
+fn synthetic_vae_batch(
+    batch: usize,
+    vertices: usize,
+    tokens: usize,
+    frames: usize,
+    device: &Device,
+) -> Result<crate::frame_vae::VaeBatch, String> {
+    use crate::frame_vae::{EdgeList, VaeBatch};
+    use burn::tensor::{Distribution, TensorData};
     let chain: Vec<[u32; 2]> = (0..vertices as u32 - 1).map(|i| [i, i + 1]).collect();
     let edges = EdgeList::new(&vec![chain; batch], vertices, device)
         .map_err(|e| format!("synthetic {e}"))?;
@@ -151,7 +193,7 @@ pub fn time_vae_reconstruct(
         device,
     );
     let fps_ids: Vec<i64> = (0..batch).flat_map(|_| 0..tokens as i64).collect();
-    let vae_batch = VaeBatch {
+    Ok(VaeBatch {
         frames: reference.clone().unsqueeze_dim::<4>(1) + motion,
         reference,
         vmask: Tensor::<2, Bool>::from_data(
@@ -160,19 +202,22 @@ pub fn time_vae_reconstruct(
         ),
         fps: Tensor::from_data(TensorData::new(fps_ids, [batch, tokens]), device),
         edges,
-    };
-    let run = || {
+    })
+}
+
+/// One warm-up call of `run`, then `iters` timed calls.
+fn time_runs(iters: usize, mut run: impl FnMut()) -> StepTiming {
+    let mut timed = || {
         let start = std::time::Instant::now();
-        let (recon, _) = model.reconstruct(&vae_batch, Posterior::Mean);
-        let _ = recon.into_data();
+        run();
         start.elapsed().as_secs_f64() * 1e3
     };
-    run();
-    let steps_ms: Vec<f64> = (0..iters).map(|_| run()).collect();
-    Ok(StepTiming {
+    timed();
+    let steps_ms: Vec<f64> = (0..iters).map(|_| timed()).collect();
+    StepTiming {
         median_ms: median(&steps_ms),
         steps_ms,
-    })
+    }
 }
 
 /// Median of a non-empty list (mean of the two middle values for an even count).

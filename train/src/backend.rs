@@ -82,6 +82,20 @@ pub fn device(backend: Backend, precision: Precision) -> Result<Device, BackendE
     }
 }
 
+/// Checks that `backend` at `precision` is available in this binary without touching the device (so that a run
+/// folder is only created for a run that can start).
+pub fn check(backend: Backend, precision: Precision) -> Result<(), BackendError> {
+    base_device(backend)?;
+    if precision == Precision::Bf16 && backend != Backend::Cuda {
+        return Err(BackendError::Precision {
+            backend,
+            precision,
+            reason: "bf16 training is offered on cuda only".into(),
+        });
+    }
+    Ok(())
+}
+
 #[allow(deprecated)] // burn-ndarray is deprecated in burn 0.22 but kept working (issue 5 item 5)
 fn base_device(backend: Backend) -> Result<Device, BackendError> {
     match backend {

@@ -296,6 +296,9 @@ pub struct VaeRunOptions {
 
 /// Starts a new VAE run with `cfg`; returns the run folder and the outcome.
 pub fn train_vae(cfg: &VaeRunConfig, opts: &VaeRunOptions) -> Result<(RunFolder, Outcome)> {
+    // Fail before claiming a run folder when the backend or the store is unusable.
+    backend::check(cfg.device.backend, cfg.device.precision)?;
+    Store::open(&opts.data).map_err(|e| TrainError::Other(e.to_string()))?;
     let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &["rec", "kl"])?;
     let outcome = run_vae(cfg, &run, opts, None)?;
     Ok((run, outcome))

@@ -19,7 +19,7 @@ fn clips(n: usize, d: f32) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
     let gt: Vec<[f32; 3]> = (0..FRAMES)
         .flat_map(|f| {
             (0..n)
-                .map(move |i| corner(i))
+                .map(corner)
                 .map(move |p| [p[0], p[1] + 0.01 * (f * f) as f32, p[2]])
         })
         .collect();
@@ -174,4 +174,36 @@ fn bad_keyframes_and_missing_files_fail() {
     let out = any4d(&["eval", "metrics", missing.to_str().unwrap(), g.to_str().unwrap()]);
     assert!(!out.status.success());
     assert!(text(&out.stderr).contains("nope.bin"), "{}", text(&out.stderr));
+}
+
+#[test]
+fn bench_metrics_runs_on_tiny_clips() {
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/metrics_reference.py");
+    let args = [
+        "bench",
+        "metrics",
+        "--clips",
+        "2",
+        "--vertices",
+        "64",
+        "--frames",
+        "6",
+        "--repeat",
+        "1",
+    ];
+    let out = any4d(&[&args[..], &["--script", script]].concat());
+    assert!(out.status.success(), "stderr: {}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("ours, 1 thread"), "{stdout}");
+    // With numpy and scipy installed the reference runs and must agree; without them the bench says so.
+    if stdout.contains("numpy+scipy, 1 core") {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with("agreement"))
+            .unwrap_or_else(|| panic!("{stdout}"));
+        let rel: f64 = line.split_whitespace().nth(8).unwrap().parse().unwrap();
+        assert!(rel < 1e-6, "{line}");
+    } else {
+        assert!(stdout.contains("reference skipped"), "{stdout}");
+    }
 }

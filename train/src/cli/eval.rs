@@ -5,7 +5,7 @@ use std::process::{Command, ExitCode};
 use std::time::Instant;
 
 use any4d_data::formats::read_clip;
-use any4d_eval::metrics::{ClipMetrics, Coordinates, Motion, Protocol, average, evaluate_clip_with};
+use any4d_eval::metrics::{ClipMetrics, Coordinates, Motion, Protocol, Rows, average, evaluate_clip_with};
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use rand::{Rng, SeedableRng};
@@ -157,7 +157,7 @@ pub struct BenchArgs {
 }
 
 /// Synthetic clips for the benchmark: a random cloud moving smoothly, and a noisy prediction. Rows `[T * N]` each.
-fn bench_clips(args: &BenchArgs) -> Vec<(Vec<[f32; 3]>, Vec<[f32; 3]>)> {
+fn bench_clips(args: &BenchArgs) -> Vec<(Rows, Rows)> {
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     (0..args.clips)
         .map(|_| {
@@ -192,11 +192,7 @@ fn timed<T>(repeat: usize, mut f: impl FnMut() -> anyhow::Result<T>) -> anyhow::
 }
 
 /// Runs the reference script on the same clips; `Err` carries why it could not run (missing python or scipy).
-fn reference(
-    args: &BenchArgs,
-    clips: &[(Vec<[f32; 3]>, Vec<[f32; 3]>)],
-    keys: &[usize],
-) -> anyhow::Result<(f64, ClipMetrics)> {
+fn reference(args: &BenchArgs, clips: &[(Rows, Rows)], keys: &[usize]) -> anyhow::Result<(f64, ClipMetrics)> {
     if !args.script.is_file() {
         bail!(
             "reference script {} not found (run from the repository root or pass --script)",
