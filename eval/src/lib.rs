@@ -9,3 +9,4 @@ pub mod plot;
 pub mod methods;
 pub mod render;
 pub mod run;
+pub mod learned;

@@ -1,0 +1,623 @@
+//! Trained networks on the evaluation protocol (SPEC §4.6, §5.1, §5.2 `lerp_space = "latent"`, §5.4, §6.1,
+//! (E4)): one window (batch 1) is encoded with the mesh VAE, completed by the keyframe RF ((R3)–(R6)), the
+//! replacement baseline ((R7)–(R8)), impute-until-τ* ((R9)) or latent interpolation ((L1) on z), and decoded.
+//!
+//! [`MeshCodec`] turns a normalised window into VAE tensors (FPS on frame 0, edges from faces, padding) and back;
+//! [`LearnedModels`] holds one RF checkpoint with its VAE, latent statistics and text encoder; [`RfSampler`],
+//! [`LatentLerpSampler`] and [`VaeReconstructor`] are the eval crate's [`WindowSampler`] / [`Reconstructor`].
+
+use std::sync::Arc;
+
+use any4d_data::batch::PadTo;
+use any4d_data::fps::farthest_point_sampling;
+use any4d_data::preprocess::{edges_from_faces, pad_vertices};
+use any4d_data::rng::{Rng, rng};
+use any4d_data::{Clip, DataError};
+use any4d_model::dymesh_vae::DyMeshVae;
+use any4d_model::frame_vae::{EdgeList, FrameVae, VaeEncoding};
+use any4d_model::latent_stats::LatentStats;
+use any4d_model::mmdit::{KfMode, Mmdit, MmditConfig, replace_keyframes};
+use any4d_model::rectified_flow::{Conditioning, SampleOptions, sample_mmdit};
+use any4d_model::text::TextEncoder;
+use burn::prelude::*;
+use burn::tensor::TensorData;
+
+use crate::baselines::lerp_latents;
+use crate::methods::{MethodKind, WindowSampler};
+use crate::run::Reconstructor;
+
+type Result<T, E = DataError> = std::result::Result<T, E>;
+
+/// RNG stream of the sampler's initial noise ε (distinct from the keyframe-noise stream of `methods.rs`).
+const NOISE_STREAM: u64 = 0x7266_6570; // "rfep"
+
+/// A trained mesh VAE of either kind (SPEC §3.5).
+pub enum MeshVae {
+    /// Frame-wise VAE: one trajectory latent per frame, `[B, T, P, C]`.
+    Frame(FrameVae),
+    /// Sequence-wise DyMeshVAE built for `frames` frames: one latent per clip, `[B, 1, P, C]`.
+    Sequence { vae: DyMeshVae, frames: usize },
+}
+
+/// Batch-1 tensors of one window for a mesh VAE.
+struct VaeInput {
+    /// Reference mesh x̄₀ (frame 0), `[1, N, 3]`.
+    reference: Tensor<3>,
+    /// The encoded frames, `[1, K, N, 3]`.
+    frames: Tensor<4>,
+    vmask: Tensor<2, Bool>,
+    fps: Tensor<2, Int>,
+    edges: EdgeList,
+}
+
+/// What the encoder produced for one window, in raw (not standardized) latent units.
+#[derive(Debug, Clone)]
+pub struct WindowEncoding {
+    /// Per-vertex shape features E₀ of the reference, `[1, N, D]` (N = padded vertex axis).
+    pub e0: Tensor<3>,
+    /// Padded reference mesh x̄₀, `[1, N, 3]`.
+    pub reference: Tensor<3>,
+    /// Shape latent z₀, `[1, P, C]`.
+    pub z0: Tensor<3>,
+    /// Posterior means μ, `[1, G, P, C]`: one per entry of `frames` (frame-wise) or one per clip (sequence-wise).
+    pub mu: Tensor<4>,
+    /// The clip frames whose μ is in `mu` (frame-wise), or all frames `0..T` (sequence-wise).
+    pub frames: Vec<usize>,
+    /// Real vertices N_v of the window.
+    pub n_real: usize,
+    /// Frames T of the window.
+    pub window_frames: usize,
+    /// Clip id, for error messages.
+    pub id: String,
+}
+
+/// A mesh VAE applied to single normalised windows: FPS on frame 0 (SPEC §2.5), edges from faces, padding
+/// (SPEC §2.4), encode, decode, and the real rows back.
+pub struct MeshCodec {
+    vae: MeshVae,
+    tokens: usize,
+    padding: PadTo,
+    device: Device,
+}
+
+impl MeshCodec {
+    /// `tokens` = P FPS tokens (512 at paper size; a window with fewer vertices gets what
+    /// [`farthest_point_sampling`] returns, its points repeated cyclically). `padding`: `PadTo::BatchMax` = the
+    /// window's own N_v (enough for a VAE with masked padded keys), `PadTo::Fixed(4096)` for an AAM-style VAE
+    /// that attends to padding. Give the VAE without autodiff (`model.valid()`).
+    pub fn new(vae: MeshVae, tokens: usize, padding: PadTo, device: Device) -> Result<Self> {
+        if tokens == 0 {
+            return Err(DataError::new("mesh codec", "tokens", "P must be positive"));
+        }
+        if padding == PadTo::Fixed(0) {
+            return Err(DataError::new("mesh codec", "padding", "a fixed vertex axis must be positive"));
+        }
+        if let MeshVae::Sequence { frames: 0, .. } = vae {
+            return Err(DataError::new("mesh codec", "frames", "the sequence-wise VAE needs T > 0"));
+        }
+        Ok(Self {
+            vae,
+            tokens,
+            padding,
+            device,
+        })
+    }
+
+    /// The VAE.
+    pub fn vae(&self) -> &MeshVae {
+        &self.vae
+    }
+
+    /// P.
+    pub fn tokens(&self) -> usize {
+        self.tokens
+    }
+
+    /// Where the tensors live.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// Builds the batch-1 VAE input of `frames` of `clip`.
+    fn input(&self, clip: &Clip, frames: &[usize]) -> Result<VaeInput> {
+        clip.validate().map_err(|e| e.at(&clip.id))?;
+        if let Some(&f) = frames.iter().find(|&&f| f >= clip.frames) {
+            return Err(DataError::new(
+                &clip.id,
+                "keyframes",
+                format!("frame {f} is outside the window of {} frames", clip.frames),
+            ));
+        }
+        let n_real = clip.n_vertices;
+        let n = match self.padding {
+            PadTo::BatchMax => n_real,
+            PadTo::Fixed(n) => n,
+        };
+        let reference_rows = clip.frame(0);
+        let fps: Vec<i64> = farthest_point_sampling(reference_rows, self.tokens)
+            .into_iter()
+            .map(i64::from)
+            .collect();
+        let edges = edges_from_faces(&clip.faces, n_real).map_err(|e| e.at(&clip.id))?;
+        let edges = EdgeList::new(&[edges], n, &self.device)
+            .map_err(|e| DataError::new(&clip.id, "faces", e.to_string()))?;
+        let (reference, vmask) = pad_vertices(reference_rows, n_real, 1, n).map_err(|e| e.at(&clip.id))?;
+        let rows: Vec<[f32; 3]> = frames.iter().flat_map(|&f| clip.frame(f).iter().copied()).collect();
+        let (selected, _) = pad_vertices(&rows, n_real, frames.len(), n).map_err(|e| e.at(&clip.id))?;
+        let d = &self.device;
+        Ok(VaeInput {
+            reference: Tensor::from_data(TensorData::new(reference, [1, n, 3]), d),
+            frames: Tensor::from_data(TensorData::new(selected, [1, frames.len(), n, 3]), d),
+            vmask: Tensor::from_data(TensorData::new(vmask, [1, n]), d),
+            fps: Tensor::from_data(TensorData::new(fps, [1, self.tokens]), d),
+            edges,
+        })
+    }
+
+    /// Encodes `frames` of a normalised window against its frame 0 and returns the posterior means. The
+    /// sequence-wise VAE encodes the whole window, so `frames` must then be `0..T` (T as it was built for).
+    ///
+    /// # Shapes
+    /// `clip.vertices`: `[T, N_v]` rows; returns `mu` `[1, G, P, C]` with G = `frames.len()` (frame-wise) or 1.
+    pub fn encode(&self, clip: &Clip, frames: &[usize]) -> Result<WindowEncoding> {
+        if frames.is_empty() {
+            return Err(DataError::new(&clip.id, "frames", "nothing to encode: no frame was given"));
+        }
+        if let MeshVae::Sequence { frames: t, .. } = &self.vae {
+            let all: Vec<usize> = (0..clip.frames).collect();
+            if clip.frames != *t || frames != all.as_slice() {
+                return Err(DataError::new(
+                    &clip.id,
+                    "frames",
+                    format!(
+                        "the sequence-wise VAE encodes whole windows of {t} frames; got frames {frames:?} of a \
+                         {}-frame window",
+                        clip.frames
+                    ),
+                ));
+            }
+        }
+        let input = self.input(clip, frames)?;
+        let reference = input.reference.clone();
+        let VaeEncoding { e0, z0, mu, .. } = match &self.vae {
+            MeshVae::Frame(vae) => vae.encode(input.reference, input.frames, input.vmask, input.fps, &input.edges),
+            MeshVae::Sequence { vae, .. } => {
+                vae.encode(input.reference, input.frames, input.vmask, input.fps, &input.edges)
+            }
+        };
+        Ok(WindowEncoding {
+            e0,
+            reference,
+            z0,
+            mu,
+            frames: frames.to_vec(),
+            n_real: clip.n_vertices,
+            window_frames: clip.frames,
+            id: clip.id.clone(),
+        })
+    }
+
+    /// Decodes trajectory latents against the encoded reference: x̂ = x̄₀ + offsets (SPEC §3.2 "Output"), real
+    /// rows only.
+    ///
+    /// # Shapes
+    /// `z`: `[1, G, P, C]` raw latents (frame-wise: G frames in order; sequence-wise: G = 1); returns
+    /// `[G, N_v]` rows (frame-wise) or `[T, N_v]` rows (sequence-wise).
+    pub fn decode(&self, enc: &WindowEncoding, z: Tensor<4>) -> Result<Vec<[f32; 3]>> {
+        let [_, p, c] = enc.z0.dims();
+        let [b, _, pz, cz] = z.dims();
+        if b != 1 || pz != p || cz != c {
+            return Err(DataError::new(
+                &enc.id,
+                "latents",
+                format!("shape {:?} does not match the encoding's [1, G, {p}, {c}]", z.dims()),
+            ));
+        }
+        let x = match &self.vae {
+            MeshVae::Frame(vae) => vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z),
+            MeshVae::Sequence { vae, .. } => vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z),
+        };
+        real_rows(x, enc.n_real, &enc.id)
+    }
+
+    /// (E4) encode → posterior mean → decode of every frame of a normalised window (P-Table 5).
+    ///
+    /// # Shapes
+    /// `clip.vertices`: `[T, N_v]` rows; returns `[T, N_v]` rows.
+    pub fn reconstruct(&self, clip: &Clip) -> Result<Vec<[f32; 3]>> {
+        let all: Vec<usize> = (0..clip.frames).collect();
+        let enc = self.encode(clip, &all)?;
+        let mu = enc.mu.clone();
+        self.decode(&enc, mu)
+    }
+
+    /// The frame-wise VAE, or an error naming `what` needs it.
+    fn require_frame_wise(&self, what: &str) -> Result<()> {
+        match self.vae {
+            MeshVae::Frame(_) => Ok(()),
+            MeshVae::Sequence { .. } => Err(DataError::new(
+                what,
+                "vae",
+                "needs the frame-wise VAE (one latent per frame), got the sequence-wise DyMeshVAE",
+            )),
+        }
+    }
+}
+
+/// The first `n_real` rows of every frame of a decoded `[1, G, N, 3]` tensor, checked finite.
+fn real_rows(x: Tensor<4>, n_real: usize, id: &str) -> Result<Vec<[f32; 3]>> {
+    let [_, g, n, _] = x.dims();
+    let flat = x
+        .try_to_vec_as::<f32>()
+        .map_err(|e| DataError::new(id, "decoded vertices", format!("cannot read the tensor: {e:?}")))?;
+    if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
+        let row = i / 3;
+        return Err(DataError::new(
+            id,
+            "decoded vertices",
+            format!("non-finite value {} at frame {}, vertex {}", flat[i], row / n, row % n),
+        ));
+    }
+    Ok((0..g)
+        .flat_map(|f| (0..n_real).map(move |v| f * n + v))
+        .map(|r| [flat[3 * r], flat[3 * r + 1], flat[3 * r + 2]])
+        .collect())
+}
+
+/// Sorted, deduplicated keyframes, each inside the window.
+fn keyframe_list(clip: &Clip, keyframes: &[usize]) -> Result<Vec<usize>> {
+    let mut keys = keyframes.to_vec();
+    keys.sort_unstable();
+    keys.dedup();
+    if let Some(&f) = keys.iter().find(|&&f| f >= clip.frames) {
+        return Err(DataError::new(
+            &clip.id,
+            "keyframes",
+            format!("frame {f} is outside the window of {} frames", clip.frames),
+        ));
+    }
+    Ok(keys)
+}
+
+/// Keyframe latents laid out over all T frames (zero elsewhere) and the mask m.
+///
+/// # Shapes
+/// `enc.mu`: `[1, K, P, C]` for `enc.frames`; returns `[1, T, P, C]` and `[T]`.
+fn scatter_keyframes(enc: &WindowEncoding, keys: &[usize], device: &Device) -> Result<(Tensor<4>, Vec<f32>)> {
+    let [_, k, p, c] = enc.mu.dims();
+    let t = enc.window_frames;
+    let mu = enc
+        .mu
+        .try_to_vec_as::<f32>()
+        .map_err(|e| DataError::new(&enc.id, "keyframe latents", format!("cannot read the tensor: {e:?}")))?;
+    let len = p * c;
+    let mut out = vec![0.0f32; t * len];
+    let mut mask = vec![0.0f32; t];
+    for &f in keys {
+        let row = enc.frames.iter().position(|&e| e == f).filter(|&r| r < k).ok_or_else(|| {
+            DataError::new(&enc.id, "keyframes", format!("keyframe {f} was not encoded"))
+        })?;
+        out[f * len..(f + 1) * len].copy_from_slice(&mu[row * len..(row + 1) * len]);
+        mask[f] = 1.0;
+    }
+    Ok((Tensor::from_data(TensorData::new(out, [1, t, p, c]), device), mask))
+}
+
+/// Frames to encode for a keyframe set: frame 0 (the reference, always known) and the keyframes.
+fn encoded_frames(keys: &[usize]) -> Vec<usize> {
+    let mut frames = keys.to_vec();
+    if frames.first() != Some(&0) {
+        frames.insert(0, 0);
+    }
+    frames
+}
+
+/// ε ~ N(0, I) from `rng(seed, NOISE_STREAM)` (Box–Muller), so a seed gives the same noise on every device.
+///
+/// # Shapes
+/// returns `dims`.
+fn gaussian_noise(seed: u64, dims: [usize; 4], device: &Device) -> Tensor<4> {
+    let mut r = rng(seed, NOISE_STREAM);
+    let len = dims.iter().product();
+    let values: Vec<f32> = (0..len)
+        .map(|_| {
+            let (u1, u2): (f64, f64) = (r.random::<f64>().max(f64::MIN_POSITIVE), r.random::<f64>());
+            ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
+        })
+        .collect();
+    Tensor::from_data(TensorData::new(values, dims), device)
+}
+
+/// One trained RF checkpoint with everything it samples with: the frame-wise VAE (in a [`MeshCodec`], shareable
+/// with [`LatentLerpSampler`]), the MMDiT and its config, the latent statistics of SPEC §3.4 and the text encoder
+/// (the scratch encoder is trained jointly with the RF, so it comes from the same checkpoint).
+pub struct LearnedModels {
+    codec: Arc<MeshCodec>,
+    rf: Mmdit,
+    rf_config: MmditConfig,
+    stats: LatentStats,
+    text: Box<dyn TextEncoder>,
+}
+
+impl LearnedModels {
+    /// Checks that the parts fit together: frame-wise VAE, the network built from `rf_config`, the text width,
+    /// usable statistics. Give networks without autodiff (`model.valid()`).
+    pub fn new(
+        codec: Arc<MeshCodec>,
+        rf: Mmdit,
+        rf_config: MmditConfig,
+        stats: LatentStats,
+        text: Box<dyn TextEncoder>,
+    ) -> Result<Self> {
+        codec.require_frame_wise("learned models")?;
+        let bad = |field: &str, reason: String| Err(DataError::new("learned models", field, reason));
+        if let Err(msg) = rf_config.validate() {
+            return bad("rf config", msg);
+        }
+        if rf.in_channels() != rf_config.in_channels() {
+            return bad(
+                "rf",
+                format!(
+                    "the network takes {} input channels, its config ({:?}, T = {}, C = {}) gives {}",
+                    rf.in_channels(),
+                    rf_config.kf_mode,
+                    rf_config.frames,
+                    rf_config.channels,
+                    rf_config.in_channels()
+                ),
+            );
+        }
+        if text.dim() != rf_config.text_dim {
+            return bad(
+                "text",
+                format!("the encoder gives width {}, the RF expects text_dim {}", text.dim(), rf_config.text_dim),
+            );
+        }
+        for (name, mean, std) in [
+            ("shape", stats.shape_mean, stats.shape_std),
+            ("motion", stats.motion_mean, stats.motion_std),
+        ] {
+            if !(mean.is_finite() && std.is_finite() && std > 0.0) {
+                return bad("stats", format!("{name} mean {mean} / std {std}: std must be finite and > 0"));
+            }
+        }
+        Ok(Self {
+            codec,
+            rf,
+            rf_config,
+            stats,
+            text,
+        })
+    }
+
+    /// The VAE codec (share it with a [`LatentLerpSampler`] or [`VaeReconstructor`]).
+    pub fn codec(&self) -> &Arc<MeshCodec> {
+        &self.codec
+    }
+
+    /// The RF's config.
+    pub fn rf_config(&self) -> &MmditConfig {
+        &self.rf_config
+    }
+
+    /// The latent statistics.
+    pub fn stats(&self) -> &LatentStats {
+        &self.stats
+    }
+}
+
+/// Sampled latents of one window (see [`RfSampler::sample_latents`]).
+#[derive(Debug, Clone)]
+pub struct SampledWindow {
+    /// Encoding of frame 0 and the keyframes (E₀, x̄₀, z₀ for decoding).
+    pub encoding: WindowEncoding,
+    /// Raw keyframe latents μ at the keyframe frames, zero elsewhere, `[1, T, P, C]`.
+    pub keyframe_latents: Tensor<4>,
+    /// Keyframe mask m, `[T]`, 1 = keyframe.
+    pub mask: Vec<f32>,
+    /// De-standardized sampled latents, `[1, T, P, C]` (the VAE's layout).
+    pub latents: Tensor<4>,
+}
+
+/// An RF method's window sampler (SPEC §4.6): keyframe latents = posterior mean μ, standardized; ε from the
+/// seed; [`sample_mmdit`] with the mode's input rule ((R3) ours, (R7)–(R8) baseline, (R9) impute-until-τ*);
+/// de-standardize; decode every frame with E₀ of the reference.
+pub struct RfSampler {
+    models: Arc<LearnedModels>,
+    options: SampleOptions,
+    guidance: f64,
+}
+
+impl RfSampler {
+    /// `options.kf_mode` must match the network's input layout (mask channels or not); `guidance` is the CFG
+    /// weight w (1.0 in the paper: one conditional branch).
+    pub fn new(models: Arc<LearnedModels>, options: SampleOptions, guidance: f64) -> Result<Self> {
+        let bad = |field: &str, reason: String| Err(DataError::new("rf sampler", field, reason));
+        let net = models.rf_config.kf_mode;
+        if options.kf_mode.has_mask_channels() != net.has_mask_channels() {
+            return bad(
+                "kf_mode",
+                format!(
+                    "sampling with {:?} needs a network {} mask channels, but it was built for {net:?}",
+                    options.kf_mode,
+                    if options.kf_mode.has_mask_channels() { "with" } else { "without" }
+                ),
+            );
+        }
+        if options.n_grid < 2 {
+            return bad("n_grid", format!("needs at least 2 grid points, got {}", options.n_grid));
+        }
+        if !(0.0..=1.0).contains(&options.tau_star) {
+            return bad("tau_star", format!("{} is outside [0, 1]", options.tau_star));
+        }
+        if !guidance.is_finite() {
+            return bad("guidance", format!("{guidance} is not finite"));
+        }
+        Ok(Self {
+            models,
+            options,
+            guidance,
+        })
+    }
+
+    /// The sampler of an RF method kind: `KeyframeRf` → (R3), `ReplacementRf` → (R7)–(R8), `ImputeUntil` → (R9)
+    /// with its τ*; solver, grid and replacement noise from `base`.
+    pub fn for_method(
+        kind: MethodKind,
+        models: Arc<LearnedModels>,
+        base: SampleOptions,
+        guidance: f64,
+    ) -> Result<Self> {
+        let (kf_mode, tau_star) = match kind {
+            MethodKind::KeyframeRf => (KfMode::InputMask, base.tau_star),
+            MethodKind::ReplacementRf => (KfMode::ReplaceNoised, base.tau_star),
+            MethodKind::ImputeUntil { tau_star, .. } => (KfMode::ImputeUntil, f64::from(tau_star)),
+            other => {
+                return Err(DataError::new("rf sampler", other.label(), "is not a rectified-flow method"));
+            }
+        };
+        let options = SampleOptions {
+            kf_mode,
+            tau_star,
+            ..base
+        };
+        Self::new(models, options, guidance)
+    }
+
+    /// The sampler settings.
+    pub fn options(&self) -> &SampleOptions {
+        &self.options
+    }
+
+    /// Samples the trajectory latents of one window. Only frame 0 and the `keyframes` of `clip` are read.
+    ///
+    /// # Shapes
+    /// `clip.vertices`: `[T, N_v]` rows; `latents` `[1, T, P, C]`.
+    pub fn sample_latents(
+        &self,
+        clip: &Clip,
+        keyframes: &[usize],
+        caption: &str,
+        seed: u64,
+    ) -> Result<SampledWindow> {
+        let m = &self.models;
+        let cfg = &m.rf_config;
+        let device = m.codec.device().clone();
+        if clip.frames != cfg.frames {
+            return Err(DataError::new(
+                &clip.id,
+                "frames",
+                format!("the window has {} frames, the RF was built for T = {}", clip.frames, cfg.frames),
+            ));
+        }
+        let keys = keyframe_list(clip, keyframes)?;
+        let encoding = m.codec.encode(clip, &encoded_frames(&keys))?;
+        let [_, p, c] = encoding.z0.dims();
+        if c != cfg.channels {
+            return Err(DataError::new(
+                &clip.id,
+                "latents",
+                format!("the VAE gives C = {c} channels, the RF was built for C = {}", cfg.channels),
+            ));
+        }
+        let (keyframe_latents, mask) = scatter_keyframes(&encoding, &keys, &device)?;
+        let t = cfg.frames;
+        let mask_t: Tensor<2> = Tensor::from_data(TensorData::new(mask.clone(), [1, t]), &device);
+        let cond = Conditioning {
+            z0: m.stats.standardize_shape(encoding.z0.clone()),
+            z_key: m.stats.standardize_motion(keyframe_latents.clone()).swap_dims(1, 2), // [1, P, T, C]
+            mask: mask_t.clone(),
+        };
+        let text = m
+            .text
+            .encode(&[caption.to_string()], &device)
+            .map_err(|e| DataError::new(&clip.id, "caption", e.to_string()))?
+            .states;
+        let eps = gaussian_noise(seed, [1, p, t, c], &device);
+        let x1 = sample_mmdit(&m.rf, &cond, text, eps, self.guidance, &self.options); // (R6)
+        let mut latents = m.stats.destandardize_motion(x1); // [1, P, T, C]
+        if matches!(self.options.kf_mode, KfMode::InputMask | KfMode::ReplaceNoised) {
+            // SPEC §4.6: keyframe slots are Z_key; done on raw latents so they are μ exactly.
+            latents = replace_keyframes(latents, keyframe_latents.clone().swap_dims(1, 2), mask_t);
+        }
+        Ok(SampledWindow {
+            encoding,
+            keyframe_latents,
+            mask,
+            latents: latents.swap_dims(1, 2),
+        })
+    }
+}
+
+impl WindowSampler for RfSampler {
+    fn sample(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
+        let s = self.sample_latents(clip, keyframes, caption, seed)?;
+        self.models.codec.decode(&s.encoding, s.latents)
+    }
+}
+
+/// (L1) in latent space (SPEC §5.2, `lerp_space = "latent"`): the keyframes' posterior means are interpolated
+/// between consecutive keyframes, then every frame is decoded. Frames 0 and T − 1 must be keyframes.
+pub struct LatentLerpSampler {
+    codec: Arc<MeshCodec>,
+}
+
+impl LatentLerpSampler {
+    /// Needs the frame-wise VAE.
+    pub fn new(codec: Arc<MeshCodec>) -> Result<Self> {
+        codec.require_frame_wise("latent lerp")?;
+        Ok(Self { codec })
+    }
+
+    /// The interpolated latents of one window and the encoding to decode them with.
+    ///
+    /// # Shapes
+    /// returns latents `[1, T, P, C]`.
+    pub fn latents(&self, clip: &Clip, keyframes: &[usize]) -> Result<(WindowEncoding, Tensor<4>)> {
+        let keys = keyframe_list(clip, keyframes)?;
+        let enc = self.codec.encode(clip, &encoded_frames(&keys))?;
+        let (z, _) = scatter_keyframes(&enc, &keys, self.codec.device())?;
+        let [_, t, p, c] = z.dims();
+        let flat = z
+            .try_to_vec_as::<f32>()
+            .map_err(|e| DataError::new(&clip.id, "keyframe latents", format!("cannot read the tensor: {e:?}")))?;
+        // (L1) on z: ẑ_f = z_a + (f − a)/(b − a) · (z_b − z_a)
+        let filled = lerp_latents(&flat, t, p * c, &keys)
+            .map_err(|e| DataError::new(&clip.id, "lerp_latent", e.to_string()))?;
+        let z = Tensor::from_data(TensorData::new(filled, [1, t, p, c]), self.codec.device());
+        Ok((enc, z))
+    }
+}
+
+impl WindowSampler for LatentLerpSampler {
+    fn sample(&self, clip: &Clip, keyframes: &[usize], _caption: &str, _seed: u64) -> Result<Vec<[f32; 3]>> {
+        let (enc, z) = self.latents(clip, keyframes)?;
+        self.codec.decode(&enc, z)
+    }
+}
+
+/// A VAE row of P-Table 5: (E4) encode → posterior mean → decode.
+pub struct VaeReconstructor {
+    label: String,
+    codec: Arc<MeshCodec>,
+}
+
+impl VaeReconstructor {
+    /// `label` names the row, e.g. `framewise` or `sequencewise`.
+    pub fn new(label: impl Into<String>, codec: Arc<MeshCodec>) -> Self {
+        Self {
+            label: label.into(),
+            codec,
+        }
+    }
+}
+
+impl Reconstructor for VaeReconstructor {
+    fn label(&self) -> String {
+        self.label.clone()
+    }
+
+    fn reconstruct(&self, clip: &Clip) -> Result<Vec<[f32; 3]>> {
+        self.codec.reconstruct(clip)
+    }
+}
