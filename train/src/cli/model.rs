@@ -1,13 +1,17 @@
 //! `any4d model …` and `any4d bench model`: parameter counts of the network a config describes, and RF
-//! forward+backward time per clip. Parses arguments and the `[model]` table, calls `any4d_model::summary`.
+//! forward+backward (SPEC §4.3) and VAE encode+decode (SPEC §3.2, §3.5) time per clip, optionally beside
+//! AnimateAnyMesh's PyTorch networks run by `scripts/bench_torch_reference.py` on the same shapes and thread
+//! count. Parses arguments and the `[model]` table, calls `any4d_model::summary`.
 
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
+use std::process::{Command, ExitCode};
 
 use any4d_model::dymesh_vae::DyMeshVaeConfig;
 use any4d_model::frame_vae::FrameVaeConfig;
 use any4d_model::mmdit::{KfMode, MmditConfig};
-use any4d_model::summary::{format_report, param_report, time_rf_step, time_vae_reconstruct};
+use any4d_model::summary::{
+    StepTiming, TOTAL, format_report, param_report, time_dymesh_reconstruct, time_rf_step, time_vae_reconstruct,
+};
 use anyhow::{Context, bail};
 use burn::prelude::Device;
 use clap::{Args, Subcommand, ValueEnum};
@@ -55,6 +59,20 @@ pub struct BenchArgs {
     /// CPU backend.
     #[arg(long, value_enum, default_value = "flex")]
     pub backend: CpuBackend,
+    /// CPU threads for our timings (a rayon pool of this size: burn-flex's gemm and kernels and burn-ndarray
+    /// run on the current rayon pool) and for the PyTorch reference (torch.set_num_threads). Default: all cores.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// AnimateAnyMesh checkout (holds networks/dymeshvae.py): also time its PyTorch networks on the same shapes
+    /// and print a table with ratios. Without Python, torch or the folder, says why and reports ours only.
+    #[arg(long, value_name = "DIR")]
+    pub torch_reference: Option<PathBuf>,
+    /// The PyTorch reference script.
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/bench_torch_reference.py"))]
+    pub script: PathBuf,
+    /// Python interpreter for the reference.
+    #[arg(long, default_value = "python3")]
+    pub python: PathBuf,
 }
 
 pub fn run(cmd: ModelCmd) -> anyhow::Result<ExitCode> {
@@ -126,53 +144,260 @@ fn summary(path: &Path) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// Our side of the benchmark: timings and parameter counts of the three networks.
+struct OurTimings {
+    rf: StepTiming,
+    rf_params: usize,
+    vae: StepTiming,
+    vae_params: usize,
+    dymesh: StepTiming,
+    dymesh_params: usize,
+}
+
+/// Sizes of one benchmark size: RF config, tokens P, text tokens L, vertices N, both VAE configs.
+struct BenchSizes {
+    rf: MmditConfig,
+    tokens: usize,
+    text_len: usize,
+    vertices: usize,
+    vae: FrameVaeConfig,
+    dymesh: DyMeshVaeConfig,
+}
+
+impl BenchSize {
+    /// Must match `SIZES` in scripts/bench_torch_reference.py.
+    fn sizes(self) -> BenchSizes {
+        match self {
+            BenchSize::Paper => BenchSizes {
+                rf: MmditConfig::paper(KfMode::InputMask, 768),
+                tokens: 512,
+                text_len: 77,
+                vertices: 2048,
+                vae: FrameVaeConfig::new(),
+                dymesh: DyMeshVaeConfig::new(),
+            },
+            BenchSize::Tiny => BenchSizes {
+                rf: MmditConfig::tiny(),
+                tokens: 64,
+                text_len: 8,
+                vertices: 256,
+                vae: FrameVaeConfig::tiny(),
+                dymesh: DyMeshVaeConfig::tiny(),
+            },
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            BenchSize::Paper => "paper",
+            BenchSize::Tiny => "tiny",
+        }
+    }
+}
+
+fn total_params(rows: &[(String, usize)]) -> usize {
+    rows.iter().find(|(n, _)| n == TOTAL).map_or(0, |(_, n)| *n)
+}
+
+fn time_ours(args: &BenchArgs, sz: &BenchSizes, device: &Device) -> anyhow::Result<OurTimings> {
+    let rf = time_rf_step(&sz.rf, args.batch, sz.tokens, sz.text_len, args.iters, device);
+    let vae = time_vae_reconstruct(
+        &sz.vae, args.batch, sz.vertices, sz.tokens, sz.rf.frames, args.iters, device,
+    )
+    .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
+    let dymesh = time_dymesh_reconstruct(&sz.dymesh, args.batch, sz.vertices, sz.tokens, args.iters, device)
+        .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
+    Ok(OurTimings {
+        rf,
+        rf_params: total_params(&param_report(&sz.rf.init(device))),
+        vae,
+        vae_params: total_params(&param_report(&sz.vae.init(device))),
+        dymesh,
+        dymesh_params: total_params(&param_report(&sz.dymesh.init(device))),
+    })
+}
+
 pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
     if args.batch == 0 || args.iters == 0 {
         bail!("--batch and --iters must be positive");
     }
-    let (cfg, tokens, text_len) = match args.size {
-        BenchSize::Paper => (MmditConfig::paper(KfMode::InputMask, 768), 512, 77),
-        BenchSize::Tiny => (MmditConfig::tiny(), 64, 8),
+    let threads = match args.threads {
+        Some(0) => bail!("--threads must be positive"),
+        Some(n) => n,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
+    let sz = args.size.sizes();
     let device = match args.backend {
         CpuBackend::Flex => Device::flex(),
         CpuBackend::Ndarray => Device::ndarray(),
     };
-    let timing = time_rf_step(&cfg, args.batch, tokens, text_len, args.iters, &device);
-    let vae_cfg = match args.size {
-        BenchSize::Paper => FrameVaeConfig::new(),
-        BenchSize::Tiny => FrameVaeConfig::tiny(),
-    };
-    let vertices = match args.size {
-        BenchSize::Paper => 2048,
-        BenchSize::Tiny => 256,
-    };
-    let vae = time_vae_reconstruct(
-        &vae_cfg, args.batch, vertices, tokens, cfg.frames, args.iters, &device,
-    )
-    .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
+    if cfg!(debug_assertions) {
+        println!(
+            "note: debug build of our crates (dependencies are optimised); `cargo run --release -p any4d-train -- \
+             bench model` gives representative numbers"
+        );
+    }
+    // Our part runs inside a rayon pool of `threads` threads: burn-flex has no pool of its own (gemm's
+    // Parallelism::Rayon(0) and its parallel iterators use the current pool), so this bounds it.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("bench model: cannot build the rayon pool")?;
+    let ours = pool.install(|| time_ours(&args, &sz, &device))?;
+    let per_clip = |t: &StepTiming| t.median_ms / args.batch as f64;
     println!(
-        "bench model: RF forward+backward, {:?} size (W {}, {} blocks, P {tokens}, L {text_len}), {:?}, batch {}, {} iters: \
-         median {:.1} ms/step, {:.1} ms/clip",
+        "bench model: RF forward+backward, {:?} size (W {}, {} blocks, P {}, L {}), {:?}, batch {}, {} iters, \
+         {threads} threads: median {:.1} ms/step, {:.1} ms/clip",
         args.size,
-        cfg.width,
-        cfg.blocks,
+        sz.rf.width,
+        sz.rf.blocks,
+        sz.tokens,
+        sz.text_len,
         args.backend,
         args.batch,
         args.iters,
-        timing.median_ms,
-        timing.median_ms / args.batch as f64
+        ours.rf.median_ms,
+        per_clip(&ours.rf)
     );
     println!(
-        "bench model: frame-wise VAE encode+decode (posterior mean, no gradients), d {}, N {vertices}, P {tokens}, \
-         T {}, {:?}, batch {}, {} iters: median {:.1} ms/step, {:.1} ms/clip",
-        vae_cfg.width,
-        cfg.frames,
+        "bench model: frame-wise VAE encode+decode (posterior mean, no gradients), d {}, N {}, P {}, T {}, {:?}, \
+         batch {}, {} iters, {threads} threads: median {:.1} ms/step, {:.1} ms/clip",
+        sz.vae.width,
+        sz.vertices,
+        sz.tokens,
+        sz.rf.frames,
         args.backend,
         args.batch,
         args.iters,
-        vae.median_ms,
-        vae.median_ms / args.batch as f64
+        ours.vae.median_ms,
+        per_clip(&ours.vae)
     );
+    println!(
+        "bench model: sequence-wise DyMeshVAE encode+decode (posterior mean, no gradients), d {}, N {}, P {}, \
+         T {}, {:?}, batch {}, {} iters, {threads} threads: median {:.1} ms/step, {:.1} ms/clip",
+        sz.dymesh.width,
+        sz.vertices,
+        sz.tokens,
+        sz.dymesh.frames,
+        args.backend,
+        args.batch,
+        args.iters,
+        ours.dymesh.median_ms,
+        per_clip(&ours.dymesh)
+    );
+    let Some(dir) = &args.torch_reference else {
+        return Ok(ExitCode::SUCCESS);
+    };
+    let torch = match run_torch_reference(&args, dir, threads)? {
+        Ok(torch) => Some(torch),
+        Err(why) => {
+            println!("PyTorch reference skipped: {why}; reporting ours only");
+            None
+        }
+    };
+    if let Some(t) = &torch {
+        println!(
+            "PyTorch reference: torch {}, {} threads, AnimateAnyMesh at {}",
+            t.torch,
+            t.threads,
+            dir.display()
+        );
+    }
+    let rows = [
+        ("RF forward+backward", &ours.rf, ours.rf_params, torch.as_ref().map(|t| &t.rf)),
+        ("frame-wise VAE encode+decode", &ours.vae, ours.vae_params, torch.as_ref().map(|t| &t.vae_framewise)),
+        (
+            "sequence-wise DyMeshVAE enc+dec",
+            &ours.dymesh,
+            ours.dymesh_params,
+            torch.as_ref().map(|t| &t.vae_sequencewise),
+        ),
+    ];
+    println!(
+        "{:<32} {:>13} {:>16} {:>13} {:>12} {:>15}",
+        "network", "ours ms/clip", "PyTorch ms/clip", "ours/PyTorch", "params ours", "params PyTorch"
+    );
+    for (name, ours_t, ours_p, theirs) in rows {
+        let ours_ms = per_clip(ours_t);
+        match theirs {
+            Some(th) => {
+                let theirs_ms = th.median_ms / args.batch as f64;
+                println!(
+                    "{name:<32} {ours_ms:>13.1} {theirs_ms:>16.1} {:>13.2} {ours_p:>12} {:>15}",
+                    ours_ms / theirs_ms,
+                    th.params
+                );
+            }
+            None => println!("{name:<32} {ours_ms:>13.1} {:>16} {:>13} {ours_p:>12} {:>15}", "-", "-", "-"),
+        }
+    }
+    println!("(ours/PyTorch is a time ratio: below 1 means ours is faster)");
     Ok(ExitCode::SUCCESS)
+}
+
+/// One network's result in the PyTorch reference's JSON.
+#[derive(serde::Deserialize)]
+struct TorchNet {
+    median_ms: f64,
+    params: usize,
+}
+
+/// What `scripts/bench_torch_reference.py --json` prints.
+#[derive(serde::Deserialize)]
+struct TorchReference {
+    torch: String,
+    threads: usize,
+    rf: TorchNet,
+    vae_framewise: TorchNet,
+    vae_sequencewise: TorchNet,
+}
+
+/// Runs the PyTorch reference. The outer error is a failure to report (a crash, unreadable output); the inner
+/// `Err` says why the reference cannot run here (no Python, no torch, DIR is not an AnimateAnyMesh checkout).
+fn run_torch_reference(
+    args: &BenchArgs,
+    dir: &Path,
+    threads: usize,
+) -> anyhow::Result<Result<TorchReference, String>> {
+    if !dir.join("networks").join("dymeshvae.py").is_file() {
+        return Ok(Err(format!(
+            "--torch-reference {}: networks/dymeshvae.py not found (not an AnimateAnyMesh checkout)",
+            dir.display()
+        )));
+    }
+    if !args.script.is_file() {
+        return Ok(Err(format!("--script {}: not found", args.script.display())));
+    }
+    let out = Command::new(&args.python)
+        .arg(&args.script)
+        .arg("--aam")
+        .arg(dir)
+        .args(["--size", args.size.name()])
+        .args(["--batch", &args.batch.to_string()])
+        .args(["--iters", &args.iters.to_string()])
+        .args(["--threads", &threads.to_string()])
+        .arg("--json")
+        .output();
+    let out = match out {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Ok(Err(format!("{} not found", args.python.display())));
+        }
+        other => other.with_context(|| format!("running {}", args.python.display()))?,
+    };
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() {
+        // Exit 2: bad folder; 3: torch or einops missing (the script's own, one-line messages).
+        if matches!(out.status.code(), Some(2 | 3)) {
+            return Ok(Err(stderr.trim().to_string()));
+        }
+        bail!("{} {} failed ({}): {stderr}", args.python.display(), args.script.display(), out.status);
+    }
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let line = stdout
+        .lines()
+        .last()
+        .with_context(|| format!("{} printed nothing", args.script.display()))?;
+    let parsed: TorchReference = serde_json::from_str(line)
+        .with_context(|| format!("{}: unexpected output {line:?}", args.script.display()))?;
+    Ok(Ok(parsed))
 }
