@@ -90,10 +90,18 @@ impl MeshCodec {
             return Err(DataError::new("mesh codec", "tokens", "P must be positive"));
         }
         if padding == PadTo::Fixed(0) {
-            return Err(DataError::new("mesh codec", "padding", "a fixed vertex axis must be positive"));
+            return Err(DataError::new(
+                "mesh codec",
+                "padding",
+                "a fixed vertex axis must be positive",
+            ));
         }
         if let MeshVae::Sequence { frames: 0, .. } = vae {
-            return Err(DataError::new("mesh codec", "frames", "the sequence-wise VAE needs T > 0"));
+            return Err(DataError::new(
+                "mesh codec",
+                "frames",
+                "the sequence-wise VAE needs T > 0",
+            ));
         }
         Ok(Self {
             vae,
@@ -141,9 +149,14 @@ impl MeshCodec {
         let edges = edges_from_faces(&clip.faces, n_real).map_err(|e| e.at(&clip.id))?;
         let edges = EdgeList::new(&[edges], n, &self.device)
             .map_err(|e| DataError::new(&clip.id, "faces", e.to_string()))?;
-        let (reference, vmask) = pad_vertices(reference_rows, n_real, 1, n).map_err(|e| e.at(&clip.id))?;
-        let rows: Vec<[f32; 3]> = frames.iter().flat_map(|&f| clip.frame(f).iter().copied()).collect();
-        let (selected, _) = pad_vertices(&rows, n_real, frames.len(), n).map_err(|e| e.at(&clip.id))?;
+        let (reference, vmask) =
+            pad_vertices(reference_rows, n_real, 1, n).map_err(|e| e.at(&clip.id))?;
+        let rows: Vec<[f32; 3]> = frames
+            .iter()
+            .flat_map(|&f| clip.frame(f).iter().copied())
+            .collect();
+        let (selected, _) =
+            pad_vertices(&rows, n_real, frames.len(), n).map_err(|e| e.at(&clip.id))?;
         let d = &self.device;
         Ok(VaeInput {
             reference: Tensor::from_data(TensorData::new(reference, [1, n, 3]), d),
@@ -161,7 +174,11 @@ impl MeshCodec {
     /// `clip.vertices`: `[T, N_v]` rows; returns `mu` `[1, G, P, C]` with G = `frames.len()` (frame-wise) or 1.
     pub fn encode(&self, clip: &Clip, frames: &[usize]) -> Result<WindowEncoding> {
         if frames.is_empty() {
-            return Err(DataError::new(&clip.id, "frames", "nothing to encode: no frame was given"));
+            return Err(DataError::new(
+                &clip.id,
+                "frames",
+                "nothing to encode: no frame was given",
+            ));
         }
         if let MeshVae::Sequence { frames: t, .. } = &self.vae {
             let all: Vec<usize> = (0..clip.frames).collect();
@@ -180,10 +197,20 @@ impl MeshCodec {
         let input = self.input(clip, frames)?;
         let reference = input.reference.clone();
         let VaeEncoding { e0, z0, mu, .. } = match &self.vae {
-            MeshVae::Frame(vae) => vae.encode(input.reference, input.frames, input.vmask, input.fps, &input.edges),
-            MeshVae::Sequence { vae, .. } => {
-                vae.encode(input.reference, input.frames, input.vmask, input.fps, &input.edges)
-            }
+            MeshVae::Frame(vae) => vae.encode(
+                input.reference,
+                input.frames,
+                input.vmask,
+                input.fps,
+                &input.edges,
+            ),
+            MeshVae::Sequence { vae, .. } => vae.encode(
+                input.reference,
+                input.frames,
+                input.vmask,
+                input.fps,
+                &input.edges,
+            ),
         };
         Ok(WindowEncoding {
             e0,
@@ -210,12 +237,19 @@ impl MeshCodec {
             return Err(DataError::new(
                 &enc.id,
                 "latents",
-                format!("shape {:?} does not match the encoding's [1, G, {p}, {c}]", z.dims()),
+                format!(
+                    "shape {:?} does not match the encoding's [1, G, {p}, {c}]",
+                    z.dims()
+                ),
             ));
         }
         let x = match &self.vae {
-            MeshVae::Frame(vae) => vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z),
-            MeshVae::Sequence { vae, .. } => vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z),
+            MeshVae::Frame(vae) => {
+                vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z)
+            }
+            MeshVae::Sequence { vae, .. } => {
+                vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z)
+            }
         };
         real_rows(x, enc.n_real, &enc.id)
     }
@@ -247,15 +281,24 @@ impl MeshCodec {
 /// The first `n_real` rows of every frame of a decoded `[1, G, N, 3]` tensor, checked finite.
 fn real_rows(x: Tensor<4>, n_real: usize, id: &str) -> Result<Vec<[f32; 3]>> {
     let [_, g, n, _] = x.dims();
-    let flat = x
-        .try_to_vec_as::<f32>()
-        .map_err(|e| DataError::new(id, "decoded vertices", format!("cannot read the tensor: {e:?}")))?;
+    let flat = x.try_to_vec_as::<f32>().map_err(|e| {
+        DataError::new(
+            id,
+            "decoded vertices",
+            format!("cannot read the tensor: {e:?}"),
+        )
+    })?;
     if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
         let row = i / 3;
         return Err(DataError::new(
             id,
             "decoded vertices",
-            format!("non-finite value {} at frame {}, vertex {}", flat[i], row / n, row % n),
+            format!(
+                "non-finite value {} at frame {}, vertex {}",
+                flat[i],
+                row / n,
+                row % n
+            ),
         ));
     }
     Ok((0..g)
@@ -283,24 +326,43 @@ fn keyframe_list(clip: &Clip, keyframes: &[usize]) -> Result<Vec<usize>> {
 ///
 /// # Shapes
 /// `enc.mu`: `[1, K, P, C]` for `enc.frames`; returns `[1, T, P, C]` and `[T]`.
-fn scatter_keyframes(enc: &WindowEncoding, keys: &[usize], device: &Device) -> Result<(Tensor<4>, Vec<f32>)> {
+fn scatter_keyframes(
+    enc: &WindowEncoding,
+    keys: &[usize],
+    device: &Device,
+) -> Result<(Tensor<4>, Vec<f32>)> {
     let [_, k, p, c] = enc.mu.dims();
     let t = enc.window_frames;
-    let mu = enc
-        .mu
-        .try_to_vec_as::<f32>()
-        .map_err(|e| DataError::new(&enc.id, "keyframe latents", format!("cannot read the tensor: {e:?}")))?;
+    let mu = enc.mu.try_to_vec_as::<f32>().map_err(|e| {
+        DataError::new(
+            &enc.id,
+            "keyframe latents",
+            format!("cannot read the tensor: {e:?}"),
+        )
+    })?;
     let len = p * c;
     let mut out = vec![0.0f32; t * len];
     let mut mask = vec![0.0f32; t];
     for &f in keys {
-        let row = enc.frames.iter().position(|&e| e == f).filter(|&r| r < k).ok_or_else(|| {
-            DataError::new(&enc.id, "keyframes", format!("keyframe {f} was not encoded"))
-        })?;
+        let row = enc
+            .frames
+            .iter()
+            .position(|&e| e == f)
+            .filter(|&r| r < k)
+            .ok_or_else(|| {
+                DataError::new(
+                    &enc.id,
+                    "keyframes",
+                    format!("keyframe {f} was not encoded"),
+                )
+            })?;
         out[f * len..(f + 1) * len].copy_from_slice(&mu[row * len..(row + 1) * len]);
         mask[f] = 1.0;
     }
-    Ok((Tensor::from_data(TensorData::new(out, [1, t, p, c]), device), mask))
+    Ok((
+        Tensor::from_data(TensorData::new(out, [1, t, p, c]), device),
+        mask,
+    ))
 }
 
 /// Frames to encode for a keyframe set: frame 0 (the reference, always known) and the keyframes.
@@ -312,16 +374,18 @@ fn encoded_frames(keys: &[usize]) -> Vec<usize> {
     frames
 }
 
-/// ε ~ N(0, I) from `rng(seed, NOISE_STREAM)` (Box–Muller), so a seed gives the same noise on every device.
+/// The initial noise ε of [`RfSampler`] for `seed`: N(0, I) from a ChaCha stream (Box–Muller), so a seed gives
+/// the same noise on every device and thread.
 ///
 /// # Shapes
-/// returns `dims`.
-fn gaussian_noise(seed: u64, dims: [usize; 4], device: &Device) -> Tensor<4> {
+/// `dims` = `[1, P, T, C]` (token-major, as the RF state); returns `dims`.
+pub fn sampler_noise(seed: u64, dims: [usize; 4], device: &Device) -> Tensor<4> {
     let mut r = rng(seed, NOISE_STREAM);
     let len = dims.iter().product();
     let values: Vec<f32> = (0..len)
         .map(|_| {
-            let (u1, u2): (f64, f64) = (r.random::<f64>().max(f64::MIN_POSITIVE), r.random::<f64>());
+            let (u1, u2): (f64, f64) =
+                (r.random::<f64>().max(f64::MIN_POSITIVE), r.random::<f64>());
             ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
         })
         .collect();
@@ -336,7 +400,7 @@ pub struct LearnedModels {
     rf: Mmdit,
     rf_config: MmditConfig,
     stats: LatentStats,
-    text: Box<dyn TextEncoder>,
+    text: Box<dyn TextEncoder + Send + Sync>,
 }
 
 impl LearnedModels {
@@ -347,10 +411,11 @@ impl LearnedModels {
         rf: Mmdit,
         rf_config: MmditConfig,
         stats: LatentStats,
-        text: Box<dyn TextEncoder>,
+        text: Box<dyn TextEncoder + Send + Sync>,
     ) -> Result<Self> {
         codec.require_frame_wise("learned models")?;
-        let bad = |field: &str, reason: String| Err(DataError::new("learned models", field, reason));
+        let bad =
+            |field: &str, reason: String| Err(DataError::new("learned models", field, reason));
         if let Err(msg) = rf_config.validate() {
             return bad("rf config", msg);
         }
@@ -370,7 +435,11 @@ impl LearnedModels {
         if text.dim() != rf_config.text_dim {
             return bad(
                 "text",
-                format!("the encoder gives width {}, the RF expects text_dim {}", text.dim(), rf_config.text_dim),
+                format!(
+                    "the encoder gives width {}, the RF expects text_dim {}",
+                    text.dim(),
+                    rf_config.text_dim
+                ),
             );
         }
         for (name, mean, std) in [
@@ -378,7 +447,10 @@ impl LearnedModels {
             ("motion", stats.motion_mean, stats.motion_std),
         ] {
             if !(mean.is_finite() && std.is_finite() && std > 0.0) {
-                return bad("stats", format!("{name} mean {mean} / std {std}: std must be finite and > 0"));
+                return bad(
+                    "stats",
+                    format!("{name} mean {mean} / std {std}: std must be finite and > 0"),
+                );
             }
         }
         Ok(Self {
@@ -430,7 +502,8 @@ pub struct RfSampler {
 
 impl RfSampler {
     /// `options.kf_mode` must match the network's input layout (mask channels or not); `guidance` is the CFG
-    /// weight w (1.0 in the paper: one conditional branch).
+    /// weight w (1.0 in the paper: one conditional branch). ε comes from the seed ([`sampler_noise`]); only
+    /// `ReplaceNoise::Fresh` also draws from the device RNG, so it is reproducible only if the device is seeded.
     pub fn new(models: Arc<LearnedModels>, options: SampleOptions, guidance: f64) -> Result<Self> {
         let bad = |field: &str, reason: String| Err(DataError::new("rf sampler", field, reason));
         let net = models.rf_config.kf_mode;
@@ -440,15 +513,25 @@ impl RfSampler {
                 format!(
                     "sampling with {:?} needs a network {} mask channels, but it was built for {net:?}",
                     options.kf_mode,
-                    if options.kf_mode.has_mask_channels() { "with" } else { "without" }
+                    if options.kf_mode.has_mask_channels() {
+                        "with"
+                    } else {
+                        "without"
+                    }
                 ),
             );
         }
         if options.n_grid < 2 {
-            return bad("n_grid", format!("needs at least 2 grid points, got {}", options.n_grid));
+            return bad(
+                "n_grid",
+                format!("needs at least 2 grid points, got {}", options.n_grid),
+            );
         }
         if !(0.0..=1.0).contains(&options.tau_star) {
-            return bad("tau_star", format!("{} is outside [0, 1]", options.tau_star));
+            return bad(
+                "tau_star",
+                format!("{} is outside [0, 1]", options.tau_star),
+            );
         }
         if !guidance.is_finite() {
             return bad("guidance", format!("{guidance} is not finite"));
@@ -473,7 +556,11 @@ impl RfSampler {
             MethodKind::ReplacementRf => (KfMode::ReplaceNoised, base.tau_star),
             MethodKind::ImputeUntil { tau_star, .. } => (KfMode::ImputeUntil, f64::from(tau_star)),
             other => {
-                return Err(DataError::new("rf sampler", other.label(), "is not a rectified-flow method"));
+                return Err(DataError::new(
+                    "rf sampler",
+                    other.label(),
+                    "is not a rectified-flow method",
+                ));
             }
         };
         let options = SampleOptions {
@@ -507,7 +594,10 @@ impl RfSampler {
             return Err(DataError::new(
                 &clip.id,
                 "frames",
-                format!("the window has {} frames, the RF was built for T = {}", clip.frames, cfg.frames),
+                format!(
+                    "the window has {} frames, the RF was built for T = {}",
+                    clip.frames, cfg.frames
+                ),
             ));
         }
         let keys = keyframe_list(clip, keyframes)?;
@@ -517,7 +607,10 @@ impl RfSampler {
             return Err(DataError::new(
                 &clip.id,
                 "latents",
-                format!("the VAE gives C = {c} channels, the RF was built for C = {}", cfg.channels),
+                format!(
+                    "the VAE gives C = {c} channels, the RF was built for C = {}",
+                    cfg.channels
+                ),
             ));
         }
         let (keyframe_latents, mask) = scatter_keyframes(&encoding, &keys, &device)?;
@@ -525,7 +618,10 @@ impl RfSampler {
         let mask_t: Tensor<2> = Tensor::from_data(TensorData::new(mask.clone(), [1, t]), &device);
         let cond = Conditioning {
             z0: m.stats.standardize_shape(encoding.z0.clone()),
-            z_key: m.stats.standardize_motion(keyframe_latents.clone()).swap_dims(1, 2), // [1, P, T, C]
+            z_key: m
+                .stats
+                .standardize_motion(keyframe_latents.clone())
+                .swap_dims(1, 2), // [1, P, T, C]
             mask: mask_t.clone(),
         };
         let text = m
@@ -533,10 +629,13 @@ impl RfSampler {
             .encode(&[caption.to_string()], &device)
             .map_err(|e| DataError::new(&clip.id, "caption", e.to_string()))?
             .states;
-        let eps = gaussian_noise(seed, [1, p, t, c], &device);
+        let eps = sampler_noise(seed, [1, p, t, c], &device);
         let x1 = sample_mmdit(&m.rf, &cond, text, eps, self.guidance, &self.options); // (R6)
         let mut latents = m.stats.destandardize_motion(x1); // [1, P, T, C]
-        if matches!(self.options.kf_mode, KfMode::InputMask | KfMode::ReplaceNoised) {
+        if matches!(
+            self.options.kf_mode,
+            KfMode::InputMask | KfMode::ReplaceNoised
+        ) {
             // SPEC §4.6: keyframe slots are Z_key; done on raw latents so they are μ exactly.
             latents = replace_keyframes(latents, keyframe_latents.clone().swap_dims(1, 2), mask_t);
         }
@@ -550,7 +649,13 @@ impl RfSampler {
 }
 
 impl WindowSampler for RfSampler {
-    fn sample(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
+    fn sample(
+        &self,
+        clip: &Clip,
+        keyframes: &[usize],
+        caption: &str,
+        seed: u64,
+    ) -> Result<Vec<[f32; 3]>> {
         let s = self.sample_latents(clip, keyframes, caption, seed)?;
         self.models.codec.decode(&s.encoding, s.latents)
     }
@@ -578,9 +683,13 @@ impl LatentLerpSampler {
         let enc = self.codec.encode(clip, &encoded_frames(&keys))?;
         let (z, _) = scatter_keyframes(&enc, &keys, self.codec.device())?;
         let [_, t, p, c] = z.dims();
-        let flat = z
-            .try_to_vec_as::<f32>()
-            .map_err(|e| DataError::new(&clip.id, "keyframe latents", format!("cannot read the tensor: {e:?}")))?;
+        let flat = z.try_to_vec_as::<f32>().map_err(|e| {
+            DataError::new(
+                &clip.id,
+                "keyframe latents",
+                format!("cannot read the tensor: {e:?}"),
+            )
+        })?;
         // (L1) on z: ẑ_f = z_a + (f − a)/(b − a) · (z_b − z_a)
         let filled = lerp_latents(&flat, t, p * c, &keys)
             .map_err(|e| DataError::new(&clip.id, "lerp_latent", e.to_string()))?;
@@ -590,7 +699,13 @@ impl LatentLerpSampler {
 }
 
 impl WindowSampler for LatentLerpSampler {
-    fn sample(&self, clip: &Clip, keyframes: &[usize], _caption: &str, _seed: u64) -> Result<Vec<[f32; 3]>> {
+    fn sample(
+        &self,
+        clip: &Clip,
+        keyframes: &[usize],
+        _caption: &str,
+        _seed: u64,
+    ) -> Result<Vec<[f32; 3]>> {
         let (enc, z) = self.latents(clip, keyframes)?;
         self.codec.decode(&enc, z)
     }

@@ -1,5 +1,5 @@
 //! Parameter counts of a network per top-level submodule (checks SPEC §4.3 "≈ 78M trainable"; used by
-//! `any4d model summary`).
+//! `any4d model summary`) and timings of the RF step and VAE encode+decode (used by `any4d bench model`).
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::prelude::*;
@@ -179,6 +179,12 @@ fn synthetic_vae_batch(
 ) -> Result<crate::frame_vae::VaeBatch, String> {
     use crate::frame_vae::{EdgeList, VaeBatch};
     use burn::tensor::{Distribution, TensorData};
+    if vertices < 2 || tokens > vertices {
+        return Err(format!(
+            "synthetic clips need at least 2 vertices and no more tokens than vertices, got {vertices} vertices \
+             and {tokens} tokens"
+        ));
+    }
     let chain: Vec<[u32; 2]> = (0..vertices as u32 - 1).map(|i| [i, i + 1]).collect();
     let edges = EdgeList::new(&vec![chain; batch], vertices, device)
         .map_err(|e| format!("synthetic {e}"))?;
@@ -229,5 +235,42 @@ fn median(values: &[f64]) -> f64 {
         sorted[n / 2]
     } else {
         0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dymesh_vae::DyMeshVaeConfig;
+    use crate::frame_vae::FrameVaeConfig;
+
+    #[test]
+    fn vae_timings_report_every_timed_run() {
+        let dev = Device::flex();
+        let seq =
+            time_dymesh_reconstruct(&DyMeshVaeConfig::tiny(), 1, 16, 4, 3, &dev).expect("times");
+        assert_eq!(seq.steps_ms.len(), 3);
+        assert!(seq.steps_ms.iter().all(|&ms| ms > 0.0));
+        assert_eq!(seq.median_ms, median(&seq.steps_ms));
+        let frame =
+            time_vae_reconstruct(&FrameVaeConfig::tiny(), 1, 16, 4, 2, 2, &dev).expect("times");
+        assert_eq!(frame.steps_ms.len(), 2);
+    }
+
+    #[test]
+    fn impossible_synthetic_clips_are_errors() {
+        let dev = Device::flex();
+        let err =
+            time_dymesh_reconstruct(&DyMeshVaeConfig::tiny(), 1, 4, 8, 1, &dev).expect_err("P > N");
+        assert!(err.contains("4 vertices and 8 tokens"), "{err}");
+        let err =
+            time_vae_reconstruct(&FrameVaeConfig::tiny(), 1, 1, 1, 2, 1, &dev).expect_err("N < 2");
+        assert!(err.contains("at least 2 vertices"), "{err}");
+    }
+
+    #[test]
+    fn median_of_odd_and_even_counts() {
+        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
     }
 }

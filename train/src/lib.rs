@@ -2,7 +2,8 @@
 //!
 //! Code map: [`config`] (run TOML), [`backend`] (runtime device), [`run_folder`] + [`checkpoint`] +
 //! [`data_order`] (append-only runs that resume exactly), [`loop_common`] (the shared loop), [`progress`],
-//! [`plot`], [`vae_loop`] (SPEC §3), [`rf_loop`] (SPEC §4; config only so far).
+//! [`plot`], [`vae_loop`] (SPEC §3), [`rf_loop`] (SPEC §4),
+//! [`runs`] (loading trained VAE and RF runs).
 
 pub mod cli;
 
@@ -16,6 +17,7 @@ pub mod plot;
 pub mod progress;
 pub mod rf_loop;
 pub mod run_folder;
+pub mod runs;
 pub mod vae_loop;
 
 pub use error::{Result, TrainError};

@@ -1,16 +1,39 @@
-//! Rectified-flow training (SPEC §4.4–4.7; issue 5 item 1): `any4d train rf`. This file holds the run config
-//! (`configs/rf/*.toml`: `[model]` from the model crate, `[rf]` objective options, `[train]`, `[optim]`,
-//! `[device]`). The loop itself (frozen-VAE encoding, §3.4 standardisation, §4.5 keyframe masks, text dropout)
-//! is not written yet: `train_rf` returns an error saying so.
+//! Rectified-flow training (SPEC §4.2, §4.4–4.7, §5.4; issue 5 item 1): `any4d train rf`. The frozen VAE of
+//! `--vae RUN` encodes every clip once (posterior μ, log σ², z₀; cached in host memory); each step draws
+//! z = μ + σξ (or μ), standardizes it (SPEC §3.4), draws keyframe masks (§4.5, §5.4), τ, ε and the CFG text
+//! dropout, and minimises (R5) through `rf_training_loss`. The caption encoder is the `scratch` one: its tokenizer
+//! is trained on the TRAIN captions at run start (`tokenizer.json` in the run folder) and its transformer is
+//! trained jointly with the MMDiT ([`RfModel`]). Run config: `configs/rf/*.toml` (`[model]`, `[rf]`, `[text]`,
+//! `[train]`, `[optim]`, `[device]`).
 
 use std::path::{Path, PathBuf};
 
-use any4d_model::mmdit::MmditConfig;
-use any4d_model::rectified_flow::{KeyframeLoss, TauSampler};
+use any4d_data::keyframes::{KeyframeStrategy, sample_keyframes};
+use any4d_data::store::{Split, Store};
+use any4d_model::frame_vae::{self, FrameVae};
+use any4d_model::latent_stats::LatentStats;
+use any4d_model::mmdit::{KfMode, Mmdit, MmditConfig};
+use any4d_model::rectified_flow::{KeyframeLoss, RfBatch, RfLossOptions, TauSampler, rf_training_loss};
+use any4d_model::text::scratch::{ScratchTextConfig, ScratchTextModel, ScratchTokenizer};
+use burn::module::Module;
+use burn::prelude::{Device, Tensor, TensorData};
+use burn::tensor::Distribution;
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use crate::backend;
 use crate::config::{DeviceConfig, OptimConfig, TrainConfig, parse_strict, to_toml};
 use crate::error::{Result, TrainError, io_err};
+use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, StopFlag};
+use crate::progress::ProgressMode;
+use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder};
+use crate::runs::{self, LoadedVae, VaeRunRecord};
+use crate::vae_loop::{MeshVae, load_clips, vae_batch};
+
+/// Names of the loss terms in `metrics.csv` / `valid.csv`: (R5) and the fraction of keyframe slots (m = 1).
+pub const RF_TERMS: [&str; 2] = ["rf", "kf_frac"];
 
 /// How the keyframe set of a training sample is drawn (SPEC §4.5, §5.4, §8 X3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -18,7 +41,7 @@ use crate::error::{Result, TrainError, io_err};
 pub enum KfSampler {
     /// k ~ Unif{0..=k_max}, a uniform k-subset of the T frames (paper, k_max = 5).
     Random,
-    /// SceneMI: k ~ Unif{2..T}, first and last always included.
+    /// SceneMI: k ~ Unif{2..=T}, first and last always included.
     Scenemi,
 }
 
@@ -26,7 +49,7 @@ pub enum KfSampler {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LatentDraw {
-    /// z = μ + σξ, a fresh posterior sample each time a clip is encoded.
+    /// z = μ + σξ, a fresh posterior sample every time a clip enters a batch.
     Sample,
     /// z = μ.
     Mean,
@@ -54,6 +77,31 @@ pub struct RfSection {
     pub latent: LatentDraw,
 }
 
+/// Which caption encoder the RF trains with (SPEC §4.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TextEncoderKind {
+    /// WordPiece tokenizer trained on the TRAIN captions + a small transformer trained jointly with the RF.
+    /// (The CLIP and BERT loaders of the model crate are not wired into training yet.)
+    Scratch,
+}
+
+/// The `[text]` table: the caption encoder. Its width is `model.text_dim`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TextSection {
+    /// Encoder kind.
+    pub encoder: TextEncoderKind,
+    /// Largest tokenizer vocabulary (special tokens included); the trained one may be smaller.
+    pub vocab_size: usize,
+    /// Transformer layers.
+    pub layers: usize,
+    /// Attention heads; must divide `model.text_dim`.
+    pub heads: usize,
+    /// Tokens L per caption (SPEC §1.1: 77).
+    pub max_len: usize,
+}
+
 /// A whole `configs/rf/*.toml` run config.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -62,6 +110,8 @@ pub struct RfRunConfig {
     pub model: MmditConfig,
     /// `[rf]`.
     pub rf: RfSection,
+    /// `[text]`.
+    pub text: TextSection,
     /// `[train]`.
     pub train: TrainConfig,
     /// `[optim]`.
@@ -88,13 +138,39 @@ impl RfRunConfig {
         if !(0.0..=1.0).contains(&rf.tau_star) {
             return Err(bad(format!("rf.tau_star {} is outside [0, 1]", rf.tau_star)));
         }
-        if rf.keyframe_noise < 0.0 {
-            return Err(bad(format!("rf.keyframe_noise {} is negative", rf.keyframe_noise)));
+        if !(rf.keyframe_noise >= 0.0 && rf.keyframe_noise.is_finite()) {
+            return Err(bad(format!(
+                "rf.keyframe_noise {} must be finite and non-negative",
+                rf.keyframe_noise
+            )));
         }
         if rf.k_max > cfg.model.frames {
             return Err(bad(format!(
                 "rf.k_max {} exceeds model.frames {}",
                 rf.k_max, cfg.model.frames
+            )));
+        }
+        if rf.kf_sampler == KfSampler::Scenemi && cfg.model.frames < 2 {
+            return Err(bad(format!(
+                "rf.kf_sampler = \"scenemi\" keeps the first and last frames: needs model.frames ≥ 2, got {}",
+                cfg.model.frames
+            )));
+        }
+        let t = &cfg.text;
+        for (name, value) in [
+            ("vocab_size", t.vocab_size),
+            ("layers", t.layers),
+            ("heads", t.heads),
+            ("max_len", t.max_len),
+        ] {
+            if value == 0 {
+                return Err(bad(format!("text.{name} must be positive, got 0")));
+            }
+        }
+        if cfg.model.text_dim % t.heads != 0 {
+            return Err(bad(format!(
+                "text.heads ({}) must divide model.text_dim ({})",
+                t.heads, cfg.model.text_dim
             )));
         }
         Ok(cfg)
@@ -110,23 +186,614 @@ impl RfRunConfig {
     pub fn to_toml(&self) -> Result<String> {
         to_toml(self)
     }
+
+    /// The network of this config for a trained tokenizer of `vocab_size` tokens.
+    pub fn model_config(&self, vocab_size: usize) -> RfModelConfig {
+        RfModelConfig {
+            mmdit: self.model.clone(),
+            text: ScratchTextConfig {
+                vocab_size,
+                width: self.model.text_dim,
+                layers: self.text.layers,
+                heads: self.text.heads,
+                max_len: self.text.max_len,
+            },
+        }
+    }
+
+    /// The options of (R5) for this config.
+    pub fn loss_options(&self) -> RfLossOptions {
+        RfLossOptions {
+            kf_mode: self.model.kf_mode,
+            keyframe_loss: self.rf.keyframe_loss,
+            tau_star: self.rf.tau_star,
+        }
+    }
 }
+
+// ---------------------------------------------------------------------------------------------------------------
+// The trained network
+
+/// Sizes of [`RfModel`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct RfModelConfig {
+    /// The MMDiT.
+    pub mmdit: MmditConfig,
+    /// The scratch caption transformer (width = `mmdit.text_dim`).
+    pub text: ScratchTextConfig,
+}
+
+impl RfModelConfig {
+    /// Builds both networks on `device`.
+    pub fn init(&self, device: &Device) -> RfModel {
+        RfModel {
+            mmdit: self.mmdit.init(device),
+            text: self.text.init(device),
+        }
+    }
+}
+
+/// What the RF run trains: the MMDiT v_θ (R4) and, jointly, the scratch caption encoder (SPEC §4.4).
+#[derive(Module, Debug)]
+pub struct RfModel {
+    /// The keyframe-conditioned velocity network.
+    pub mmdit: Mmdit,
+    /// The caption transformer feeding the MMDiT's text stream.
+    pub text: ScratchTextModel,
+}
+
+impl RfModel {
+    /// Token states of `captions` (empty or blank caption = all padding = zero states, unconditional).
+    ///
+    /// # Shapes
+    /// - output: `[B, L, D_txt]` with B = `captions.len()`, L = `max_len`
+    pub fn encode_text(
+        &self,
+        tokenizer: &ScratchTokenizer,
+        captions: &[String],
+        max_len: usize,
+        device: &Device,
+    ) -> Result<Tensor<3>> {
+        let ids = tokenizer
+            .pad_batch(captions, max_len)
+            .map_err(|e| TrainError::Other(e.to_string()))?;
+        Ok(self.text.forward(ids.ids_tensor(device), ids.pad_tensor(device)))
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Keyframe masks (SPEC §4.5, §5.4)
+
+/// The keyframe mask m of one training window of `frames` frames (true = observed keyframe): `Random` draws
+/// k ~ U{0..=k_max} and a uniform k-subset (§4.5 steps 1–2); `Scenemi` draws k ~ U{2..=T} with the first and last
+/// frames always included (§5.4). Modes trained without keyframes (`replace_noised`, `none`) get all-false masks
+/// and consume no random numbers.
+pub fn draw_keyframe_mask(rf: &RfSection, kf_mode: KfMode, frames: usize, rng: &mut impl Rng) -> Vec<bool> {
+    if !kf_mode.has_mask_channels() {
+        return vec![false; frames];
+    }
+    match rf.kf_sampler {
+        KfSampler::Random => sample_keyframes(&KeyframeStrategy::Random { k_max: rf.k_max }, frames, rng),
+        KfSampler::Scenemi => {
+            let mut mask = vec![false; frames];
+            mask[0] = true;
+            mask[frames - 1] = true;
+            let k = rng.random_range(2..=frames);
+            let mut inner: Vec<usize> = (1..frames - 1).collect();
+            let (chosen, _) = inner.partial_shuffle(rng, k - 2);
+            for &f in chosen.iter() {
+                mask[f] = true;
+            }
+            mask
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Frozen-VAE latents
+
+/// Frozen-VAE encoding of one clip, kept in host memory in the VAE's layout.
+#[derive(Clone, Debug)]
+pub struct ClipLatents {
+    /// Index of the clip in the store.
+    pub store_index: usize,
+    /// Its caption.
+    pub caption: String,
+    /// Shape latent z₀, `[P, C]` row-major.
+    pub z0: Vec<f32>,
+    /// Posterior mean μ_f of every frame, `[T, P, C]` row-major.
+    pub mu: Vec<f32>,
+    /// Posterior log σ²_f, `[T, P, C]` row-major.
+    pub logvar: Vec<f32>,
+}
+
+/// The latents of one split and their sizes.
+#[derive(Clone, Debug)]
+pub struct LatentSet {
+    /// One entry per clip, in store order.
+    pub clips: Vec<ClipLatents>,
+    /// T.
+    pub frames: usize,
+    /// P.
+    pub tokens: usize,
+    /// C.
+    pub channels: usize,
+}
+
+impl LatentSet {
+    /// Host bytes held.
+    pub fn bytes(&self) -> usize {
+        self.clips.len() * self.tokens * self.channels * (1 + 2 * self.frames) * std::mem::size_of::<f32>()
+    }
+}
+
+fn host_f32<const D: usize>(t: Tensor<D>, what: &str) -> Result<Vec<f32>> {
+    t.into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .map_err(|e| TrainError::Other(format!("{what}: cannot read tensor data: {e:?}")))
+}
+
+/// Encodes clips `store_indices` of `store` with the frozen frame-wise VAE, `micro_batch` clips at a time.
+pub fn encode_latents(
+    vae: &FrameVae,
+    store: &Store,
+    store_indices: &[usize],
+    micro_batch: usize,
+    device: &Device,
+) -> Result<LatentSet> {
+    let (frames, tokens) = (store.frames(), store.p());
+    let mut clips = Vec::with_capacity(store_indices.len());
+    let mut channels = 0;
+    for chunk in store_indices.chunks(micro_batch.max(1)) {
+        let (batch, _) = load_clips(store, chunk, device)?;
+        let enc = vae.vae_encode(&vae_batch(&batch, device)?);
+        let [b, t, p, c] = enc.mu.dims();
+        if (t, p) != (frames, tokens) {
+            return Err(TrainError::Other(format!(
+                "VAE latents are [{b}, {t}, {p}, {c}], the store {} has T = {frames}, P = {tokens}",
+                store.dir().display()
+            )));
+        }
+        channels = c;
+        let z0 = host_f32(enc.z0, "z0")?;
+        let mu = host_f32(enc.mu, "mu")?;
+        let logvar = host_f32(enc.logvar, "logvar")?;
+        let (shape_len, motion_len) = (p * c, t * p * c);
+        for (i, (&store_index, caption)) in chunk.iter().zip(batch.captions).enumerate() {
+            clips.push(ClipLatents {
+                store_index,
+                caption,
+                z0: z0[i * shape_len..(i + 1) * shape_len].to_vec(),
+                mu: mu[i * motion_len..(i + 1) * motion_len].to_vec(),
+                logvar: logvar[i * motion_len..(i + 1) * motion_len].to_vec(),
+            });
+        }
+    }
+    Ok(LatentSet {
+        clips,
+        frames,
+        tokens,
+        channels,
+    })
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// The objective
+
+/// Whether a batch applies the CFG caption dropout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TextDropout {
+    /// keep_txt ~ Bernoulli(1 − rf.text_dropout) (training).
+    Apply,
+    /// keep_txt = 1 (validation).
+    Off,
+}
+
+/// Which split a batch is drawn from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Subset {
+    /// The TRAIN split.
+    Train,
+    /// The VAL split.
+    Valid,
+}
+
+/// One RF batch with the noise and times of (R1).
+pub struct RfStep {
+    /// Standardized latents, keyframe mask, text.
+    pub batch: RfBatch,
+    /// ε ~ N(0, I), `[B, P, T, C]`.
+    pub eps: Tensor<4>,
+    /// τ per sample, `[B]`.
+    pub tau: Tensor<1>,
+}
+
+/// The frozen VAE and store for noisy keyframes (`kf_mode = "impute_until"`), encoded per batch.
+struct NoisyKeyframes {
+    vae: FrameVae,
+    store: Store,
+}
+
+/// Training objective of the keyframe RF over cached frozen-VAE latents: terms `rf` (R5) and `kf_frac`.
+pub struct RfObjective {
+    cfg: RfRunConfig,
+    stats: LatentStats,
+    tokenizer: ScratchTokenizer,
+    train: LatentSet,
+    valid: LatentSet,
+    noisy: Option<NoisyKeyframes>,
+}
+
+impl RfObjective {
+    /// Encodes the TRAIN and VAL clips of the store in `data` with the frozen VAE (on the inference `device`)
+    /// and checks that the RF config fits the VAE and the store.
+    pub fn new(
+        cfg: &RfRunConfig,
+        data: &Path,
+        vae: &LoadedVae,
+        tokenizer: ScratchTokenizer,
+        device: &Device,
+    ) -> Result<Self> {
+        let store = open_store(data)?;
+        check_compatible(cfg, &store, vae)?;
+        let frame_vae = vae.frame_vae()?;
+        let mb = cfg.train.micro_batch;
+        let train = encode_latents(frame_vae, &store, &store.indices(Split::Train), mb, device)?;
+        let valid = encode_latents(frame_vae, &store, &store.indices(Split::Val), mb, device)?;
+        let noisy = (cfg.model.kf_mode == KfMode::ImputeUntil).then(|| NoisyKeyframes {
+            vae: frame_vae.clone(),
+            store,
+        });
+        Ok(RfObjective {
+            cfg: cfg.clone(),
+            stats: vae.stats,
+            tokenizer,
+            train,
+            valid,
+            noisy,
+        })
+    }
+
+    /// The cached TRAIN latents.
+    pub fn train_set(&self) -> &LatentSet {
+        &self.train
+    }
+
+    /// The cached VAL latents.
+    pub fn valid_set(&self) -> &LatentSet {
+        &self.valid
+    }
+
+    /// Builds the batch of positions `indices` of `subset`: z = μ + σξ or μ (`rf.latent`), standardized (SPEC
+    /// §3.4), token-major; keyframe masks ([`draw_keyframe_mask`]); keyframe latents (Z itself, or the encoded
+    /// noisy keyframes of §5.4 for `impute_until`); captions through the text model; keep_txt; ε; τ.
+    /// Host draws (masks, keep_txt, keyframe noise) come from `rng`; ξ, ε and τ from the device stream.
+    ///
+    /// # Shapes
+    /// - output batch: z0 `[B, P, C]`, z/z_key/eps `[B, P, T, C]`, mask `[B, T]`, text `[B, L, D_txt]`, keep_txt
+    ///   and tau `[B]`
+    pub fn batch(
+        &self,
+        model: &RfModel,
+        subset: Subset,
+        indices: &[usize],
+        rng: &mut ChaCha8Rng,
+        dropout: TextDropout,
+        device: &Device,
+    ) -> Result<RfStep> {
+        let set = match subset {
+            Subset::Train => &self.train,
+            Subset::Valid => &self.valid,
+        };
+        let (b, t, p, c) = (indices.len(), set.frames, set.tokens, set.channels);
+        let mut z0 = Vec::with_capacity(b * p * c);
+        let mut mu = Vec::with_capacity(b * t * p * c);
+        let mut logvar = Vec::with_capacity(b * t * p * c);
+        let mut captions = Vec::with_capacity(b);
+        let mut store_ids = Vec::with_capacity(b);
+        for &i in indices {
+            let clip = set.clips.get(i).ok_or_else(|| {
+                TrainError::Other(format!("{subset:?} index {i} out of range ({} clips)", set.clips.len()))
+            })?;
+            z0.extend_from_slice(&clip.z0);
+            mu.extend_from_slice(&clip.mu);
+            logvar.extend_from_slice(&clip.logvar);
+            captions.push(clip.caption.clone());
+            store_ids.push(clip.store_index);
+        }
+        let z0: Tensor<3> = Tensor::from_data(TensorData::new(z0, [b, p, c]), device);
+        let mu: Tensor<4> = Tensor::from_data(TensorData::new(mu, [b, t, p, c]), device);
+        let z = match self.cfg.rf.latent {
+            LatentDraw::Sample => {
+                let logvar = Tensor::from_data(TensorData::new(logvar, [b, t, p, c]), device);
+                frame_vae::sample(mu, logvar) // z = μ + σξ
+            }
+            LatentDraw::Mean => mu,
+        };
+        // SPEC §3.4: (z − mean)/std; VAE layout [B, T, P, C] → token-major [B, P, T, C].
+        let z = self.stats.standardize_motion(z.swap_dims(1, 2));
+        let z0 = self.stats.standardize_shape(z0);
+
+        let kf_mode = self.cfg.model.kf_mode;
+        let mask: Vec<bool> = (0..b)
+            .flat_map(|_| draw_keyframe_mask(&self.cfg.rf, kf_mode, t, rng))
+            .collect();
+        let z_key = match &self.noisy {
+            Some(noisy) => self.noisy_keyframe_latents(noisy, &store_ids, &mask, rng, device)?,
+            None => z.clone(),
+        };
+        let mask = Tensor::from_data(
+            TensorData::new(mask.iter().map(|&m| f32::from(u8::from(m))).collect::<Vec<_>>(), [b, t]),
+            device,
+        );
+        let keep: Vec<f32> = (0..b)
+            .map(|_| match dropout {
+                TextDropout::Apply => f32::from(u8::from(!rng.random_bool(self.cfg.rf.text_dropout))),
+                TextDropout::Off => 1.0,
+            })
+            .collect();
+        let text = model.encode_text(&self.tokenizer, &captions, self.cfg.text.max_len, device)?;
+        let eps = Tensor::random([b, p, t, c], Distribution::Normal(0.0, 1.0), device);
+        let tau = self.cfg.rf.tau_sampler.sample(b, device);
+        Ok(RfStep {
+            batch: RfBatch {
+                z0,
+                z,
+                z_key,
+                mask,
+                text,
+                keep_txt: Tensor::from_data(TensorData::new(keep, [b]), device),
+            },
+            eps,
+            tau,
+        })
+    }
+
+    /// SPEC §5.4 (SceneMI): keyframe vertices + i.i.d. N(0, (l · rf.keyframe_noise)²) with l ~ U(0, 1) per sample,
+    /// first and last frames clean, real vertices only; encoded by the frozen VAE (posterior mean, SPEC §9.16) and
+    /// standardized. Non-keyframe slots hold the clean frames' latents (unused: the mask hides them).
+    ///
+    /// # Shapes
+    /// - mask: `B · T` row-major; output `[B, P, T, C]` on `device`
+    fn noisy_keyframe_latents(
+        &self,
+        noisy: &NoisyKeyframes,
+        store_ids: &[usize],
+        mask: &[bool],
+        rng: &mut ChaCha8Rng,
+        device: &Device,
+    ) -> Result<Tensor<4>> {
+        let inference = device.clone().without_autodiff();
+        let (mut clips, _) = load_clips(&noisy.store, store_ids, &inference)?;
+        let [b, t, n, _] = clips.vertices.dims();
+        let mut noise = vec![0.0f32; b * t * n * 3];
+        for (bi, &n_real) in clips.n_real.iter().enumerate() {
+            let std = rng.random::<f64>() * self.cfg.rf.keyframe_noise; // l · 0.02
+            for f in 1..t.saturating_sub(1) {
+                if !mask[bi * t + f] {
+                    continue;
+                }
+                let row = &mut noise[(bi * t + f) * n * 3..][..n_real * 3];
+                for x in row.iter_mut() {
+                    *x = (standard_normal(rng) * std) as f32;
+                }
+            }
+        }
+        clips.vertices = clips.vertices + Tensor::from_data(TensorData::new(noise, [b, t, n, 3]), &inference);
+        let enc = noisy.vae.vae_encode(&vae_batch(&clips, &inference)?);
+        let z_key = self.stats.standardize_motion(enc.mu.swap_dims(1, 2));
+        Ok(Tensor::from_data(z_key.into_data(), device))
+    }
+}
+
+/// One N(0, 1) draw (Box–Muller).
+fn standard_normal(rng: &mut impl Rng) -> f64 {
+    let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]: ln is finite
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+impl Objective for RfObjective {
+    type Model = RfModel;
+
+    fn terms(&self) -> Vec<String> {
+        RF_TERMS.iter().map(|s| s.to_string()).collect()
+    }
+
+    fn train_len(&self) -> usize {
+        self.train.clips.len()
+    }
+
+    fn loss(&self, model: &RfModel, indices: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
+        let step = self.batch(model, Subset::Train, indices, rng, TextDropout::Apply, device)?;
+        let kf_frac = step.batch.mask.clone().mean();
+        let rf = rf_training_loss(&model.mmdit, &step.batch, step.eps, step.tau, &self.cfg.loss_options()); // (R5)
+        Ok(Losses {
+            total: rf.clone(),
+            terms: vec![rf, kf_frac],
+        })
+    }
+
+    /// (R5) on the VAL split with a fixed seed (same masks, ξ, ε and τ at every validation) and no text dropout.
+    fn validate(&self, model: &RfModel, device: &Device) -> Result<Option<Vec<f64>>> {
+        let n = self.valid.clips.len();
+        if n == 0 {
+            return Ok(None);
+        }
+        let seed = loop_common::step_seed(self.cfg.train.seed, u64::MAX);
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        device.seed(seed);
+        let mut sums = [0.0f64; 3];
+        let positions: Vec<usize> = (0..n).collect();
+        for chunk in positions.chunks(self.cfg.train.micro_batch) {
+            let step = self.batch(model, Subset::Valid, chunk, &mut rng, TextDropout::Off, device)?;
+            let kf_frac = step.batch.mask.clone().mean();
+            let rf = rf_training_loss(&model.mmdit, &step.batch, step.eps, step.tau, &self.cfg.loss_options());
+            let w = chunk.len() as f64 / n as f64;
+            let rf = loop_common::scalar(rf);
+            for (s, v) in sums.iter_mut().zip([rf, loop_common::scalar(kf_frac), rf]) {
+                *s += w * v;
+            }
+        }
+        Ok(Some(sums.to_vec()))
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Runs
 
 /// Options of `any4d train rf` besides the config.
 pub struct RfRunOptions {
     /// Store folder (`--data`).
     pub data: PathBuf,
-    /// The frozen VAE's run folder (`--vae`).
-    pub vae_run: PathBuf,
+    /// The frozen VAE's run folder (`--vae`): required for a new run; for `--resume` it may be omitted (the run
+    /// folder records it) and must otherwise name the same run.
+    pub vae_run: Option<PathBuf>,
     /// Folder that holds run folders.
     pub runs_dir: PathBuf,
     /// Run name.
     pub name: String,
+    /// Progress display.
+    pub progress: ProgressMode,
+    /// Ctrl-C flag.
+    pub stop: StopFlag,
 }
 
-/// RF training entry point. Not implemented yet.
-pub fn train_rf(_cfg: &RfRunConfig, _opts: &RfRunOptions) -> Result<()> {
-    Err(TrainError::Other(
-        "RF training is not implemented yet (train/src/rf_loop.rs holds only its config so far)".into(),
-    ))
+fn open_store(data: &Path) -> Result<Store> {
+    Store::open(data).map_err(|e| TrainError::Other(e.to_string()))
+}
+
+/// SPEC §4.1: the RF slots must match the VAE latents and the store windows.
+fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
+    vae.frame_vae()?;
+    let c = vae.latent_channels();
+    if cfg.model.channels != c {
+        return Err(TrainError::Other(format!(
+            "model.channels = {} but the VAE run {} has latent_channels = {c}: set model.channels = {c}",
+            cfg.model.channels,
+            vae.run.display()
+        )));
+    }
+    if cfg.model.frames != store.frames() {
+        return Err(TrainError::Other(format!(
+            "model.frames = {} but the store {} holds {}-frame clips: set model.frames = {}",
+            cfg.model.frames,
+            store.dir().display(),
+            store.frames(),
+            store.frames()
+        )));
+    }
+    Ok(())
+}
+
+/// Starts a new RF run with `cfg` on the frozen VAE of `opts.vae_run`; returns the run folder and the outcome.
+/// The run folder gets `vae_run.json` (which VAE run and checkpoint step) and `tokenizer.json`.
+pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Outcome)> {
+    let vae_dir = opts.vae_run.as_deref().ok_or_else(|| {
+        TrainError::Other("a new RF run needs the VAE run folder (--vae RUN)".into())
+    })?;
+    // Fail before claiming a run folder when the backend, the store or the VAE run is unusable.
+    backend::check(cfg.device.backend, cfg.device.precision)?;
+    let device = backend::device(cfg.device.backend, cfg.device.precision)?;
+    let store = open_store(&opts.data)?;
+    let vae = runs::load_vae_run(vae_dir, &device)?;
+    check_compatible(cfg, &store, &vae)?;
+    let captions = train_captions(&store)?;
+    let tokenizer = ScratchTokenizer::train(&captions, cfg.text.vocab_size).map_err(|e| TrainError::Other(e.to_string()))?;
+
+    let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &RF_TERMS)?;
+    runs::write_vae_record(&run, &VaeRunRecord::of(&vae)?)?;
+    tokenizer
+        .save(run.root())
+        .map_err(|e| TrainError::Other(e.to_string()))?;
+    run.log(&format!(
+        "tokenizer trained on {} TRAIN captions: {} tokens",
+        captions.len(),
+        tokenizer.vocab_size()
+    ))?;
+    let outcome = run_rf(cfg, &run, opts, &vae, tokenizer, &device, None)?;
+    Ok((run, outcome))
+}
+
+/// Continues the RF run in `run_dir` from its newest checkpoint (config, tokenizer and VAE run from the run
+/// folder; the backend may be overridden).
+pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRunOptions) -> Result<Outcome> {
+    let run = RunFolder::open(run_dir)?;
+    let mut cfg = RfRunConfig::parse(&run.config_text()?, &run.path(CONFIG_FILE))?;
+    if let Some(b) = backend {
+        cfg.device.backend = b;
+    }
+    let ckpt = crate::checkpoint::latest(&run.path(CHECKPOINTS_DIR))?.ok_or_else(|| TrainError::Checkpoint {
+        path: run_dir.to_path_buf(),
+        reason: "no complete checkpoint to resume".into(),
+    })?;
+    let record = runs::read_vae_record(run_dir)?;
+    if let Some(given) = &opts.vae_run {
+        let given = std::fs::canonicalize(given).map_err(io_err("resolve VAE run folder", given))?;
+        if given != record.run {
+            return Err(TrainError::Other(format!(
+                "--vae {} differs from the VAE run {} that {} was trained on",
+                given.display(),
+                record.run.display(),
+                run_dir.display()
+            )));
+        }
+    }
+    backend::check(cfg.device.backend, cfg.device.precision)?;
+    let device = backend::device(cfg.device.backend, cfg.device.precision)?;
+    let vae = record.load(&device)?;
+    let tokenizer = ScratchTokenizer::load(run_dir).map_err(|e| TrainError::Other(e.to_string()))?;
+    run_rf(&cfg, &run, opts, &vae, tokenizer, &device, Some(ckpt))
+}
+
+fn train_captions(store: &Store) -> Result<Vec<String>> {
+    store
+        .indices(Split::Train)
+        .into_iter()
+        .map(|i| {
+            store
+                .get(i)
+                .map(|c| c.clip.caption)
+                .map_err(|e| TrainError::Other(e.to_string()))
+        })
+        .collect()
+}
+
+fn run_rf(
+    cfg: &RfRunConfig,
+    run: &RunFolder,
+    opts: &RfRunOptions,
+    vae: &LoadedVae,
+    tokenizer: ScratchTokenizer,
+    device: &Device,
+    resume: Option<PathBuf>,
+) -> Result<Outcome> {
+    let vocab = tokenizer.vocab_size();
+    let objective = RfObjective::new(cfg, &opts.data, vae, tokenizer, device)?;
+    run.log(&format!(
+        "RF {:?} on {} ({} train / {} val clips, latents cached: {:.1} MiB), VAE {} step {}, backend {}",
+        cfg.model.kf_mode,
+        opts.data.display(),
+        objective.train.clips.len(),
+        objective.valid.clips.len(),
+        (objective.train.bytes() + objective.valid.bytes()) as f64 / (1024.0 * 1024.0),
+        vae.run.display(),
+        vae.step,
+        cfg.device.backend
+    ))?;
+    let ad = device.clone().autodiff();
+    ad.seed(cfg.train.seed);
+    let model = cfg.model_config(vocab).init(&ad);
+    let setup = LoopSetup {
+        run,
+        train: &cfg.train,
+        optim: &cfg.optim,
+        device: ad,
+        stop: opts.stop.clone(),
+        progress: opts.progress,
+        resume,
+    };
+    let (_, outcome) = loop_common::train(&objective, model, setup)?;
+    Ok(outcome)
 }

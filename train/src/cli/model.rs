@@ -10,7 +10,8 @@ use any4d_model::dymesh_vae::DyMeshVaeConfig;
 use any4d_model::frame_vae::FrameVaeConfig;
 use any4d_model::mmdit::{KfMode, MmditConfig};
 use any4d_model::summary::{
-    StepTiming, TOTAL, format_report, param_report, time_dymesh_reconstruct, time_rf_step, time_vae_reconstruct,
+    StepTiming, TOTAL, format_report, param_report, time_dymesh_reconstruct, time_rf_step,
+    time_vae_reconstruct,
 };
 use anyhow::{Context, bail};
 use burn::prelude::Device;
@@ -200,13 +201,33 @@ fn total_params(rows: &[(String, usize)]) -> usize {
 }
 
 fn time_ours(args: &BenchArgs, sz: &BenchSizes, device: &Device) -> anyhow::Result<OurTimings> {
-    let rf = time_rf_step(&sz.rf, args.batch, sz.tokens, sz.text_len, args.iters, device);
+    let rf = time_rf_step(
+        &sz.rf,
+        args.batch,
+        sz.tokens,
+        sz.text_len,
+        args.iters,
+        device,
+    );
     let vae = time_vae_reconstruct(
-        &sz.vae, args.batch, sz.vertices, sz.tokens, sz.rf.frames, args.iters, device,
+        &sz.vae,
+        args.batch,
+        sz.vertices,
+        sz.tokens,
+        sz.rf.frames,
+        args.iters,
+        device,
     )
     .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
-    let dymesh = time_dymesh_reconstruct(&sz.dymesh, args.batch, sz.vertices, sz.tokens, args.iters, device)
-        .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
+    let dymesh = time_dymesh_reconstruct(
+        &sz.dymesh,
+        args.batch,
+        sz.vertices,
+        sz.tokens,
+        args.iters,
+        device,
+    )
+    .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
     Ok(OurTimings {
         rf,
         rf_params: total_params(&param_report(&sz.rf.init(device))),
@@ -304,8 +325,18 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
         );
     }
     let rows = [
-        ("RF forward+backward", &ours.rf, ours.rf_params, torch.as_ref().map(|t| &t.rf)),
-        ("frame-wise VAE encode+decode", &ours.vae, ours.vae_params, torch.as_ref().map(|t| &t.vae_framewise)),
+        (
+            "RF forward+backward",
+            &ours.rf,
+            ours.rf_params,
+            torch.as_ref().map(|t| &t.rf),
+        ),
+        (
+            "frame-wise VAE encode+decode",
+            &ours.vae,
+            ours.vae_params,
+            torch.as_ref().map(|t| &t.vae_framewise),
+        ),
         (
             "sequence-wise DyMeshVAE enc+dec",
             &ours.dymesh,
@@ -315,7 +346,12 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
     ];
     println!(
         "{:<32} {:>13} {:>16} {:>13} {:>12} {:>15}",
-        "network", "ours ms/clip", "PyTorch ms/clip", "ours/PyTorch", "params ours", "params PyTorch"
+        "network",
+        "ours ms/clip",
+        "PyTorch ms/clip",
+        "ours/PyTorch",
+        "params ours",
+        "params PyTorch"
     );
     for (name, ours_t, ours_p, theirs) in rows {
         let ours_ms = per_clip(ours_t);
@@ -328,7 +364,10 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
                     th.params
                 );
             }
-            None => println!("{name:<32} {ours_ms:>13.1} {:>16} {:>13} {ours_p:>12} {:>15}", "-", "-", "-"),
+            None => println!(
+                "{name:<32} {ours_ms:>13.1} {:>16} {:>13} {ours_p:>12} {:>15}",
+                "-", "-", "-"
+            ),
         }
     }
     println!("(ours/PyTorch is a time ratio: below 1 means ours is faster)");
@@ -366,7 +405,10 @@ fn run_torch_reference(
         )));
     }
     if !args.script.is_file() {
-        return Ok(Err(format!("--script {}: not found", args.script.display())));
+        return Ok(Err(format!(
+            "--script {}: not found",
+            args.script.display()
+        )));
     }
     let out = Command::new(&args.python)
         .arg(&args.script)
@@ -390,7 +432,12 @@ fn run_torch_reference(
         if matches!(out.status.code(), Some(2 | 3)) {
             return Ok(Err(stderr.trim().to_string()));
         }
-        bail!("{} {} failed ({}): {stderr}", args.python.display(), args.script.display(), out.status);
+        bail!(
+            "{} {} failed ({}): {stderr}",
+            args.python.display(),
+            args.script.display(),
+            out.status
+        );
     }
     let stdout = String::from_utf8_lossy(&out.stdout);
     let line = stdout
@@ -400,4 +447,164 @@ fn run_torch_reference(
     let parsed: TorchReference = serde_json::from_str(line)
         .with_context(|| format!("{}: unexpected output {line:?}", args.script.display()))?;
     Ok(Ok(parsed))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Arguments that run `sh SCRIPT` as the "Python" reference.
+    fn args(script: &Path) -> BenchArgs {
+        BenchArgs {
+            size: BenchSize::Tiny,
+            batch: 2,
+            iters: 1,
+            backend: CpuBackend::Flex,
+            threads: Some(3),
+            torch_reference: None,
+            script: script.to_path_buf(),
+            python: PathBuf::from("sh"),
+        }
+    }
+
+    /// A folder that looks like an AnimateAnyMesh checkout, and a fake reference script with `body`.
+    fn setup(body: &str) -> (tempfile::TempDir, PathBuf, PathBuf) {
+        let tmp = tempfile::tempdir().expect("temp dir");
+        let aam = tmp.path().join("aam");
+        std::fs::create_dir_all(aam.join("networks")).expect("mkdir");
+        std::fs::write(aam.join("networks/dymeshvae.py"), "").expect("write");
+        let script = tmp.path().join("fake.sh");
+        std::fs::write(&script, body).expect("write");
+        (tmp, aam, script)
+    }
+
+    #[test]
+    fn reference_json_is_parsed_and_gets_our_sizes_and_threads() {
+        // Arguments: --aam DIR --size S --batch B --iters K --threads N --json; echo S, B and N back.
+        let (_tmp, aam, script) = setup(
+            r#"echo "{\"torch\": \"$4\", \"threads\": ${10}, \"rf\": {\"median_ms\": $6.5, \"params\": 7},
+\"vae_framewise\": {\"median_ms\": 1.0, \"params\": 8}, \"vae_sequencewise\": {\"median_ms\": 2.0, \"params\": 9}}" | tr -d '\n'
+echo"#,
+        );
+        let parsed = run_torch_reference(&args(&script), &aam, 3)
+            .expect("runs")
+            .expect("available");
+        assert_eq!(parsed.torch, "tiny");
+        assert_eq!(parsed.threads, 3);
+        assert_eq!(parsed.rf.median_ms, 2.5);
+        assert_eq!(
+            (
+                parsed.rf.params,
+                parsed.vae_framewise.params,
+                parsed.vae_sequencewise.params
+            ),
+            (7, 8, 9)
+        );
+    }
+
+    #[test]
+    fn missing_torch_is_a_reason_not_an_error() {
+        let (_tmp, aam, script) =
+            setup("echo 'bench_torch_reference: torch is not installed' >&2\nexit 3\n");
+        let why = run_torch_reference(&args(&script), &aam, 1)
+            .expect("runs")
+            .err()
+            .expect("unavailable");
+        assert!(why.contains("torch is not installed"), "{why}");
+    }
+
+    #[test]
+    fn missing_checkout_and_python_are_reasons() {
+        let (tmp, _aam, script) = setup("exit 0\n");
+        let why = run_torch_reference(&args(&script), tmp.path(), 1)
+            .expect("runs")
+            .err()
+            .expect("unavailable");
+        assert!(why.contains("not an AnimateAnyMesh checkout"), "{why}");
+        let (_tmp, aam, script) = setup("exit 0\n");
+        let mut a = args(&script);
+        a.python = PathBuf::from("/nonexistent/python3");
+        let why = run_torch_reference(&a, &aam, 1)
+            .expect("runs")
+            .err()
+            .expect("unavailable");
+        assert!(why.contains("/nonexistent/python3 not found"), "{why}");
+    }
+
+    #[test]
+    fn a_crashing_reference_is_an_error_naming_its_output() {
+        let (_tmp, aam, script) = setup("echo 'Traceback: boom' >&2\nexit 1\n");
+        let err = run_torch_reference(&args(&script), &aam, 1)
+            .err()
+            .expect("a crash is an error");
+        assert!(format!("{err:#}").contains("Traceback: boom"), "{err:#}");
+        let (_tmp, aam, script) = setup("echo not-json\n");
+        let err = run_torch_reference(&args(&script), &aam, 1)
+            .err()
+            .expect("bad output is an error");
+        assert!(format!("{err:#}").contains("unexpected output"), "{err:#}");
+    }
+
+    #[test]
+    fn bench_sizes_agree_with_the_reference_script() {
+        // The script's SIZES table must describe the same networks as ours.
+        let script = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../scripts/bench_torch_reference.py"
+        ))
+        .expect("script");
+        for size in [BenchSize::Paper, BenchSize::Tiny] {
+            let sz = size.sizes();
+            let start = script
+                .find(&format!("\"{}\": {{", size.name()))
+                .expect("size entry");
+            let entry = &script[start..];
+            let rf = format!(
+                "\"rf\": {{\"width\": {}, \"blocks\": {}, \"heads\": {}, \"frames\": {}, \"channels\": {}, \
+                 \"text_dim\": {}}}",
+                sz.rf.width,
+                sz.rf.blocks,
+                sz.rf.heads,
+                sz.rf.frames,
+                sz.rf.channels,
+                sz.rf.text_dim
+            );
+            let tokens = format!("\"tokens\": {},", sz.tokens);
+            let text = format!("\"text_len\": {},", sz.text_len);
+            let verts = format!("\"vertices\": {},", sz.vertices);
+            let fw = format!(
+                "\"vae_framewise\": {{\"dim\": {}, \"heads\": {}, \"dim_head\": {}, \"blocks\": {}, \"latent\": {}}}",
+                sz.vae.width,
+                sz.vae.heads,
+                sz.vae.head_dim,
+                sz.vae.enc_blocks,
+                sz.vae.latent_channels
+            );
+            let sw = format!(
+                "\"vae_sequencewise\": {{\"dim\": {}, \"heads\": {}, \"dim_head\": {}, \"blocks\": {}, \"latent\": {}}}",
+                sz.dymesh.width,
+                sz.dymesh.heads,
+                sz.dymesh.head_dim,
+                sz.dymesh.enc_blocks,
+                sz.dymesh.latent_channels
+            );
+            let entry_end = entry.find("\n    },").expect("entry end");
+            for needle in [rf, tokens, text, verts, fw, sw] {
+                assert!(
+                    entry[..entry_end].contains(&needle),
+                    "{} size: script lacks {needle}",
+                    size.name()
+                );
+            }
+            assert_eq!(
+                sz.rf.frames, sz.dymesh.frames,
+                "both VAEs time clips of the RF's frame count"
+            );
+            assert_eq!(
+                sz.vae.dec_blocks, sz.vae.enc_blocks,
+                "the script uses one block count per VAE"
+            );
+            assert_eq!(sz.dymesh.dec_blocks, sz.dymesh.enc_blocks);
+        }
+    }
 }

@@ -11,7 +11,7 @@ use crate::backend::Backend;
 use crate::config::Duration;
 use crate::loop_common::{Outcome, StopFlag};
 use crate::progress::ProgressMode;
-use crate::rf_loop::{RfRunConfig, RfRunOptions, train_rf};
+use crate::rf_loop::{RfRunConfig, RfRunOptions, resume_rf, train_rf};
 use crate::run_folder::{METRICS_FILE, read_table};
 use crate::vae_loop::{VaeRunConfig, VaeRunOptions, resume_vae, train_vae};
 
@@ -47,18 +47,22 @@ pub struct VaeArgs {
 
 #[derive(Args, Debug)]
 pub struct RfArgs {
-    /// Run config (`configs/rf/*.toml`).
-    #[arg(long)]
-    config: PathBuf,
-    /// The VAE run folder whose newest checkpoint encodes the clips.
-    #[arg(long)]
-    vae: PathBuf,
+    /// Run config (`configs/rf/*.toml`); not with `--resume`, which reads the run's own config.
+    #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
+    config: Option<PathBuf>,
+    /// The VAE run folder whose newest checkpoint encodes the clips (with `--resume`: optional, must be the
+    /// run's own).
+    #[arg(long, required_unless_present = "resume")]
+    vae: Option<PathBuf>,
     /// Dataset store folder.
     #[arg(long)]
     data: PathBuf,
-    /// Run name.
+    /// Run name: the run goes to `<runs>/<NAME>-<n>/` with the next free n.
     #[arg(long, default_value = "rf")]
     run: String,
+    /// Continue this run folder from its newest checkpoint.
+    #[arg(long)]
+    resume: Option<PathBuf>,
     /// Override `[device] backend`.
     #[arg(long, value_enum)]
     backend: Option<Backend>,
@@ -86,21 +90,35 @@ pub struct BenchArgs {
 pub fn run(cmd: TrainCmd) -> anyhow::Result<ExitCode> {
     match cmd {
         TrainCmd::Vae(args) => vae(args),
-        TrainCmd::Rf(args) => {
-            let mut cfg = RfRunConfig::load(&args.config)?;
+        TrainCmd::Rf(args) => rf(args),
+    }
+}
+
+fn rf(args: RfArgs) -> anyhow::Result<ExitCode> {
+    let stop = StopFlag::new();
+    stop.install_ctrlc()?;
+    let opts = RfRunOptions {
+        data: args.data,
+        vae_run: args.vae,
+        runs_dir: args.runs_dir,
+        name: args.run,
+        progress: ProgressMode::Auto,
+        stop,
+    };
+    let outcome = match (args.resume, args.config) {
+        (Some(run_dir), _) => resume_rf(&run_dir, args.backend, &opts)?,
+        (None, Some(config)) => {
+            let mut cfg = RfRunConfig::load(&config)?;
             if let Some(b) = args.backend {
                 cfg.device.backend = b;
             }
-            let opts = RfRunOptions {
-                data: args.data,
-                vae_run: args.vae,
-                runs_dir: args.runs_dir,
-                name: args.run,
-            };
-            train_rf(&cfg, &opts)?;
-            Ok(ExitCode::SUCCESS)
+            let (run, outcome) = train_rf(&cfg, &opts)?;
+            println!("run folder: {}", run.root().display());
+            outcome
         }
-    }
+        (None, None) => anyhow::bail!("give --config or --resume"),
+    };
+    Ok(report(&outcome))
 }
 
 fn vae(args: VaeArgs) -> anyhow::Result<ExitCode> {
