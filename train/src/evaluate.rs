@@ -1,0 +1,199 @@
+//! Learned methods of the evaluation protocol built from trained run folders: the one place that turns
+//! `runs/…` (train) into `eval::methods::Method`s and `eval::run::Reconstructor`s (eval cannot read run folders).
+//! Used by `any4d eval run` and `any4d quickstart`.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use any4d_data::batch::PadTo;
+use any4d_eval::learned::{
+    LatentLerpSampler, LearnedModels, MeshCodec, MeshVae, RfSampler, VaeReconstructor,
+};
+use any4d_eval::methods::{Method, MethodKind, RfMethod};
+use any4d_eval::run::{Reconstructor, vertex_methods};
+use any4d_model::rectified_flow::{SampleOptions, Solver};
+use any4d_model::text::scratch::ScratchTextEncoder;
+use burn::prelude::{Device, Module};
+
+use crate::error::{Result, TrainError};
+use crate::runs::{LoadedVae, VaeModel, load_rf_run, load_vae_run};
+
+/// Trained runs that the learned methods come from.
+#[derive(Debug, Clone, Default)]
+pub struct LearnedRuns {
+    /// Keyframe-conditioned RF run (`ours`; also serves impute-until-τ* as the inference-only variant).
+    pub rf: Option<PathBuf>,
+    /// Non-keyframe RF run (`kf_mode = "none"`), sampled with replacement (the paper's Baseline).
+    pub baseline_rf: Option<PathBuf>,
+    /// VAE run for latent lerp and table 5 (defaults to the RF run's VAE).
+    pub vae: Option<PathBuf>,
+    /// Second VAE run for table 5 (e.g. the sequence-wise ablation).
+    pub vae_b: Option<PathBuf>,
+}
+
+/// How the RF methods sample.
+#[derive(Debug, Clone, Copy)]
+pub struct SamplingSetup {
+    /// Grid points over [0, 1] (64 in the paper).
+    pub n_grid: usize,
+    /// Solver (midpoint in the paper).
+    pub solver: Solver,
+    /// Classifier-free guidance weight (1.0 in the paper).
+    pub guidance: f64,
+}
+
+impl Default for SamplingSetup {
+    fn default() -> Self {
+        Self {
+            n_grid: 64,
+            solver: Solver::Midpoint,
+            guidance: 1.0,
+        }
+    }
+}
+
+/// Methods in the order of `kinds`, each with a label → checkpoint line for the table header.
+pub struct BuiltMethods {
+    pub methods: Vec<Box<dyn Method>>,
+    pub checkpoints: Vec<(String, String)>,
+}
+
+fn need<'a>(path: &'a Option<PathBuf>, flag: &str, kind: MethodKind) -> Result<&'a Path> {
+    path.as_deref().ok_or_else(|| {
+        TrainError::Other(format!("method `{}` needs a trained run: pass {flag} RUN", kind.label()))
+    })
+}
+
+fn eval_err(e: impl std::fmt::Display) -> TrainError {
+    TrainError::Other(e.to_string())
+}
+
+fn codec_of(vae: &LoadedVae, tokens: usize, device: &Device) -> Result<Arc<MeshCodec>> {
+    use crate::vae_loop::VaeModelConfig;
+    let model = match (&vae.model, &vae.config.model) {
+        (VaeModel::Framewise(m), _) => MeshVae::Frame(m.clone().valid()),
+        (VaeModel::Sequencewise(m), VaeModelConfig::Sequencewise(c)) => MeshVae::Sequence {
+            vae: m.clone().valid(),
+            frames: c.frames,
+        },
+        (VaeModel::Sequencewise(_), VaeModelConfig::Framewise(_)) => {
+            return Err(TrainError::Other(format!(
+                "VAE run {}: its network and config disagree on the VAE kind",
+                vae.run.display()
+            )));
+        }
+    };
+    Ok(Arc::new(MeshCodec::new(model, tokens, PadTo::BatchMax, device.clone()).map_err(eval_err)?))
+}
+
+fn checkpoint_label(run: &Path, step: u64) -> String {
+    format!("{} (step {step})", run.display())
+}
+
+/// The RF sampler of one RF run (its own VAE and statistics, its scratch text encoder) for `kind`.
+fn rf_method(
+    kind: MethodKind,
+    run_dir: &Path,
+    tokens: usize,
+    sampling: SamplingSetup,
+    device: &Device,
+) -> Result<(Box<dyn Method>, String)> {
+    let rf = load_rf_run(run_dir, device)?;
+    let vae = rf.load_vae(device)?;
+    let codec = codec_of(&vae, tokens, device)?;
+    let label = checkpoint_label(&rf.run, rf.step);
+    let rf_config = rf.config.model.clone();
+    let text = ScratchTextEncoder {
+        tokenizer: rf.tokenizer,
+        model: rf.model.text.valid(),
+    };
+    let models = LearnedModels::new(
+        codec,
+        rf.model.mmdit.valid(),
+        rf_config,
+        vae.stats.clone(),
+        Box::new(text),
+    )
+    .map_err(eval_err)?;
+    let mut base = SampleOptions::paper(rf.config.model.kf_mode);
+    base.n_grid = sampling.n_grid;
+    base.solver = sampling.solver;
+    let sampler = RfSampler::for_method(kind, Arc::new(models), base, sampling.guidance).map_err(eval_err)?;
+    let method = RfMethod::new(kind, sampler).map_err(eval_err)?;
+    Ok((Box::new(method), label))
+}
+
+/// The VAE run for latent lerp / table 5: `--vae`, else the VAE of the keyframe RF run.
+fn vae_run_for(runs: &LearnedRuns, device: &Device) -> Result<LoadedVae> {
+    if let Some(v) = &runs.vae {
+        return load_vae_run(v, device);
+    }
+    if let Some(rf) = &runs.rf {
+        return load_rf_run(rf, device)?.load_vae(device);
+    }
+    Err(TrainError::Other(
+        "method `lerp_latent` needs a VAE: pass --vae RUN (or --rf RUN to use its VAE)".into(),
+    ))
+}
+
+/// Builds `kinds` in order. `tokens` is the store's P.
+pub fn build_methods(
+    kinds: &[MethodKind],
+    runs: &LearnedRuns,
+    tokens: usize,
+    sampling: SamplingSetup,
+    device: &Device,
+) -> Result<BuiltMethods> {
+    let mut methods = Vec::new();
+    let mut checkpoints = Vec::new();
+    for &kind in kinds {
+        let (method, ckpt) = match kind {
+            MethodKind::Lerp | MethodKind::StaticNearest => {
+                let mut m = vertex_methods(&[kind]).map_err(eval_err)?;
+                (m.remove(0), "none".to_string())
+            }
+            MethodKind::KeyframeRf | MethodKind::ImputeUntil { .. } => {
+                rf_method(kind, need(&runs.rf, "--rf", kind)?, tokens, sampling, device)?
+            }
+            MethodKind::ReplacementRf => rf_method(
+                kind,
+                need(&runs.baseline_rf, "--baseline-rf", kind)?,
+                tokens,
+                sampling,
+                device,
+            )?,
+            MethodKind::LerpLatent => {
+                let vae = vae_run_for(runs, device)?;
+                let sampler = LatentLerpSampler::new(codec_of(&vae, tokens, device)?).map_err(eval_err)?;
+                let method = RfMethod::new(kind, sampler).map_err(eval_err)?;
+                (Box::new(method) as Box<dyn Method>, checkpoint_label(&vae.run, vae.step))
+            }
+        };
+        methods.push(method);
+        checkpoints.push((kind.label(), ckpt));
+    }
+    Ok(BuiltMethods { methods, checkpoints })
+}
+
+/// Table 5 rows: `--vae` (and `--vae-b`) as reconstructors labelled by their VAE kind.
+pub fn build_reconstructors(
+    runs: &LearnedRuns,
+    tokens: usize,
+    device: &Device,
+) -> Result<(Vec<Box<dyn Reconstructor>>, Vec<(String, String)>)> {
+    let mut out: Vec<Box<dyn Reconstructor>> = Vec::new();
+    let mut ckpts = Vec::new();
+    for run in [&runs.vae, &runs.vae_b].into_iter().flatten() {
+        let vae = load_vae_run(run, device)?;
+        let label = match vae.model {
+            VaeModel::Framewise(_) => "framewise",
+            VaeModel::Sequencewise(_) => "sequencewise",
+        };
+        ckpts.push((label.to_string(), checkpoint_label(&vae.run, vae.step)));
+        out.push(Box::new(VaeReconstructor::new(label, codec_of(&vae, tokens, device)?)));
+    }
+    if out.is_empty() {
+        return Err(TrainError::Other("table5 needs --vae RUN (and optionally --vae-b RUN)".into()));
+    }
+    Ok((out, ckpts))
+}

@@ -1,0 +1,194 @@
+//! `any4d quickstart`: the whole method on procedural clips in minutes on a CPU — synthesise a store, train a
+//! tiny frame-wise VAE, a tiny keyframe-conditioned RF and a tiny non-keyframe RF (the paper's Baseline), then
+//! score them beside linear interpolation and the static nearest keyframe on one protocol (P-Table 1 shape).
+//! Sizes come from `configs/{vae,rf}/tiny.toml` (embedded at build time, so the binary runs anywhere).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use any4d_data::store::write_synth;
+use any4d_data::synth::SynthConfig;
+use any4d_eval::methods::MethodKind;
+use any4d_eval::run::{RunOptions, TableReport, run_protocol};
+use any4d_eval::tables::{TableHeader, TableKind};
+use any4d_model::rectified_flow::Solver;
+
+use crate::backend;
+use crate::config::Duration;
+use crate::error::{Result, TrainError};
+use crate::evaluate::{LearnedRuns, SamplingSetup, build_methods};
+use crate::loop_common::{Outcome, StopFlag};
+use crate::progress::ProgressMode;
+use crate::rf_loop::{RfRunConfig, RfRunOptions, train_rf};
+use crate::vae_loop::{VaeRunConfig, VaeRunOptions, train_vae};
+
+const VAE_TINY: &str = include_str!("../../configs/vae/tiny.toml");
+const RF_TINY: &str = include_str!("../../configs/rf/tiny.toml");
+const BASELINE_TINY: &str = include_str!("../../configs/rf/baseline_tiny.toml");
+
+/// What the quickstart does; every default is chosen to finish in minutes on 2 cores.
+#[derive(Debug, Clone)]
+pub struct QuickstartOptions {
+    /// Output folder (a fresh `<out>-<n>` is used when it exists: nothing is overwritten).
+    pub out: PathBuf,
+    /// Procedural clips to synthesise.
+    pub clips: usize,
+    /// Seed of the procedural clips.
+    pub seed: u64,
+    /// Largest vertex count of the procedural clips (SPEC filter 512..=4096; small is fast).
+    pub max_vertices: usize,
+    /// Optimiser steps of the VAE (the tiny preset's when `None`).
+    pub vae_steps: Option<u64>,
+    /// Optimiser steps of each RF (the tiny preset's when `None`).
+    pub rf_steps: Option<u64>,
+    /// Validation clips in the evaluation manifest.
+    pub eval_clips: usize,
+    /// ODE grid points of the samplers (the paper's 64 is slow on a CPU).
+    pub n_grid: usize,
+    /// Progress display.
+    pub progress: ProgressMode,
+    /// Ctrl-C flag.
+    pub stop: StopFlag,
+}
+
+/// Where the quickstart put things.
+#[derive(Debug)]
+pub struct QuickstartReport {
+    pub out: PathBuf,
+    pub data: PathBuf,
+    pub vae_run: PathBuf,
+    pub rf_run: PathBuf,
+    pub baseline_run: PathBuf,
+    pub eval_dir: PathBuf,
+    pub table: TableReport,
+}
+
+/// A folder that does not exist yet: `out`, else `out-2`, `out-3`, …
+fn fresh_folder(out: &Path) -> PathBuf {
+    if !out.exists() {
+        return out.to_path_buf();
+    }
+    let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "quickstart".into());
+    (2..)
+        .map(|n| out.with_file_name(format!("{name}-{n}")))
+        .find(|p| !p.exists())
+        .expect("an unbounded range always yields a free name")
+}
+
+fn finished(what: &str, outcome: Outcome) -> Result<()> {
+    match outcome {
+        Outcome::Finished { .. } => Ok(()),
+        Outcome::Interrupted { step, checkpoint } => Err(TrainError::Other(format!(
+            "{what} interrupted at step {step}; checkpoint kept at {}",
+            checkpoint.display()
+        ))),
+    }
+}
+
+/// Runs the whole quickstart; `say` receives one line per stage.
+pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<QuickstartReport> {
+    let out = fresh_folder(&opts.out);
+    let data = out.join("data");
+    let runs_dir = out.join("runs");
+    let started = Instant::now();
+    let stage = |msg: String| say(&format!("[{:>5.0} s] {msg}", started.elapsed().as_secs_f64()));
+
+    // The presets are embedded; errors name the repository file they came from.
+    let mut vae_cfg = VaeRunConfig::parse(VAE_TINY, Path::new("configs/vae/tiny.toml"))?;
+    let mut rf_cfg = RfRunConfig::parse(RF_TINY, Path::new("configs/rf/tiny.toml"))?;
+    let mut base_cfg = RfRunConfig::parse(BASELINE_TINY, Path::new("configs/rf/baseline_tiny.toml"))?;
+    if let Some(n) = opts.vae_steps {
+        vae_cfg.train.duration = Duration::Steps(n);
+    }
+    if let Some(n) = opts.rf_steps {
+        rf_cfg.train.duration = Duration::Steps(n);
+        base_cfg.train.duration = Duration::Steps(n);
+    }
+    // Every stage runs on the CPU backend that `configs/*/tiny.toml` names; check it before creating anything.
+    backend::check(vae_cfg.device.backend, vae_cfg.device.precision)?;
+
+    stage(format!("1/5 synthesising {} procedural clips into {}", opts.clips, data.display()));
+    let synth = SynthConfig {
+        clips: opts.clips,
+        seed: opts.seed,
+        frames: 16,
+        min_vertices: 512,
+        max_vertices: opts.max_vertices,
+    };
+    let report = write_synth(&synth, &data).map_err(|e| TrainError::Other(e.to_string()))?;
+    stage(format!("      {} clips: {} train, {} validation", report.kept, report.train, report.val));
+
+    stage("2/5 training the tiny frame-wise VAE".into());
+    let (vae_run, outcome) = train_vae(
+        &vae_cfg,
+        &VaeRunOptions {
+            data: data.clone(),
+            runs_dir: runs_dir.clone(),
+            name: "vae".into(),
+            progress: opts.progress,
+            stop: opts.stop.clone(),
+        },
+    )?;
+    finished("VAE training", outcome)?;
+
+    let rf_opts = |name: &str| RfRunOptions {
+        data: data.clone(),
+        vae_run: Some(vae_run.root().to_path_buf()),
+        runs_dir: runs_dir.clone(),
+        name: name.into(),
+        progress: opts.progress,
+        stop: opts.stop.clone(),
+    };
+    stage("3/5 training the tiny keyframe-conditioned RF (ours)".into());
+    let (rf_run, outcome) = train_rf(&rf_cfg, &rf_opts("rf"))?;
+    finished("RF training", outcome)?;
+    stage("4/5 training the tiny non-keyframe RF (the paper's Baseline, sampled with replacement)".into());
+    let (baseline_run, outcome) = train_rf(&base_cfg, &rf_opts("baseline-rf"))?;
+    finished("baseline RF training", outcome)?;
+
+    stage(format!("5/5 evaluating on {} validation clips, K_x = 0..3", opts.eval_clips));
+    let device = backend::device(rf_cfg.device.backend, rf_cfg.device.precision)?;
+    let runs = LearnedRuns {
+        rf: Some(rf_run.root().to_path_buf()),
+        baseline_rf: Some(baseline_run.root().to_path_buf()),
+        vae: Some(vae_run.root().to_path_buf()),
+        vae_b: None,
+    };
+    let kinds = [MethodKind::KeyframeRf, MethodKind::ReplacementRf, MethodKind::Lerp, MethodKind::StaticNearest];
+    let sampling = SamplingSetup {
+        n_grid: opts.n_grid,
+        solver: Solver::Midpoint,
+        guidance: 1.0,
+    };
+    let built = build_methods(&kinds, &runs, report_p(&data)?, sampling, &device)?;
+    let eval_dir = out.join("eval");
+    let mut run_opts = RunOptions::new(TableKind::Table1, data.clone(), eval_dir.clone());
+    run_opts.methods = built.methods;
+    run_opts.clips = opts.eval_clips;
+    run_opts.export_items = 3;
+    run_opts.progress = !matches!(opts.progress, ProgressMode::Quiet);
+    run_opts.header = TableHeader {
+        text_encoder: "scratch".into(),
+        checkpoints: built.checkpoints.into_iter().collect(),
+        device: format!(
+            "{:?} CPU; sampler midpoint on a {}-point grid, guidance 1.0 (paper: 64 points)",
+            rf_cfg.device.backend, opts.n_grid
+        ),
+        ..TableHeader::default()
+    };
+    let table = run_protocol(&run_opts).map_err(|e| TrainError::Other(e.to_string()))?;
+    stage("done".into());
+    Ok(QuickstartReport {
+        out,
+        data,
+        vae_run: vae_run.root().to_path_buf(),
+        rf_run: rf_run.root().to_path_buf(),
+        baseline_run: baseline_run.root().to_path_buf(),
+        eval_dir,
+        table,
+    })
+}
+
+fn report_p(data: &Path) -> Result<usize> {
+    Ok(any4d_data::store::Store::open(data).map_err(|e| TrainError::Other(e.to_string()))?.p())
+}

@@ -1,0 +1,406 @@
+//! The keyframe RF loop on a tiny frozen VAE (SPEC §4.5, §5.4; issue 5 item 1): a short run lowers (R5), keyframe
+//! masks follow the sampler (k ≤ k_max, k = 0 drawn; no keyframes for `none`/`replace_noised`), `impute_until`
+//! trains on noisy keyframes, resume is bitwise equal to straight training, `load_rf_run` round-trips, and
+//! mismatched configs or incomplete run folders give errors naming the field or file. One tiny VAE run on
+//! procedural clips is shared by all tests.
+
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard, OnceLock};
+
+use any4d_data::store::write_synth_with;
+use any4d_data::synth::SynthConfig;
+use any4d_model::mmdit::KfMode;
+use any4d_model::text::scratch::ScratchTokenizer;
+use any4d_train::backend::{Backend, Precision, device};
+use any4d_train::config::Duration;
+use any4d_train::loop_common::{LoopSetup, Objective, Outcome, StopFlag, train};
+use any4d_train::progress::ProgressMode;
+use any4d_train::rf_loop::{
+    KfSampler, LatentDraw, RF_TERMS, RfModel, RfObjective, RfRunConfig, RfRunOptions, Subset, TextDropout,
+    draw_keyframe_mask, train_rf,
+};
+use any4d_train::run_folder::{METRICS_FILE, RunFolder, VALID_FILE, read_table};
+use any4d_train::runs::{LoadedVae, VAE_RUN_FILE, load_rf_run, load_vae_run};
+use any4d_train::vae_loop::{VaeRunConfig, VaeRunOptions, train_vae};
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::prelude::{Device, Tensor};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// burn's CPU RNG seed is process-wide: tests that draw from it run one at a time.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+fn serial() -> MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// A procedural store (4-frame clips, P = 32) and a finished tiny VAE run on it, made once per test process.
+struct Fixture {
+    _dir: tempfile::TempDir,
+    dir: PathBuf,
+    store: PathBuf,
+    vae_run: PathBuf,
+}
+
+fn fixture() -> &'static Fixture {
+    static FIXTURE: OnceLock<Fixture> = OnceLock::new();
+    FIXTURE.get_or_init(|| {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let store = dir.path().join("store");
+        let synth = SynthConfig {
+            clips: 10,
+            seed: 3,
+            frames: 4,
+            min_vertices: 256,
+            max_vertices: 512,
+        };
+        write_synth_with(&synth, &store, 32, None).expect("synthetic store");
+        let mut cfg = VaeRunConfig::load(&root().join("configs/vae/tiny.toml")).expect("configs/vae/tiny.toml");
+        cfg.train.duration = Duration::Steps(6);
+        cfg.train.batch_size = 4;
+        cfg.train.micro_batch = 4;
+        cfg.train.checkpoint_every = 6;
+        cfg.train.valid_every = 6;
+        let opts = VaeRunOptions {
+            data: store.clone(),
+            runs_dir: dir.path().join("runs"),
+            name: "vae".into(),
+            progress: ProgressMode::Quiet,
+            stop: StopFlag::new(),
+        };
+        let (run, outcome) = train_vae(&cfg, &opts).expect("tiny VAE run");
+        assert!(matches!(outcome, Outcome::Finished { .. }), "{outcome:?}");
+        Fixture {
+            dir: dir.path().to_path_buf(),
+            vae_run: run.root().to_path_buf(),
+            store,
+            _dir: dir,
+        }
+    })
+}
+
+/// configs/rf/tiny.toml sized for the fixture: T = 4, k_max = 3, `steps` steps of 4 clips.
+fn tiny_rf(steps: u64) -> RfRunConfig {
+    let mut cfg = RfRunConfig::load(&root().join("configs/rf/tiny.toml")).expect("configs/rf/tiny.toml");
+    cfg.model.frames = 4;
+    cfg.rf.k_max = 3;
+    cfg.train.duration = Duration::Steps(steps);
+    cfg.train.batch_size = 4;
+    cfg.train.micro_batch = 4;
+    cfg.train.checkpoint_every = steps;
+    cfg.train.valid_every = steps;
+    cfg
+}
+
+fn rf_opts(name: &str) -> RfRunOptions {
+    let f = fixture();
+    RfRunOptions {
+        data: f.store.clone(),
+        vae_run: Some(f.vae_run.clone()),
+        runs_dir: f.dir.join("runs"),
+        name: name.into(),
+        progress: ProgressMode::Quiet,
+        stop: StopFlag::new(),
+    }
+}
+
+const LOSS_STEPS: u64 = 40;
+
+/// The RF run of [`tiny_rf_run_lowers_its_loss`], trained once and shared with the round-trip test.
+fn trained_rf() -> &'static (PathBuf, RfRunConfig) {
+    static RUN: OnceLock<(PathBuf, RfRunConfig)> = OnceLock::new();
+    RUN.get_or_init(|| {
+        let cfg = tiny_rf(LOSS_STEPS);
+        let (run, outcome) = train_rf(&cfg, &rf_opts("rf")).expect("tiny RF run");
+        assert!(
+            matches!(outcome, Outcome::Finished { steps: LOSS_STEPS, .. }),
+            "{outcome:?}"
+        );
+        (run.root().to_path_buf(), cfg)
+    })
+}
+
+fn inference_device() -> Device {
+    device(Backend::Flex, Precision::F32).expect("flex device")
+}
+
+fn params(m: &RfModel) -> Vec<f32> {
+    struct Collect(Vec<f32>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            self.0
+                .extend(p.val().into_data().try_to_vec::<f32>().expect("f32 parameters"));
+        }
+    }
+    let mut c = Collect(Vec::new());
+    m.visit(&mut c);
+    c.0
+}
+
+fn make_objective(cfg: &RfRunConfig, vae: &LoadedVae, dev: &Device) -> (RfObjective, usize) {
+    let f = fixture();
+    let store = any4d_data::store::Store::open(&f.store).unwrap();
+    let captions: Vec<String> = store
+        .indices(any4d_data::store::Split::Train)
+        .into_iter()
+        .map(|i| store.get(i).unwrap().clip.caption)
+        .collect();
+    let tokenizer = ScratchTokenizer::train(&captions, cfg.text.vocab_size).unwrap();
+    let vocab = tokenizer.vocab_size();
+    (RfObjective::new(cfg, &f.store, vae, tokenizer, dev).unwrap(), vocab)
+}
+
+#[test]
+fn tiny_rf_run_lowers_its_loss() {
+    let _g = serial();
+    let (run, _) = trained_rf();
+    let t = read_table(&run.join(METRICS_FILE)).unwrap();
+    let col = |name: &str| t.header.iter().position(|h| h == name).unwrap() - 1;
+    let (loss, kf) = (col("loss"), col("kf_frac"));
+    let mean = |rows: &[(u64, Vec<f64>)]| rows.iter().map(|r| r.1[loss]).sum::<f64>() / rows.len() as f64;
+    let n = t.rows.len();
+    assert_eq!(n as u64, LOSS_STEPS);
+    let (first, last) = (mean(&t.rows[..5]), mean(&t.rows[n - 5..]));
+    assert!(last < 0.6 * first, "RF loss did not drop: first 5 steps {first}, last 5 {last}");
+    // input_mask with k ~ U{0..3} of T = 4: keyframes appear, but not in every slot.
+    let kf_mean = t.rows.iter().map(|r| r.1[kf]).sum::<f64>() / n as f64;
+    assert!((0.1..0.7).contains(&kf_mean), "mean keyframe fraction {kf_mean}");
+    for file in ["tokenizer.json", VAE_RUN_FILE, VALID_FILE] {
+        assert!(run.join(file).is_file(), "{file} missing in {}", run.display());
+    }
+}
+
+#[test]
+fn load_rf_run_round_trips_the_trained_run() {
+    let _g = serial();
+    let (run, cfg) = trained_rf();
+    let dev = inference_device();
+    let loaded = load_rf_run(run, &dev).unwrap();
+    assert_eq!(&loaded.config, cfg);
+    assert_eq!(loaded.step, LOSS_STEPS);
+    let vae = loaded.load_vae(&dev).unwrap();
+    assert_eq!(vae.run, std::fs::canonicalize(&fixture().vae_run).unwrap());
+    // The loaded network reproduces the final validation loss logged by the run (fixed validation seed).
+    let tokenizer = ScratchTokenizer::load(run).unwrap();
+    assert_eq!(tokenizer.vocab_size(), loaded.tokenizer.vocab_size());
+    let objective = RfObjective::new(cfg, &fixture().store, &vae, tokenizer, &dev).unwrap();
+    let values = objective
+        .validate(&loaded.model, &dev)
+        .unwrap()
+        .expect("the fixture store has VAL clips");
+    let table = read_table(&run.join(VALID_FILE)).unwrap();
+    let (step, logged) = table.rows.last().expect("a validation row");
+    assert_eq!(*step, LOSS_STEPS);
+    let rel = (values[2] - logged[2]).abs() / logged[2];
+    assert!(rel < 1e-5, "validation loss {} vs logged {}", values[2], logged[2]);
+    let text = loaded
+        .encode_text(&["a small sphere spins".into(), String::new()], &dev)
+        .unwrap();
+    assert_eq!(text.dims(), [2, cfg.text.max_len, cfg.model.text_dim]);
+}
+
+#[test]
+fn keyframe_masks_follow_sampler_and_mode() {
+    let cfg = RfRunConfig::load(&root().join("configs/rf/tiny.toml")).unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let mut hist = [0usize; 17];
+    for _ in 0..3000 {
+        let m = draw_keyframe_mask(&cfg.rf, KfMode::InputMask, 16, &mut rng);
+        assert_eq!(m.len(), 16);
+        hist[m.iter().filter(|&&x| x).count()] += 1;
+    }
+    assert!(hist[6..].iter().all(|&n| n == 0), "k > k_max = 5 drawn: {hist:?}");
+    // k ~ U{0..5}: 500 expected per value; 4.5 standard deviations ≈ 92.
+    assert!(hist[..6].iter().all(|&n| (400..=600).contains(&n)), "{hist:?}");
+    for mode in [KfMode::None, KfMode::ReplaceNoised] {
+        for _ in 0..100 {
+            assert!(draw_keyframe_mask(&cfg.rf, mode, 16, &mut rng).iter().all(|&m| !m), "{mode:?}");
+        }
+    }
+    let mut scenemi = cfg.rf.clone();
+    scenemi.kf_sampler = KfSampler::Scenemi;
+    let mut ks = std::collections::BTreeSet::new();
+    for _ in 0..2000 {
+        let m = draw_keyframe_mask(&scenemi, KfMode::ImputeUntil, 16, &mut rng);
+        assert!(m[0] && m[15], "SceneMI keeps first and last: {m:?}");
+        ks.insert(m.iter().filter(|&&x| x).count());
+    }
+    assert_eq!(ks, (2..=16).collect(), "SceneMI k ~ U{{2..T}}");
+}
+
+#[test]
+fn batch_masks_respect_k_max_and_none_has_no_keyframes() {
+    let _g = serial();
+    let dev = inference_device();
+    let vae = load_vae_run(&fixture().vae_run, &dev).unwrap();
+    let mut cfg = tiny_rf(1);
+    let (objective, vocab) = make_objective(&cfg, &vae, &dev);
+    let model = cfg.model_config(vocab).init(&dev);
+    let n = objective.train_len();
+    let all: Vec<usize> = (0..n).collect();
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut sums = Vec::new();
+    for _ in 0..50 {
+        let step = objective
+            .batch(&model, Subset::Train, &all, &mut rng, TextDropout::Apply, &dev)
+            .unwrap();
+        assert_eq!(step.batch.z.dims(), [n, 32, 4, 4]);
+        assert_eq!(step.batch.mask.dims(), [n, 4]);
+        let rows: Vec<f32> = step.batch.mask.sum_dim(1).into_data().try_to_vec().unwrap();
+        sums.extend(rows);
+    }
+    assert!(sums.iter().all(|&k| k <= 3.0), "k > k_max = 3: {sums:?}");
+    assert!(sums.contains(&0.0), "k = 0 never drawn in {} masks", sums.len());
+    assert!(sums.contains(&3.0), "k = 3 never drawn in {} masks", sums.len());
+
+    cfg.model.kf_mode = KfMode::None;
+    let (objective, vocab) = make_objective(&cfg, &vae, &dev);
+    let model = cfg.model_config(vocab).init(&dev);
+    for _ in 0..5 {
+        let step = objective
+            .batch(&model, Subset::Train, &all, &mut rng, TextDropout::Apply, &dev)
+            .unwrap();
+        let total = step.batch.mask.sum().into_scalar::<f32>();
+        assert_eq!(total, 0.0, "kf_mode none drew keyframes");
+    }
+}
+
+#[test]
+fn impute_until_trains_on_noisy_keyframes() {
+    let _g = serial();
+    let mut cfg = tiny_rf(3);
+    cfg.model.kf_mode = KfMode::ImputeUntil;
+    cfg.rf.kf_sampler = KfSampler::Scenemi;
+    cfg.rf.keyframe_noise = 0.5; // large, so the encoded keyframes must differ from the clean latents
+    cfg.rf.latent = LatentDraw::Mean; // Z = standardized clean μ: comparable with the noisy keyframes' μ
+    let dev = inference_device();
+    let vae = load_vae_run(&fixture().vae_run, &dev).unwrap();
+    let (objective, vocab) = make_objective(&cfg, &vae, &dev);
+    let model = cfg.model_config(vocab).init(&dev);
+    let all: Vec<usize> = (0..objective.train_len()).collect();
+    let step = objective
+        .batch(&model, Subset::Train, &all, &mut ChaCha8Rng::seed_from_u64(2), TextDropout::Off, &dev)
+        .unwrap();
+    let b = all.len();
+    let mask: Vec<f32> = step.batch.mask.clone().into_data().try_to_vec().unwrap();
+    assert!(mask.chunks(4).all(|m| m[0] == 1.0 && m[3] == 1.0), "SceneMI keeps first and last: {mask:?}");
+    // Mean |z_key − z| per (clip, frame): only inner keyframes are noised; first, last and non-keyframes are clean.
+    let diff: Vec<f32> = (step.batch.z_key.clone() - step.batch.z.clone())
+        .abs()
+        .mean_dim(3)
+        .mean_dim(1)
+        .reshape([b, 4])
+        .into_data()
+        .try_to_vec()
+        .unwrap();
+    let mut noisy = 0;
+    for (i, (&d, &m)) in diff.iter().zip(&mask).enumerate() {
+        let f = i % 4;
+        if m == 1.0 && f != 0 && f != 3 {
+            noisy += 1;
+        } else {
+            assert!(d < 1e-4, "clip {} frame {f} (mask {m}) changed by {d}", i / 4);
+        }
+    }
+    let noisy_mean = diff
+        .iter()
+        .zip(&mask)
+        .enumerate()
+        .filter(|(i, (_, m))| **m == 1.0 && i % 4 != 0 && i % 4 != 3)
+        .map(|(_, (d, _))| *d)
+        .sum::<f32>()
+        / noisy.max(1) as f32;
+    assert!(noisy > 0 && noisy_mean > 1e-3, "{noisy} noisy keyframes, mean latent change {noisy_mean}");
+    let (run, outcome) = train_rf(&cfg, &rf_opts("impute")).unwrap();
+    assert!(matches!(outcome, Outcome::Finished { steps: 3, .. }), "{outcome:?}");
+    let t = read_table(&run.path(METRICS_FILE)).unwrap();
+    assert!(t.rows.iter().all(|r| r.1.iter().all(|v| v.is_finite())), "{t:?}");
+}
+
+#[test]
+fn tiny_rf_resume_is_bitwise_equal_to_straight_training() {
+    let _g = serial();
+    let n = 2;
+    let inference = inference_device();
+    let vae = load_vae_run(&fixture().vae_run, &inference).unwrap();
+    let cfg = tiny_rf(2 * n);
+    let (objective, vocab) = make_objective(&cfg, &vae, &inference);
+    let go = |run: &RunFolder, steps: u64, resume: Option<PathBuf>| {
+        let mut cfg = cfg.clone();
+        cfg.train.duration = Duration::Steps(steps);
+        let dev = inference.clone().autodiff();
+        dev.seed(cfg.train.seed);
+        let model = cfg.model_config(vocab).init(&dev);
+        let setup = LoopSetup {
+            run,
+            train: &cfg.train,
+            optim: &cfg.optim,
+            device: dev,
+            stop: StopFlag::new(),
+            progress: ProgressMode::Quiet,
+            resume,
+        };
+        train(&objective, model, setup).unwrap()
+    };
+    let runs = fixture().dir.join("resume-runs");
+    let straight_run = RunFolder::create(&runs, "straight", "", &RF_TERMS).unwrap();
+    let (straight, _) = go(&straight_run, 2 * n, None);
+    let split_run = RunFolder::create(&runs, "split", "", &RF_TERMS).unwrap();
+    let (_, first) = go(&split_run, n, None);
+    let Outcome::Finished { checkpoint, .. } = first else {
+        panic!("{first:?}")
+    };
+    let (resumed, _) = go(&split_run, 2 * n, Some(checkpoint));
+    assert_eq!(params(&straight), params(&resumed), "resumed RF differs from straight training");
+}
+
+#[test]
+fn mismatched_configs_and_incomplete_runs_are_reported() {
+    let _g = serial();
+    let f = fixture();
+    let mut cfg = tiny_rf(1);
+    cfg.model.channels = 3;
+    let err = train_rf(&cfg, &rf_opts("bad")).unwrap_err().to_string();
+    assert!(err.contains("model.channels") && err.contains("latent_channels = 4"), "{err}");
+    let mut cfg = tiny_rf(1);
+    cfg.model.frames = 16;
+    let err = train_rf(&cfg, &rf_opts("bad")).unwrap_err().to_string();
+    assert!(err.contains("model.frames") && err.contains("4-frame"), "{err}");
+    assert!(!f.dir.join("runs/bad-1").exists(), "a failed start claimed a run folder");
+
+    let dev = inference_device();
+    let empty = f.dir.join("not-a-run");
+    std::fs::create_dir_all(&empty).unwrap();
+    let err = load_vae_run(&empty, &dev).unwrap_err().to_string();
+    assert!(err.contains("not-a-run") && err.contains("config.toml"), "{err}");
+    // An RF run folder without its tokenizer.
+    std::fs::copy(
+        root().join("configs/rf/tiny.toml"),
+        empty.join("config.toml"),
+    )
+    .unwrap();
+    let err = load_rf_run(&empty, &dev).err().expect("no tokenizer").to_string();
+    assert!(err.contains("not-a-run") && err.contains("tokenizer.json"), "{err}");
+    // A VAE run folder without latent statistics (a copy of the fixture's without `latent_stats.json`).
+    let vae_copy = f.dir.join("vae-without-stats");
+    copy_dir(&f.vae_run, &vae_copy);
+    std::fs::remove_file(vae_copy.join("latent_stats.json")).unwrap();
+    let err = load_vae_run(&vae_copy, &dev).unwrap_err().to_string();
+    assert!(err.contains("vae-without-stats") && err.contains("latent_stats.json"), "{err}");
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        if e.path().is_dir() {
+            copy_dir(&e.path(), &to.join(e.file_name()));
+        } else {
+            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+        }
+    }
+}
