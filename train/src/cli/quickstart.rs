@@ -20,7 +20,7 @@ pub struct QuickstartArgs {
     #[arg(long, default_value_t = 666)]
     pub seed: u64,
     /// Largest vertex count of the clips (512..=4096; small is fast).
-    #[arg(long, default_value_t = 640)]
+    #[arg(long, default_value_t = 768)]
     pub max_vertices: usize,
     /// VAE optimiser steps [default: configs/vae/tiny.toml].
     #[arg(long)]
