@@ -59,9 +59,9 @@ pub fn run(args: QuickstartArgs) -> anyhow::Result<ExitCode> {
     println!("  VAE run                   {}", report.vae_run.display());
     println!("  keyframe RF run (ours)    {}", report.rf_run.display());
     println!("  baseline RF run           {}", report.baseline_run.display());
-    println!("  table, per-clip parquet, strips and plots   {}", report.eval_dir.display());
-    for f in &report.table.files {
-        println!("    {}", f.display());
-    }
+    println!("  evaluation                {}", report.eval_dir.display());
+    println!("    summary.md / summary.csv (this table), clips.parquet (per clip), manifest.json,");
+    println!("    rmse_vs_kx.png (plot), strips/*.png (ground truth above, prediction below), predictions/");
+    println!("  each run folder has config.toml, log.txt, metrics.csv, loss.png and checkpoints/");
     Ok(ExitCode::SUCCESS)
 }
