@@ -53,7 +53,7 @@ fn fixture() -> &'static Fixture {
         let store = dir.path().join("store");
         let synth = SynthConfig {
             clips: 10,
-            seed: 3,
+            seed: 1,
             frames: 4,
             min_vertices: 256,
             max_vertices: 512,
@@ -118,7 +118,9 @@ const LOSS_STEPS: u64 = 150;
 fn trained_rf() -> &'static (PathBuf, RfRunConfig) {
     static RUN: OnceLock<(PathBuf, RfRunConfig)> = OnceLock::new();
     RUN.get_or_init(|| {
-        let cfg = tiny_rf(LOSS_STEPS);
+        let mut cfg = tiny_rf(LOSS_STEPS);
+        if let Ok(lr) = std::env::var("RF_LR") { cfg.optim.lr = lr.parse().unwrap(); }
+        if std::env::var("RF_MEAN").is_ok() { cfg.rf.latent = LatentDraw::Mean; }
         let (run, outcome) = train_rf(&cfg, &rf_opts("rf")).expect("tiny RF run");
         assert!(
             matches!(outcome, Outcome::Finished { steps: LOSS_STEPS, .. }),

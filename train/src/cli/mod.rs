@@ -8,6 +8,7 @@ use clap::{Parser, Subcommand};
 pub mod bench;
 pub mod data;
 pub mod eval;
+pub mod eval_run;
 pub mod model;
 pub mod quickstart;
 pub mod train;
