@@ -1,10 +1,11 @@
 //! Rectified-flow training (SPEC §4.2, §4.4–4.7, §5.4; issue 5 item 1): `any4d train rf`. The frozen VAE of
-//! `--vae RUN` encodes every clip once (posterior μ, log σ², z₀; cached in host memory); each step draws
-//! z = μ + σξ (or μ), standardizes it (SPEC §3.4), draws keyframe masks (§4.5, §5.4), τ, ε and the CFG text
-//! dropout, and minimises (R5) through `rf_training_loss`. The caption encoder is the `scratch` one: its tokenizer
-//! is trained on the TRAIN captions at run start (`tokenizer.json` in the run folder) and its transformer is
-//! trained jointly with the MMDiT ([`RfModel`]). Run config: `configs/rf/*.toml` (`[model]`, `[rf]`, `[text]`,
-//! `[train]`, `[optim]`, `[device]`).
+//! `--vae RUN` encodes the clips (posterior μ, log σ², z₀) — once at run start into host memory, or per
+//! micro-batch (`rf.latent_cache`); each step draws z = μ + σξ (or μ), standardizes it (SPEC §3.4), draws keyframe
+//! masks (§4.5, §5.4; SceneMI's noisy keyframes for `impute_until` are noised in vertex space and encoded per
+//! batch), τ, ε and the CFG text dropout, and minimises (R5) through `rf_training_loss`. The caption encoder is the
+//! `scratch` one: its tokenizer is trained on the TRAIN captions at run start (`tokenizer.json` in the run folder)
+//! and its transformer is trained jointly with the MMDiT ([`RfModel`]). Run config: `configs/rf/*.toml`
+//! (`[model]`, `[rf]`, `[text]`, `[train]`, `[optim]`, `[device]`).
 
 use std::path::{Path, PathBuf};
 
@@ -55,6 +56,17 @@ pub enum LatentDraw {
     Mean,
 }
 
+/// Where the frozen-VAE latents live during training.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LatentCache {
+    /// Encode every clip once at run start and keep z₀, μ and log σ² in host memory: P·C·(1 + 2T) floats per clip
+    /// (811 KB at the paper's P = 512, C = 12, T = 16, so about 169 GB for 208K clips).
+    Memory,
+    /// Encode each micro-batch with the frozen VAE when it is drawn: no memory, one VAE forward per batch.
+    PerBatch,
+}
+
 /// The `[rf]` table: options of the RF objective.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -75,6 +87,8 @@ pub struct RfSection {
     pub text_dropout: f64,
     /// Posterior sample or mean as the RF's target latent.
     pub latent: LatentDraw,
+    /// Frozen-VAE latents cached in memory or encoded per batch.
+    pub latent_cache: LatentCache,
 }
 
 /// Which caption encoder the RF trains with (SPEC §4.4).
@@ -167,7 +181,7 @@ impl RfRunConfig {
                 return Err(bad(format!("text.{name} must be positive, got 0")));
             }
         }
-        if cfg.model.text_dim % t.heads != 0 {
+        if !cfg.model.text_dim.is_multiple_of(t.heads) {
             return Err(bad(format!(
                 "text.heads ({}) must divide model.text_dim ({})",
                 t.heads, cfg.model.text_dim
@@ -409,25 +423,26 @@ pub struct RfStep {
     pub tau: Tensor<1>,
 }
 
-/// The frozen VAE and store for noisy keyframes (`kf_mode = "impute_until"`), encoded per batch.
-struct NoisyKeyframes {
-    vae: FrameVae,
-    store: Store,
+/// The clips of one split: their store indices and, with [`LatentCache::Memory`], their latents.
+struct SplitLatents {
+    store_indices: Vec<usize>,
+    cached: Option<LatentSet>,
 }
 
-/// Training objective of the keyframe RF over cached frozen-VAE latents: terms `rf` (R5) and `kf_frac`.
+/// Training objective of the keyframe RF on a frozen VAE: terms `rf` (R5) and `kf_frac`.
 pub struct RfObjective {
     cfg: RfRunConfig,
     stats: LatentStats,
     tokenizer: ScratchTokenizer,
-    train: LatentSet,
-    valid: LatentSet,
-    noisy: Option<NoisyKeyframes>,
+    vae: FrameVae,
+    store: Store,
+    train: SplitLatents,
+    valid: SplitLatents,
 }
 
 impl RfObjective {
-    /// Encodes the TRAIN and VAL clips of the store in `data` with the frozen VAE (on the inference `device`)
-    /// and checks that the RF config fits the VAE and the store.
+    /// Checks that the RF config fits the VAE and the store in `data`; with [`LatentCache::Memory`] encodes the
+    /// TRAIN and VAL clips once with the frozen VAE (on the inference `device`).
     pub fn new(
         cfg: &RfRunConfig,
         data: &Path,
@@ -437,32 +452,45 @@ impl RfObjective {
     ) -> Result<Self> {
         let store = open_store(data)?;
         check_compatible(cfg, &store, vae)?;
-        let frame_vae = vae.frame_vae()?;
-        let mb = cfg.train.micro_batch;
-        let train = encode_latents(frame_vae, &store, &store.indices(Split::Train), mb, device)?;
-        let valid = encode_latents(frame_vae, &store, &store.indices(Split::Val), mb, device)?;
-        let noisy = (cfg.model.kf_mode == KfMode::ImputeUntil).then(|| NoisyKeyframes {
-            vae: frame_vae.clone(),
-            store,
-        });
+        let frame_vae = vae.frame_vae()?.clone();
+        let split = |split: Split| -> Result<SplitLatents> {
+            let store_indices = store.indices(split);
+            let cached = match cfg.rf.latent_cache {
+                LatentCache::Memory => Some(encode_latents(
+                    &frame_vae,
+                    &store,
+                    &store_indices,
+                    cfg.train.micro_batch,
+                    device,
+                )?),
+                LatentCache::PerBatch => None,
+            };
+            Ok(SplitLatents { store_indices, cached })
+        };
+        let (train, valid) = (split(Split::Train)?, split(Split::Val)?);
         Ok(RfObjective {
             cfg: cfg.clone(),
             stats: vae.stats,
             tokenizer,
+            vae: frame_vae,
+            store,
             train,
             valid,
-            noisy,
         })
     }
 
-    /// The cached TRAIN latents.
-    pub fn train_set(&self) -> &LatentSet {
-        &self.train
+    /// Number of VAL clips.
+    pub fn valid_len(&self) -> usize {
+        self.valid.store_indices.len()
     }
 
-    /// The cached VAL latents.
-    pub fn valid_set(&self) -> &LatentSet {
-        &self.valid
+    /// Host bytes of the cached latents (0 with [`LatentCache::PerBatch`]).
+    pub fn cached_bytes(&self) -> usize {
+        [&self.train, &self.valid]
+            .iter()
+            .filter_map(|s| s.cached.as_ref())
+            .map(LatentSet::bytes)
+            .sum()
     }
 
     /// Builds the batch of positions `indices` of `subset`: z = μ + σξ or μ (`rf.latent`), standardized (SPEC
@@ -482,25 +510,41 @@ impl RfObjective {
         dropout: TextDropout,
         device: &Device,
     ) -> Result<RfStep> {
-        let set = match subset {
+        let split = match subset {
             Subset::Train => &self.train,
             Subset::Valid => &self.valid,
+        };
+        let store_ids = indices
+            .iter()
+            .map(|&i| {
+                split.store_indices.get(i).copied().ok_or_else(|| {
+                    TrainError::Other(format!(
+                        "{subset:?} index {i} out of range ({} clips)",
+                        split.store_indices.len()
+                    ))
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let encoded;
+        let (set, positions) = match &split.cached {
+            Some(set) => (set, indices.to_vec()),
+            None => {
+                let inference = device.clone().without_autodiff();
+                encoded = encode_latents(&self.vae, &self.store, &store_ids, store_ids.len(), &inference)?;
+                (&encoded, (0..store_ids.len()).collect())
+            }
         };
         let (b, t, p, c) = (indices.len(), set.frames, set.tokens, set.channels);
         let mut z0 = Vec::with_capacity(b * p * c);
         let mut mu = Vec::with_capacity(b * t * p * c);
         let mut logvar = Vec::with_capacity(b * t * p * c);
         let mut captions = Vec::with_capacity(b);
-        let mut store_ids = Vec::with_capacity(b);
-        for &i in indices {
-            let clip = set.clips.get(i).ok_or_else(|| {
-                TrainError::Other(format!("{subset:?} index {i} out of range ({} clips)", set.clips.len()))
-            })?;
+        for &i in &positions {
+            let clip = &set.clips[i];
             z0.extend_from_slice(&clip.z0);
             mu.extend_from_slice(&clip.mu);
             logvar.extend_from_slice(&clip.logvar);
             captions.push(clip.caption.clone());
-            store_ids.push(clip.store_index);
         }
         let z0: Tensor<3> = Tensor::from_data(TensorData::new(z0, [b, p, c]), device);
         let mu: Tensor<4> = Tensor::from_data(TensorData::new(mu, [b, t, p, c]), device);
@@ -519,9 +563,9 @@ impl RfObjective {
         let mask: Vec<bool> = (0..b)
             .flat_map(|_| draw_keyframe_mask(&self.cfg.rf, kf_mode, t, rng))
             .collect();
-        let z_key = match &self.noisy {
-            Some(noisy) => self.noisy_keyframe_latents(noisy, &store_ids, &mask, rng, device)?,
-            None => z.clone(),
+        let z_key = match kf_mode {
+            KfMode::ImputeUntil => self.noisy_keyframe_latents(&store_ids, &mask, rng, device)?,
+            KfMode::InputMask | KfMode::ReplaceNoised | KfMode::None => z.clone(),
         };
         let mask = Tensor::from_data(
             TensorData::new(mask.iter().map(|&m| f32::from(u8::from(m))).collect::<Vec<_>>(), [b, t]),
@@ -558,14 +602,13 @@ impl RfObjective {
     /// - mask: `B · T` row-major; output `[B, P, T, C]` on `device`
     fn noisy_keyframe_latents(
         &self,
-        noisy: &NoisyKeyframes,
         store_ids: &[usize],
         mask: &[bool],
         rng: &mut ChaCha8Rng,
         device: &Device,
     ) -> Result<Tensor<4>> {
         let inference = device.clone().without_autodiff();
-        let (mut clips, _) = load_clips(&noisy.store, store_ids, &inference)?;
+        let (mut clips, _) = load_clips(&self.store, store_ids, &inference)?;
         let [b, t, n, _] = clips.vertices.dims();
         let mut noise = vec![0.0f32; b * t * n * 3];
         for (bi, &n_real) in clips.n_real.iter().enumerate() {
@@ -581,7 +624,7 @@ impl RfObjective {
             }
         }
         clips.vertices = clips.vertices + Tensor::from_data(TensorData::new(noise, [b, t, n, 3]), &inference);
-        let enc = noisy.vae.vae_encode(&vae_batch(&clips, &inference)?);
+        let enc = self.vae.vae_encode(&vae_batch(&clips, &inference)?);
         let z_key = self.stats.standardize_motion(enc.mu.swap_dims(1, 2));
         Ok(Tensor::from_data(z_key.into_data(), device))
     }
@@ -602,7 +645,7 @@ impl Objective for RfObjective {
     }
 
     fn train_len(&self) -> usize {
-        self.train.clips.len()
+        self.train.store_indices.len()
     }
 
     fn loss(&self, model: &RfModel, indices: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
@@ -617,7 +660,7 @@ impl Objective for RfObjective {
 
     /// (R5) on the VAL split with a fixed seed (same masks, ξ, ε and τ at every validation) and no text dropout.
     fn validate(&self, model: &RfModel, device: &Device) -> Result<Option<Vec<f64>>> {
-        let n = self.valid.clips.len();
+        let n = self.valid_len();
         if n == 0 {
             return Ok(None);
         }
@@ -690,9 +733,10 @@ fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result
 /// Starts a new RF run with `cfg` on the frozen VAE of `opts.vae_run`; returns the run folder and the outcome.
 /// The run folder gets `vae_run.json` (which VAE run and checkpoint step) and `tokenizer.json`.
 pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Outcome)> {
-    let vae_dir = opts.vae_run.as_deref().ok_or_else(|| {
-        TrainError::Other("a new RF run needs the VAE run folder (--vae RUN)".into())
-    })?;
+    let vae_dir = opts
+        .vae_run
+        .as_deref()
+        .ok_or_else(|| TrainError::Other("a new RF run needs the VAE run folder (--vae RUN)".into()))?;
     // Fail before claiming a run folder when the backend, the store or the VAE run is unusable.
     backend::check(cfg.device.backend, cfg.device.precision)?;
     let device = backend::device(cfg.device.backend, cfg.device.precision)?;
@@ -700,7 +744,8 @@ pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Ou
     let vae = runs::load_vae_run(vae_dir, &device)?;
     check_compatible(cfg, &store, &vae)?;
     let captions = train_captions(&store)?;
-    let tokenizer = ScratchTokenizer::train(&captions, cfg.text.vocab_size).map_err(|e| TrainError::Other(e.to_string()))?;
+    let tokenizer =
+        ScratchTokenizer::train(&captions, cfg.text.vocab_size).map_err(|e| TrainError::Other(e.to_string()))?;
 
     let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &RF_TERMS)?;
     runs::write_vae_record(&run, &VaeRunRecord::of(&vae)?)?;
@@ -772,12 +817,13 @@ fn run_rf(
     let vocab = tokenizer.vocab_size();
     let objective = RfObjective::new(cfg, &opts.data, vae, tokenizer, device)?;
     run.log(&format!(
-        "RF {:?} on {} ({} train / {} val clips, latents cached: {:.1} MiB), VAE {} step {}, backend {}",
+        "RF {:?} on {} ({} train / {} val clips, latents {:?}: {:.1} MiB), VAE {} step {}, backend {}",
         cfg.model.kf_mode,
         opts.data.display(),
-        objective.train.clips.len(),
-        objective.valid.clips.len(),
-        (objective.train.bytes() + objective.valid.bytes()) as f64 / (1024.0 * 1024.0),
+        objective.train_len(),
+        objective.valid_len(),
+        cfg.rf.latent_cache,
+        objective.cached_bytes() as f64 / (1024.0 * 1024.0),
         vae.run.display(),
         vae.step,
         cfg.device.backend

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use any4d_model::dymesh_vae::DyMeshVae;
 use any4d_model::frame_vae::FrameVae;
 use any4d_model::latent_stats::LatentStats;
-use any4d_model::text::scratch::{TOKENIZER_FILE, ScratchTokenizer};
+use any4d_model::text::scratch::{ScratchTokenizer, TOKENIZER_FILE};
 use burn::prelude::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
@@ -112,9 +112,8 @@ pub fn load_vae_run(run_dir: &Path, device: &Device) -> Result<LoadedVae> {
         LATENT_STATS_FILE,
         " (written when a VAE run finishes: finish it with `any4d train vae --resume`)",
     )?;
-    let stored: StoredLatentStats = serde_json::from_str(&stats_text).map_err(|e| {
-        TrainError::Other(format!("run {}: bad `{LATENT_STATS_FILE}`: {e}", run.display()))
-    })?;
+    let stored: StoredLatentStats = serde_json::from_str(&stats_text)
+        .map_err(|e| TrainError::Other(format!("run {}: bad `{LATENT_STATS_FILE}`: {e}", run.display())))?;
     if stored.step != step {
         return Err(TrainError::Other(format!(
             "run {}: `{LATENT_STATS_FILE}` belongs to step {}, the newest checkpoint is step {step}; finish the run \
@@ -174,8 +173,8 @@ impl VaeRunRecord {
 
 /// Writes `vae_run.json` into an RF run folder.
 pub fn write_vae_record(run: &RunFolder, record: &VaeRunRecord) -> Result<()> {
-    let json = serde_json::to_vec_pretty(record)
-        .map_err(|e| TrainError::Other(format!("serialise {VAE_RUN_FILE}: {e}")))?;
+    let json =
+        serde_json::to_vec_pretty(record).map_err(|e| TrainError::Other(format!("serialise {VAE_RUN_FILE}: {e}")))?;
     write_atomic(&run.path(VAE_RUN_FILE), &json)
 }
 
@@ -230,8 +229,8 @@ pub fn load_rf_run(run_dir: &Path, device: &Device) -> Result<LoadedRf> {
     if !run.join(TOKENIZER_FILE).is_file() {
         return Err(missing(&run, TOKENIZER_FILE, " (written when an RF run starts)"));
     }
-    let tokenizer = ScratchTokenizer::load(&run)
-        .map_err(|e| TrainError::Other(format!("run {}: {e}", run.display())))?;
+    let tokenizer =
+        ScratchTokenizer::load(&run).map_err(|e| TrainError::Other(format!("run {}: {e}", run.display())))?;
     let vae = read_vae_record(&run)?;
     let (ckpt, step) = newest_checkpoint(&run)?;
     let model = checkpoint::load_model(config.model_config(tokenizer.vocab_size()).init(device), &ckpt)?;
