@@ -188,7 +188,9 @@ impl VertexFilter {
     }
 }
 
-/// Windows of `len` frames every `stride` frames (SPEC §2.6), ids suffixed `_w<start>`.
+/// Windows of `len` frames every `stride` frames (SPEC §2.6). An id in the AAM form
+/// `<uid>_offset<k>_<s>-<e>` keeps that form with the window's own frame range (`<uid>_offset<k>_<s+start>-<s+start+len−1>`,
+/// so consecutive windows sharing a frame pair up for the long-horizon protocol, SPEC §2.7); other ids get `_w<start>`.
 ///
 /// A clip of exactly `len` frames gives itself unchanged (same id); a shorter clip gives none. Windows are
 /// **not** normalised here: callers normalise each window by its own first frame ([`normalize`]).
@@ -211,7 +213,7 @@ pub fn windows(clip: &Clip, len: usize, stride: usize) -> Vec<Clip> {
     (0..=clip.frames - len)
         .step_by(stride)
         .map(|start| Clip {
-            id: format!("{}_w{start}", clip.id),
+            id: window_id(&clip.id, start, len),
             vertices: clip.vertices[start * n..(start + len) * n].to_vec(),
             frames: len,
             n_vertices: n,
@@ -220,6 +222,16 @@ pub fn windows(clip: &Clip, len: usize, stride: usize) -> Vec<Clip> {
             source: clip.source.clone(),
         })
         .collect()
+}
+
+/// Id of the window of `len` frames starting at local frame `start` (see [`windows`]).
+fn window_id(id: &str, start: usize, len: usize) -> String {
+    let aam = id.rsplit_once('_').and_then(|(stem, range)| {
+        let (s, e) = range.split_once('-')?;
+        let (s, _e): (usize, usize) = (s.parse().ok()?, e.parse().ok()?);
+        stem.contains("_offset").then(|| format!("{stem}_{}-{}", s + start, s + start + len - 1))
+    });
+    aam.unwrap_or_else(|| format!("{id}_w{start}"))
 }
 
 /// Zero-pad normalised vertices to `n_max` rows per frame (SPEC §2.4) and build the vertex mask.
@@ -404,7 +416,8 @@ mod tests {
         let c = clip(frames, vec![[0, 1, 2]]);
         let w = windows(&c, 3, 1);
         assert_eq!(w.len(), 3);
-        assert_eq!(w[2].id, "obj_offset0_0-1_w2");
+        // AAM ids keep their form with the window's own frame range; other ids get `_w<start>`.
+        assert_eq!(w[2].id, "obj_offset0_2-4");
         assert_eq!(w[2].object_uid(), "obj");
         assert_eq!(w[2].frame(0)[0], [2.0, 0.0, 0.0]);
         assert_eq!(w[1].frames, 3);
@@ -413,8 +426,10 @@ mod tests {
                 .iter()
                 .map(|w| w.id.clone())
                 .collect::<Vec<_>>(),
-            ["obj_offset0_0-1_w0", "obj_offset0_0-1_w2"]
+            ["obj_offset0_0-2", "obj_offset0_2-4"]
         );
+        let plain = Clip { id: "plain".into(), ..c.clone() };
+        assert_eq!(windows(&plain, 3, 2)[1].id, "plain_w2");
         assert_eq!(windows(&c, 5, 1), vec![c.clone()]);
         assert!(windows(&c, 6, 1).is_empty());
     }

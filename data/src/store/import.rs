@@ -167,18 +167,39 @@ pub fn write_synth(cfg: &SynthConfig, out: &Path) -> Result<ImportReport> {
 /// [`write_synth`] with P FPS tokens and a progress callback. Each procedural clip is one window; its source is
 /// `synth:<seed>:<index>`, so synth runs with other seeds add to the store and the same seed replaces.
 pub fn write_synth_with(cfg: &SynthConfig, out: &Path, p: usize, progress: Progress) -> Result<ImportReport> {
+    write_synth_windows(cfg, out, p, cfg.frames, 1, progress)
+}
+
+/// [`write_synth_with`] cutting each procedural clip into windows of `window` frames every `stride` frames
+/// (SPEC §2.6). With `cfg.frames = 31`, `window = 16`, `stride = 15` the two windows of a clip share frame 15 and
+/// form a long-horizon pair (SPEC §2.7, P-Table 2).
+pub fn write_synth_windows(
+    cfg: &SynthConfig,
+    out: &Path,
+    p: usize,
+    window: usize,
+    stride: usize,
+    progress: Progress,
+) -> Result<ImportReport> {
     if p == 0 {
         return Err(DataError::new(out, "p", "needs at least 1 FPS token"));
     }
+    if window < 2 || window > cfg.frames || stride == 0 {
+        return Err(DataError::new(
+            out,
+            "window",
+            format!("window {window} / stride {stride} do not fit clips of {} frames", cfg.frames),
+        ));
+    }
     cfg.validate()?;
-    let existing = prepare_out(out, cfg.frames, p)?;
+    let existing = prepare_out(out, window, p)?;
     let jobs: Vec<Job> =
         (0..cfg.clips).map(|index| Job::Synth { source: format!("synth:{}:{index}", cfg.seed), index }).collect();
-    run_jobs(out, existing, &jobs, cfg.frames, p, progress, |job| match job {
+    run_jobs(out, existing, &jobs, window, p, progress, |job| match job {
         Job::Synth { source, index } => match synth::generate_one(cfg, *index) {
             Ok(mut clip) => {
                 clip.source = source.clone();
-                Outcome::Clips(preprocess_windows(&clip, cfg.frames, 1, p))
+                Outcome::Clips(preprocess_windows(&clip, window, stride, p))
             }
             Err(e) => Outcome::Rejected(reason(&e, source)),
         },

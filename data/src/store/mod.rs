@@ -52,7 +52,7 @@ use crate::preprocess::Normalization;
 
 pub use format::{Catalog, Entry, StoreWriter, encode, read_catalog};
 pub use import::{
-    ImportOptions, ImportReport, Progress, Rejected, Weld, import, import_with_progress, write_synth, write_synth_with,
+    ImportOptions, ImportReport, Progress, Rejected, Weld, import, import_with_progress, write_synth, write_synth_windows, write_synth_with,
 };
 pub use index::{IndexRow, Status, read_index, write_index};
 

@@ -99,6 +99,13 @@ pub struct SynthArgs {
     /// FPS tokens P per clip.
     #[arg(long, default_value_t = DEFAULT_P)]
     pub p: usize,
+    /// Store windows of this many frames [default: --frames]; `--frames 31 --window 16 --stride 15` makes the
+    /// long-horizon pairs of `eval run --protocol table2`.
+    #[arg(long)]
+    pub window: Option<usize>,
+    /// Frames between window starts.
+    #[arg(long, default_value_t = 1)]
+    pub stride: usize,
 }
 
 /// Output format of `inspect`.
@@ -223,7 +230,7 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     };
-    let report = store::write_synth_with(&cfg, &a.out, a.p, Some(&tick))?;
+    let report = store::write_synth_windows(&cfg, &a.out, a.p, a.window.unwrap_or(a.frames), a.stride, Some(&tick))?;
     bar.finish_and_clear();
     emit(&report.to_string())?;
     if report.rejected.is_empty() { Ok(ExitCode::SUCCESS) } else { Ok(ExitCode::from(EXIT_REJECTED)) }
