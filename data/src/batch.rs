@@ -110,7 +110,9 @@ impl ClipBatcher {
     /// - items: B clips of T frames, N_v_b vertices, P FPS indices
     /// - returns vertices `[B, T, N, 3]`, vmask `[B, N]`, fps `[B, P]`
     pub fn try_batch(&self, items: &[ClipItem], device: &Device) -> Result<ClipBatch> {
-        let first = items.first().ok_or_else(|| DataError::new("batch", "items", "a batch needs at least one clip"))?;
+        let first = items
+            .first()
+            .ok_or_else(|| DataError::new("batch", "items", "a batch needs at least one clip"))?;
         let (t, p) = (first.clip.frames, first.fps.len());
         let n_max = match self.pad {
             PadTo::BatchMax => items.iter().map(|c| c.clip.n_vertices).max().unwrap_or(0),
@@ -127,7 +129,11 @@ impl ClipBatcher {
                 return Err(DataError::new(
                     &c.id,
                     "batch",
-                    format!("T = {}, P = {} differ from the batch's T = {t}, P = {p}", c.frames, item.fps.len()),
+                    format!(
+                        "T = {}, P = {} differ from the batch's T = {t}, P = {p}",
+                        c.frames,
+                        item.fps.len()
+                    ),
                 ));
             }
             let (v, m) = pad_vertices(&c.vertices, c.n_vertices, t, n_max).map_err(|e| e.at(&c.id))?; // SPEC §2.4

@@ -71,7 +71,10 @@ impl Clip {
             return err("vertices", format!("needs at least 2 frames, found {}", self.frames));
         }
         if self.n_vertices < 3 {
-            return err("vertices", format!("needs at least 3 vertices, found {}", self.n_vertices));
+            return err(
+                "vertices",
+                format!("needs at least 3 vertices, found {}", self.n_vertices),
+            );
         }
         if self.vertices.len() != self.frames * self.n_vertices {
             return err(
@@ -95,8 +98,11 @@ impl Clip {
                 ),
             );
         }
-        if let Some((i, face)) =
-            self.faces.iter().enumerate().find(|(_, f)| f.iter().any(|&v| v as usize >= self.n_vertices))
+        if let Some((i, face)) = self
+            .faces
+            .iter()
+            .enumerate()
+            .find(|(_, f)| f.iter().any(|&v| v as usize >= self.n_vertices))
         {
             return err(
                 "faces",
@@ -117,7 +123,9 @@ mod tests {
     use super::*;
 
     fn tri(frames: usize) -> Vec<[f32; 3]> {
-        (0..frames).flat_map(|f| [[0.0, 0.0, f as f32], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]).collect()
+        (0..frames)
+            .flat_map(|f| [[0.0, 0.0, f as f32], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+            .collect()
     }
 
     #[test]

@@ -56,10 +56,7 @@ pub fn farthest_point_sampling(points: &[[f32; 3]], p: usize) -> Vec<u32> {
 /// # Shapes
 /// - `clips`: B sets of `[N_b]` rows of xyz; returns B vectors of `[P]` indices
 pub fn fps_many(clips: &[&[[f32; 3]]], p: usize) -> Vec<Vec<u32>> {
-    clips
-        .par_iter()
-        .map(|pts| farthest_point_sampling(pts, p))
-        .collect()
+    clips.par_iter().map(|pts| farthest_point_sampling(pts, p)).collect()
 }
 
 #[cfg(test)]
@@ -82,10 +79,7 @@ mod tests {
     fn hand_case_on_a_line() {
         // Points on the x axis: 0, 1, 10, 4, 6. Start 0 → farthest 10 (idx 2) → then 4 or 6? d(4)=min(16,36)=16,
         // d(6)=min(36,16)=16: tie → lowest index 3. Then d: 1→1, 6→4 → idx 4.
-        let pts: Vec<[f32; 3]> = [0.0, 1.0, 10.0, 4.0, 6.0]
-            .iter()
-            .map(|&x| [x, 0.0, 0.0])
-            .collect();
+        let pts: Vec<[f32; 3]> = [0.0, 1.0, 10.0, 4.0, 6.0].iter().map(|&x| [x, 0.0, 0.0]).collect();
         assert_eq!(farthest_point_sampling(&pts, 4), vec![0, 2, 3, 4]);
         assert_eq!(farthest_point_sampling(&pts, 5), vec![0, 2, 3, 4, 1]);
     }
@@ -160,10 +154,7 @@ mod tests {
         let many = fps_many(&[&a, &b], 64);
         assert_eq!(
             many,
-            vec![
-                farthest_point_sampling(&a, 64),
-                farthest_point_sampling(&b, 64)
-            ]
+            vec![farthest_point_sampling(&a, 64), farthest_point_sampling(&b, 64)]
         );
     }
 }

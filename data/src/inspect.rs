@@ -124,7 +124,11 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
     let mut vertex_histogram: Vec<Bin> = (0..HIST_BINS)
         .map(|b| Bin {
             lo: HIST_MIN + b * width,
-            hi: if b + 1 == HIST_BINS { HIST_MAX } else { HIST_MIN + (b + 1) * width },
+            hi: if b + 1 == HIST_BINS {
+                HIST_MAX
+            } else {
+                HIST_MIN + (b + 1) * width
+            },
             count: 0,
         })
         .collect();
@@ -152,7 +156,12 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
         match r.status {
             Status::Rejected => {
                 s.rejected += 1;
-                let field = r.reason.split_once(':').map_or(r.reason.as_str(), |(f, _)| f).trim().to_owned();
+                let field = r
+                    .reason
+                    .split_once(':')
+                    .map_or(r.reason.as_str(), |(f, _)| f)
+                    .trim()
+                    .to_owned();
                 *s.reject_reasons.entry(field).or_default() += 1;
                 s.rejected_files.push((r.source.clone(), r.reason.clone()));
             }
@@ -236,8 +245,16 @@ impl Summary {
         let mut o = String::new();
         // Writing into a String cannot fail.
         let _ = writeln!(o, "store              {}", self.dir);
-        let _ = writeln!(o, "index rows         {} ({} ok, {} rejected)", self.clips, self.ok, self.rejected);
-        let _ = writeln!(o, "split              {} train, {} val ({} objects)", self.train, self.val, self.objects);
+        let _ = writeln!(
+            o,
+            "index rows         {} ({} ok, {} rejected)",
+            self.clips, self.ok, self.rejected
+        );
+        let _ = writeln!(
+            o,
+            "split              {} train, {} val ({} objects)",
+            self.train, self.val, self.objects
+        );
         let _ = writeln!(o, "empty captions     {}", self.empty_captions);
         map_line(&mut o, "frames", &self.frames);
         map_line(&mut o, "formats", &self.formats);
@@ -298,9 +315,27 @@ mod tests {
     #[test]
     fn counts_histogram_and_families() {
         let rows = vec![
-            row("synth-sphere-wave-1-0_offset0_0-15", 512, Some(Split::Train), Status::Ok, ""),
-            row("synth-sphere-wave-1-1_offset0_0-15", 959, Some(Split::Train), Status::Ok, ""),
-            row("synth-torus-twist-1-2_offset0_0-15", 4096, Some(Split::Val), Status::Ok, ""),
+            row(
+                "synth-sphere-wave-1-0_offset0_0-15",
+                512,
+                Some(Split::Train),
+                Status::Ok,
+                "",
+            ),
+            row(
+                "synth-sphere-wave-1-1_offset0_0-15",
+                959,
+                Some(Split::Train),
+                Status::Ok,
+                "",
+            ),
+            row(
+                "synth-torus-twist-1-2_offset0_0-15",
+                4096,
+                Some(Split::Val),
+                Status::Ok,
+                "",
+            ),
             row("big", 5000, Some(Split::Train), Status::Ok, ""),
             row("bad", 0, None, Status::Rejected, "vertices: has 100 vertices"),
         ];
@@ -308,7 +343,14 @@ mod tests {
         assert_eq!((s.clips, s.ok, s.rejected, s.train, s.val), (5, 4, 1, 3, 1));
         assert_eq!(s.empty_captions, 1);
         assert_eq!(s.vertex_histogram.len(), 8);
-        assert_eq!(s.vertex_histogram[0], Bin { lo: 512, hi: 960, count: 2 });
+        assert_eq!(
+            s.vertex_histogram[0],
+            Bin {
+                lo: 512,
+                hi: 960,
+                count: 2
+            }
+        );
         assert_eq!(s.vertex_histogram[7].count, 1);
         assert_eq!(s.vertices_above, 1);
         assert_eq!(s.synthetic_families.get("sphere-wave"), Some(&2));
@@ -318,7 +360,11 @@ mod tests {
         for key in ["clips", "ok", "rejected", "train", "val"] {
             assert!(json[key].is_u64(), "missing {key} in {json}");
         }
-        assert!(s.to_table().contains("rejected /data/bad.bin: vertices"), "{}", s.to_table());
+        assert!(
+            s.to_table().contains("rejected /data/bad.bin: vertices"),
+            "{}",
+            s.to_table()
+        );
     }
 
     #[test]

@@ -52,7 +52,10 @@ impl KeyframeStrategy {
                     return err(format!("first and last frames need T ≥ 2, got T = {t}"));
                 }
                 if *kx > t - 2 {
-                    return err(format!("{kx} extra keyframes do not fit in the {} inner frames of T = {t}", t - 2));
+                    return err(format!(
+                        "{kx} extra keyframes do not fit in the {} inner frames of T = {t}",
+                        t - 2
+                    ));
                 }
                 Ok(())
             }
@@ -130,7 +133,10 @@ pub fn sample_keyframes(strategy: &KeyframeStrategy, t: usize, rng: &mut impl Rn
 /// As [`sample_keyframes`].
 pub fn keyframe_mask_batch(strategy: &KeyframeStrategy, b: usize, t: usize, seed: u64) -> Vec<f32> {
     let mut r: DataRng = rng(seed, KEYFRAME_STREAM);
-    (0..b).flat_map(|_| sample_keyframes(strategy, t, &mut r)).map(|m| if m { 1.0 } else { 0.0 }).collect()
+    (0..b)
+        .flat_map(|_| sample_keyframes(strategy, t, &mut r))
+        .map(|m| if m { 1.0 } else { 0.0 })
+        .collect()
 }
 
 #[cfg(test)]
@@ -165,7 +171,10 @@ mod tests {
         let mut r = rng(3, 1);
         let mut seen = [0usize; 16];
         for _ in 0..2000 {
-            for (f, m) in sample_keyframes(&KeyframeStrategy::Random { k_max: 5 }, 16, &mut r).iter().enumerate() {
+            for (f, m) in sample_keyframes(&KeyframeStrategy::Random { k_max: 5 }, 16, &mut r)
+                .iter()
+                .enumerate()
+            {
                 seen[f] += usize::from(*m);
             }
         }
@@ -182,7 +191,10 @@ mod tests {
                 assert!(m[0] && m[15], "ends missing for seed {seed}, kx {kx}");
                 assert_eq!(count(&m), kx + 2);
                 if let Some(p) = &prev {
-                    assert!(p.iter().zip(&m).all(|(a, b)| !a || *b), "not nested at seed {seed}, kx {kx}");
+                    assert!(
+                        p.iter().zip(&m).all(|(a, b)| !a || *b),
+                        "not nested at seed {seed}, kx {kx}"
+                    );
                 }
                 prev = Some(m);
             }

@@ -3,18 +3,18 @@
 //! Formats: DyMesh `.bin` (restricted unpickler, never executes), OBJ sequences, glTF/GLB.
 //! Preprocessing: welding, frame-0 normalisation (D1)–(D3), vertex filter, windows, FPS, padding.
 
+pub mod batch;
 pub mod clip;
 pub mod error;
 pub mod formats;
-pub mod preprocess;
 pub mod fps;
-pub mod synth;
-pub mod store;
 pub mod inspect;
-pub mod render;
-pub mod batch;
 pub mod keyframes;
+pub mod preprocess;
+pub mod render;
 pub mod rng;
+pub mod store;
+pub mod synth;
 
 pub use clip::Clip;
 pub use error::{DataError, Result};

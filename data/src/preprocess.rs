@@ -163,10 +163,7 @@ pub struct VertexFilter {
 impl Default for VertexFilter {
     /// 512 ≤ N_v ≤ 4096.
     fn default() -> Self {
-        Self {
-            min: 512,
-            max: 4096,
-        }
+        Self { min: 512, max: 4096 }
     }
 }
 
@@ -198,10 +195,7 @@ impl VertexFilter {
 /// # Panics
 /// If `len < 2` (a clip needs two frames) or `stride == 0`; both are programming errors, not data errors.
 pub fn windows(clip: &Clip, len: usize, stride: usize) -> Vec<Clip> {
-    assert!(
-        len >= 2,
-        "windows: len must be at least 2 frames, got {len}"
-    );
+    assert!(len >= 2, "windows: len must be at least 2 frames, got {len}");
     assert!(stride >= 1, "windows: stride must be at least 1");
     if clip.frames < len {
         return Vec::new();
@@ -229,7 +223,8 @@ fn window_id(id: &str, start: usize, len: usize) -> String {
     let aam = id.rsplit_once('_').and_then(|(stem, range)| {
         let (s, e) = range.split_once('-')?;
         let (s, _e): (usize, usize) = (s.parse().ok()?, e.parse().ok()?);
-        stem.contains("_offset").then(|| format!("{stem}_{}-{}", s + start, s + start + len - 1))
+        stem.contains("_offset")
+            .then(|| format!("{stem}_{}-{}", s + start, s + start + len - 1))
     });
     aam.unwrap_or_else(|| format!("{id}_w{start}"))
 }
@@ -242,17 +237,10 @@ fn window_id(id: &str, start: usize, len: usize) -> String {
 /// # Shapes
 /// - `frames`: `[T · N_v]` rows of xyz
 /// - returns `([T · N · 3] f32, [N] bool)` with N = `n_max`; the mask is true for the first `n_real` rows
-pub fn pad_vertices(
-    frames: &[[f32; 3]],
-    n_real: usize,
-    t: usize,
-    n_max: usize,
-) -> Result<(Vec<f32>, Vec<bool>)> {
+pub fn pad_vertices(frames: &[[f32; 3]], n_real: usize, t: usize, n_max: usize) -> Result<(Vec<f32>, Vec<bool>)> {
     let err = |reason: String| Err(DataError::new("pad_vertices", "vertices", reason));
     if n_real > n_max {
-        return err(format!(
-            "{n_real} real vertices exceed the padded size {n_max}"
-        ));
+        return err(format!("{n_real} real vertices exceed the padded size {n_max}"));
     }
     if frames.len() != t * n_real {
         return err(format!(
@@ -306,16 +294,7 @@ mod tests {
 
     fn clip(frames: Vec<Vec<[f32; 3]>>, faces: Vec<[u32; 3]>) -> Clip {
         let (t, n) = (frames.len(), frames[0].len());
-        Clip::new(
-            "obj_offset0_0-1",
-            frames.concat(),
-            t,
-            n,
-            faces,
-            "cap",
-            "x.bin",
-        )
-        .unwrap()
+        Clip::new("obj_offset0_0-1", frames.concat(), t, n, faces, "cap", "x.bin").unwrap()
     }
 
     #[test]
@@ -328,11 +307,7 @@ mod tests {
         assert_eq!(norm.center, [3.0, 1.0, 0.0]);
         assert!((norm.scale - 2.0).abs() < 1e-6);
         assert_eq!(nc.frame(0)[0], [-1.0, -0.5, -0.5]);
-        let max = nc
-            .frame(0)
-            .iter()
-            .flatten()
-            .fold(0.0f32, |m, x| m.max(x.abs()));
+        let max = nc.frame(0).iter().flatten().fold(0.0f32, |m, x| m.max(x.abs()));
         assert!((max - 1.0).abs() < 1e-6, "{max}");
         assert_eq!(
             nc.frame(1)[0],
@@ -401,13 +376,7 @@ mod tests {
         assert_eq!(e.field, "vertices");
         assert!(e.reason.contains("7 vertices"), "{e}");
         assert!(f.check(&tri(3)).is_err());
-        assert_eq!(
-            VertexFilter::default(),
-            VertexFilter {
-                min: 512,
-                max: 4096
-            }
-        );
+        assert_eq!(VertexFilter::default(), VertexFilter { min: 512, max: 4096 });
     }
 
     #[test]
@@ -422,13 +391,13 @@ mod tests {
         assert_eq!(w[2].frame(0)[0], [2.0, 0.0, 0.0]);
         assert_eq!(w[1].frames, 3);
         assert_eq!(
-            windows(&c, 3, 2)
-                .iter()
-                .map(|w| w.id.clone())
-                .collect::<Vec<_>>(),
+            windows(&c, 3, 2).iter().map(|w| w.id.clone()).collect::<Vec<_>>(),
             ["obj_offset0_0-2", "obj_offset0_2-4"]
         );
-        let plain = Clip { id: "plain".into(), ..c.clone() };
+        let plain = Clip {
+            id: "plain".into(),
+            ..c.clone()
+        };
         assert_eq!(windows(&plain, 3, 2)[1].id, "plain_w2");
         assert_eq!(windows(&c, 5, 1), vec![c.clone()]);
         assert!(windows(&c, 6, 1).is_empty());
@@ -436,12 +405,7 @@ mod tests {
 
     #[test]
     fn padding_zeroes_and_masks() {
-        let frames = vec![
-            [1.0, 2.0, 3.0],
-            [4.0, 5.0, 6.0],
-            [7.0, 8.0, 9.0],
-            [10.0, 11.0, 12.0],
-        ];
+        let frames = vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0], [10.0, 11.0, 12.0]];
         let (x, m) = pad_vertices(&frames, 2, 2, 3).unwrap();
         assert_eq!(
             x,
@@ -459,9 +423,6 @@ mod tests {
     fn edges_are_undirected_sorted_unique() {
         let e = edges_from_faces(&[[0, 1, 2], [2, 1, 3], [3, 3, 1]], 4).unwrap();
         assert_eq!(e, vec![[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]]);
-        assert_eq!(
-            edges_from_faces(&[[0, 1, 4]], 4).unwrap_err().field,
-            "faces"
-        );
+        assert_eq!(edges_from_faces(&[[0, 1, 4]], 4).unwrap_err().field, "faces");
     }
 }

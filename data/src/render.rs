@@ -149,12 +149,7 @@ impl View {
 ///
 /// # Shapes
 /// - `vertices`: `[N]` rows of xyz; `faces`: `[M]` triangles
-pub fn rasterize_frame(
-    vertices: &[V3],
-    faces: &[[u32; 3]],
-    view: &View,
-    size: u32,
-) -> Result<RgbImage> {
+pub fn rasterize_frame(vertices: &[V3], faces: &[[u32; 3]], view: &View, size: u32) -> Result<RgbImage> {
     let opts = RenderOptions {
         background: [255, 255, 255],
         ..RenderOptions::default()
@@ -226,11 +221,7 @@ pub fn contact_sheet(clip: &Clip, opts: &RenderOptions) -> Result<RgbImage> {
 }
 
 /// Render [`contact_sheet`] and write it as PNG to `path`; errors name the path.
-pub fn render_contact_sheet(
-    clip: &Clip,
-    path: impl AsRef<Path>,
-    opts: &RenderOptions,
-) -> Result<()> {
+pub fn render_contact_sheet(clip: &Clip, path: impl AsRef<Path>, opts: &RenderOptions) -> Result<()> {
     let path = path.as_ref();
     let img = contact_sheet(clip, opts)?;
     img.save_with_format(path, ImageFormat::Png)
@@ -255,10 +246,7 @@ fn draw_frame(
         return Err(DataError::new(
             "render",
             "faces",
-            format!(
-                "face {i} = {f:?} indexes past the {} vertices",
-                vertices.len()
-            ),
+            format!("face {i} = {f:?} indexes past the {} vertices", vertices.len()),
         ));
     }
     let light = unit([
@@ -275,11 +263,7 @@ fn draw_frame(
     let screen: Vec<V3> = vertices.iter().map(|&p| project(p)).collect();
     let mut depth = vec![f32::NEG_INFINITY; (size * size) as usize];
     for f in faces {
-        let (a, b, c) = (
-            screen[f[0] as usize],
-            screen[f[1] as usize],
-            screen[f[2] as usize],
-        );
+        let (a, b, c) = (screen[f[0] as usize], screen[f[1] as usize], screen[f[2] as usize]);
         if !a.iter().chain(&b).chain(&c).all(|v| v.is_finite()) {
             continue;
         }
@@ -308,9 +292,7 @@ fn draw_frame(
         for y in y0 as i64..=y1 {
             for x in x0 as i64..=x1 {
                 let (qx, qy) = (x as f32 + 0.5, y as f32 + 0.5);
-                let edge = |p: V3, q: V3| {
-                    ((q[0] - p[0]) * (qy - p[1]) - (q[1] - p[1]) * (qx - p[0])) / area
-                };
+                let edge = |p: V3, q: V3| ((q[0] - p[0]) * (qy - p[1]) - (q[1] - p[1]) * (qx - p[0])) / area;
                 let (l0, l1, l2) = (edge(b, c), edge(c, a), edge(a, b));
                 if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
                     continue;
@@ -349,10 +331,7 @@ fn draw_number(img: &mut RgbImage, x: u32, y: u32, value: usize, scale: u32) {
                 if bits >> (2 - col) & 1 == 1 {
                     for dy in 0..scale {
                         for dx in 0..scale {
-                            let (px, py) = (
-                                x + (i as u32 * 4 + col) * scale + dx,
-                                y + row as u32 * scale + dy,
-                            );
+                            let (px, py) = (x + (i as u32 * 4 + col) * scale + dx, y + row as u32 * scale + dy);
                             if px < img.width() && py < img.height() {
                                 img.put_pixel(px, py, Rgb([40, 40, 40]));
                             }
@@ -416,33 +395,17 @@ mod tests {
         );
         let bg = Rgb(opts.background);
         let painted = |x0: u32| (x0 + 1..x0 + 63).flat_map(|x| (1..63).map(move |y| (x, y)));
-        let count = |x0: u32| {
-            painted(x0)
-                .filter(|&(x, y)| img.get_pixel(x, y) != &bg)
-                .count()
-        };
-        assert!(
-            count(0) > 100 && count(64) > 100,
-            "{} {}",
-            count(0),
-            count(64)
-        );
+        let count = |x0: u32| painted(x0).filter(|&(x, y)| img.get_pixel(x, y) != &bg).count();
+        assert!(count(0) > 100 && count(64) > 100, "{} {}", count(0), count(64));
         // Framing covers both frames: the square sits left in tile 0 and right in tile 1.
         let mean_x = |x0: u32| {
             let px: Vec<u32> = painted(x0)
-                .filter(|&(x, y)| {
-                    y > 15 && img.get_pixel(x, y) != &bg && img.get_pixel(x, y).0[0] > 100
-                })
+                .filter(|&(x, y)| y > 15 && img.get_pixel(x, y) != &bg && img.get_pixel(x, y).0[0] > 100)
                 .map(|(x, _)| x - x0)
                 .collect();
             px.iter().sum::<u32>() as f32 / px.len() as f32
         };
-        assert!(
-            mean_x(0) + 10.0 < mean_x(64),
-            "{} vs {}",
-            mean_x(0),
-            mean_x(64)
-        );
+        assert!(mean_x(0) + 10.0 < mean_x(64), "{} vs {}", mean_x(0), mean_x(64));
     }
 
     #[test]

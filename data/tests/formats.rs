@@ -10,9 +10,7 @@ use any4d_data::formats::obj::{read_obj_seq, write_obj_seq};
 use any4d_data::formats::{read_clip, write_clip};
 
 fn fixture(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(rel)
 }
 
 /// A small moving clip with coordinates that are not round numbers.
@@ -76,11 +74,7 @@ fn good_bin_fixtures_match_numpy_exactly() {
             .iter()
             .map(|x| x.as_u64().unwrap() as u32)
             .collect();
-        assert_eq!(
-            (clip.frames, clip.n_vertices),
-            (shape[0], shape[1]),
-            "{name}"
-        );
+        assert_eq!((clip.frames, clip.n_vertices), (shape[0], shape[1]), "{name}");
         assert_eq!(
             clip.vertices.iter().flatten().copied().collect::<Vec<_>>(),
             flat,
@@ -101,20 +95,10 @@ fn good_bin_fixtures_match_numpy_exactly() {
     let c = read_bin(&fixture("bin/p2_f64.bin")).unwrap();
     assert_eq!(
         c.vertices[1],
-        [
-            0.1f64 as f32,
-            (0.1f64 + 0.01) as f32,
-            (0.1f64 + 0.02) as f32
-        ]
+        [0.1f64 as f32, (0.1f64 + 0.01) as f32, (0.1f64 + 0.02) as f32]
     );
-    assert_eq!(
-        read_bin(&fixture("bin/no_caption.bin")).unwrap().caption,
-        " "
-    );
-    assert_eq!(
-        read_bin(&fixture("bin/empty_caption.bin")).unwrap().caption,
-        ""
-    );
+    assert_eq!(read_bin(&fixture("bin/no_caption.bin")).unwrap().caption, " ");
+    assert_eq!(read_bin(&fixture("bin/empty_caption.bin")).unwrap().caption, "");
     assert_eq!(
         read_bin(&fixture("bin/bytes_caption.bin")).unwrap().caption,
         "café spins"
@@ -138,16 +122,8 @@ fn bad_bin_fixtures_name_path_and_field() {
         ("not_a_dict", "pickle", "list"),
         ("truncated", "pickle", "truncated"),
         ("not_pickle", "pickle", "stack underflow"),
-        (
-            "hostile_os_system",
-            "pickle",
-            "`posix.system` is not allowed",
-        ),
-        (
-            "hostile_builtins_eval",
-            "pickle",
-            "`builtins.eval` is not allowed",
-        ),
+        ("hostile_os_system", "pickle", "`posix.system` is not allowed"),
+        ("hostile_builtins_eval", "pickle", "`builtins.eval` is not allowed"),
     ];
     for (name, field, reason) in cases {
         let path = fixture(&format!("bin/bad_{name}.bin"));
@@ -160,10 +136,7 @@ fn bad_bin_fixtures_name_path_and_field() {
 
 #[test]
 fn hostile_pickles_never_run() {
-    let marks = [
-        "/tmp/any4d_fixture_pwned_os_system",
-        "/tmp/any4d_fixture_pwned_eval",
-    ];
+    let marks = ["/tmp/any4d_fixture_pwned_os_system", "/tmp/any4d_fixture_pwned_eval"];
     for m in marks {
         assert!(
             !Path::new(m).exists(),
@@ -175,10 +148,7 @@ fn hostile_pickles_never_run() {
         assert!(read_clip(&fixture(&format!("bin/bad_{name}.bin"))).is_err());
     }
     for m in marks {
-        assert!(
-            !Path::new(m).exists(),
-            "{m} appeared: a hostile pickle was executed"
-        );
+        assert!(!Path::new(m).exists(), "{m} appeared: a hostile pickle was executed");
     }
 }
 
@@ -209,29 +179,15 @@ fn python_reads_written_bin() {
     let path = dir.path().join("sample.bin");
     write_bin(&path, &sample_clip()).unwrap();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/check_bin.py");
-    let out = Command::new("python3")
-        .arg(&script)
-        .arg(&path)
-        .output()
-        .unwrap();
+    let out = Command::new("python3").arg(&script).arg(&path).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(
-        stdout.contains("vertices ndarray float32 (4, 5, 3) C"),
-        "{stdout}"
-    );
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("vertices ndarray float32 (4, 5, 3) C"), "{stdout}");
     assert!(stdout.contains("faces ndarray int64 (3, 3) C"), "{stdout}");
     assert!(stdout.contains("caption str 'a thing wiggles'"), "{stdout}");
     let v0 = sample_clip().vertices[0].map(|x| x as f64);
     assert!(
-        stdout.contains(&format!(
-            "vertices[0,0] [{:?}, {:?}, {:?}]",
-            v0[0], v0[1], v0[2]
-        )),
+        stdout.contains(&format!("vertices[0,0] [{:?}, {:?}, {:?}]", v0[0], v0[1], v0[2])),
         "{stdout}"
     );
 }
@@ -239,10 +195,7 @@ fn python_reads_written_bin() {
 #[test]
 fn obj_sequence_reads_in_natural_order() {
     let clip = read_obj_seq(&fixture("obj/quad_seq")).unwrap();
-    assert_eq!(
-        (clip.frames, clip.n_vertices, clip.id.as_str()),
-        (3, 4, "quad_seq")
-    );
+    assert_eq!((clip.frames, clip.n_vertices, clip.id.as_str()), (3, 4, "quad_seq"));
     assert_eq!(clip.faces, vec![[0, 1, 2], [0, 2, 3]]);
     assert_eq!(clip.caption, "a quad rises");
     // frame_1, frame_2, frame_10 lift z by 0, 0.5, 1 (plus 0.25 x).
@@ -272,30 +225,17 @@ fn obj_round_trip_and_no_overwrite() {
     let back = read_obj_seq(&seq).unwrap();
     assert_eq!(
         (back.vertices, back.faces, back.caption),
-        (
-            clip.vertices.clone(),
-            clip.faces.clone(),
-            clip.caption.clone()
-        )
+        (clip.vertices.clone(), clip.faces.clone(), clip.caption.clone())
     );
     assert_eq!(write_obj_seq(&seq, &clip).unwrap_err().field, "frames");
 }
 
 #[test]
 fn gltf_morph_fixture_bakes_weights() {
-    let clip = read_gltf(
-        &fixture("gltf/morph_square.gltf"),
-        &GltfReadOptions::default(),
-    )
-    .unwrap();
+    let clip = read_gltf(&fixture("gltf/morph_square.gltf"), &GltfReadOptions::default()).unwrap();
     assert_eq!((clip.frames, clip.n_vertices), (31, 4));
     assert_eq!(clip.faces, vec![[0, 1, 2], [0, 2, 3]]);
-    let square = [
-        [0.0, 0.0, 0.0],
-        [1.0, 0.0, 0.0],
-        [1.0, 1.0, 0.0],
-        [0.0, 1.0, 0.0],
-    ];
+    let square = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
     let moved = |d: [f32; 3]| square.map(|p: [f32; 3]| [p[0] + d[0], p[1] + d[1], p[2] + d[2]]);
     assert_close(clip.frame(0), &square, 1e-6);
     assert_close(clip.frame(6), &moved([0.0, 0.0, 0.4]), 1e-6); // t = 0.2: w = (0.4, 0)
@@ -307,31 +247,20 @@ fn gltf_morph_fixture_bakes_weights() {
         max_frames: Some(5),
         mesh: Some(0),
     };
-    assert_eq!(
-        read_gltf(&fixture("gltf/morph_square.gltf"), &opts)
-            .unwrap()
-            .frames,
-        5
-    );
+    assert_eq!(read_gltf(&fixture("gltf/morph_square.gltf"), &opts).unwrap().frames, 5);
     let opts = GltfReadOptions {
         mesh: Some(3),
         ..GltfReadOptions::default()
     };
     assert_eq!(
-        read_gltf(&fixture("gltf/morph_square.gltf"), &opts)
-            .unwrap_err()
-            .field,
+        read_gltf(&fixture("gltf/morph_square.gltf"), &opts).unwrap_err().field,
         "meshes"
     );
 }
 
 #[test]
 fn gltf_skin_fixture_bakes_joints() {
-    let clip = read_gltf(
-        &fixture("gltf/skin_strip.gltf"),
-        &GltfReadOptions::default(),
-    )
-    .unwrap();
+    let clip = read_gltf(&fixture("gltf/skin_strip.gltf"), &GltfReadOptions::default()).unwrap();
     assert_eq!((clip.frames, clip.n_vertices, clip.faces.len()), (31, 6, 4));
     let rest = [
         [-0.5, 0.0, 0.0],
@@ -358,15 +287,8 @@ fn gltf_skin_fixture_bakes_joints() {
 
 #[test]
 fn gltf_without_animation_is_an_error() {
-    let e = read_gltf(
-        &fixture("gltf/static_square.gltf"),
-        &GltfReadOptions::default(),
-    )
-    .unwrap_err();
-    assert_eq!(
-        (e.field.as_str(), e.reason.as_str()),
-        ("animations", "no animation")
-    );
+    let e = read_gltf(&fixture("gltf/static_square.gltf"), &GltfReadOptions::default()).unwrap_err();
+    assert_eq!((e.field.as_str(), e.reason.as_str()), ("animations", "no animation"));
 }
 
 #[test]
@@ -382,12 +304,7 @@ fn gltf_and_glb_round_trip() {
         };
         let back = read_gltf(&path, &opts).unwrap();
         assert_eq!(
-            (
-                back.frames,
-                back.n_vertices,
-                &back.faces,
-                back.caption.as_str()
-            ),
+            (back.frames, back.n_vertices, &back.faces, back.caption.as_str()),
             (4, 5, &clip.faces, "a thing wiggles"),
             "{name}"
         );
@@ -403,17 +320,10 @@ fn read_and_write_clip_dispatch_by_path() {
         let path = dir.path().join(name);
         write_clip(&path, &clip).unwrap();
         let back = read_clip(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
-        assert_eq!(
-            (back.frames, &back.faces),
-            (clip.frames, &clip.faces),
-            "{name}"
-        );
+        assert_eq!((back.frames, &back.faces), (clip.frames, &clip.faces), "{name}");
         assert_close(&back.vertices, &clip.vertices, 1e-6);
     }
-    assert_eq!(
-        read_clip(&dir.path().join("c.fbx")).unwrap_err().field,
-        "format"
-    );
+    assert_eq!(read_clip(&dir.path().join("c.fbx")).unwrap_err().field, "format");
 }
 
 /// The Khronos sample files that Debian's `assimp-testmodels` installs; not copied into the repository.
@@ -429,8 +339,7 @@ fn system_gltf_samples_when_installed() {
         return;
     }
     for f in files {
-        let clip = read_gltf(&root.join(f), &GltfReadOptions::default())
-            .unwrap_or_else(|e| panic!("{f}: {e}"));
+        let clip = read_gltf(&root.join(f), &GltfReadOptions::default()).unwrap_or_else(|e| panic!("{f}: {e}"));
         let moved = (1..clip.frames).map(|k| {
             clip.frame(k)
                 .iter()

@@ -27,24 +27,49 @@ fn blob(id: &str, frames: usize, n: usize, seed: u32) -> Clip {
     };
     let base: Vec<[f32; 3]> = (0..n).map(|_| [next() * 3.0 + 10.0, next() * 2.0, next()]).collect();
     let vertices = (0..frames)
-        .flat_map(|f| base.iter().map(move |p| [p[0] + 0.1 * f as f32, p[1] * (1.0 + 0.05 * f as f32), p[2]]))
+        .flat_map(|f| {
+            base.iter()
+                .map(move |p| [p[0] + 0.1 * f as f32, p[1] * (1.0 + 0.05 * f as f32), p[2]])
+        })
         .collect();
     let faces = (0..n as u32 - 2).map(|i| [i, i + 1, i + 2]).collect();
     Clip::new(id, vertices, frames, n, faces, format!("caption of {id}"), "test").unwrap()
 }
 
 fn opts() -> ImportOptions {
-    ImportOptions { filter: VertexFilter { min: 16, max: 64 }, frames: 16, stride: 1, p: 8, ..ImportOptions::default() }
+    ImportOptions {
+        filter: VertexFilter { min: 16, max: 64 },
+        frames: 16,
+        stride: 1,
+        p: 8,
+        ..ImportOptions::default()
+    }
 }
 
 /// A source folder: three good clips, one 20-frame clip (5 windows), one too small, one garbage, one ignored file.
 fn sources(dir: &Path) -> PathBuf {
     let src = dir.join("src");
     std::fs::create_dir_all(src.join("nested")).unwrap();
-    formats::write_clip(&src.join("objA_offset0_0-15.bin"), &blob("objA_offset0_0-15", 16, 20, 1)).unwrap();
-    formats::write_clip(&src.join("objB_offset0_0-15.bin"), &blob("objB_offset0_0-15", 16, 32, 2)).unwrap();
-    formats::write_clip(&src.join("nested/objC_offset0_0-15.bin"), &blob("objC_offset0_0-15", 16, 64, 3)).unwrap();
-    formats::write_clip(&src.join("objL_offset0_0-19.bin"), &blob("objL_offset0_0-19", 20, 24, 4)).unwrap();
+    formats::write_clip(
+        &src.join("objA_offset0_0-15.bin"),
+        &blob("objA_offset0_0-15", 16, 20, 1),
+    )
+    .unwrap();
+    formats::write_clip(
+        &src.join("objB_offset0_0-15.bin"),
+        &blob("objB_offset0_0-15", 16, 32, 2),
+    )
+    .unwrap();
+    formats::write_clip(
+        &src.join("nested/objC_offset0_0-15.bin"),
+        &blob("objC_offset0_0-15", 16, 64, 3),
+    )
+    .unwrap();
+    formats::write_clip(
+        &src.join("objL_offset0_0-19.bin"),
+        &blob("objL_offset0_0-19", 20, 24, 4),
+    )
+    .unwrap();
     formats::write_clip(&src.join("objS_offset0_0-15.bin"), &blob("objS_offset0_0-15", 16, 8, 5)).unwrap();
     std::fs::write(src.join("garbage.bin"), b"this is not a pickle").unwrap();
     std::fs::write(src.join("notes.txt"), b"ignored").unwrap();
@@ -56,20 +81,29 @@ fn import_stores_normalised_windows_and_rejects_bad_files() {
     let tmp = tempfile::tempdir().unwrap();
     let src = sources(tmp.path());
     let out = tmp.path().join("store");
-    let report = store::import(&[src.clone()], &out, &opts()).unwrap();
+    let report = store::import(std::slice::from_ref(&src), &out, &opts()).unwrap();
     assert_eq!(report.sources, 6, "{report}");
     assert_eq!(report.added, 3 + 5, "{report}");
-    let names: Vec<&str> = report.rejected.iter().map(|r| r.source.rsplit('/').next().unwrap()).collect();
+    let names: Vec<&str> = report
+        .rejected
+        .iter()
+        .map(|r| r.source.rsplit('/').next().unwrap())
+        .collect();
     assert_eq!(names, ["garbage.bin", "objS_offset0_0-15.bin"], "{report}");
     assert!(report.rejected[1].reason.contains("vertices"), "{report}");
 
     let st = Store::open(&out).unwrap();
     assert_eq!((st.len(), st.frames(), st.p()), (8, 16, 8));
     let original = formats::read_clip(&src.join("objB_offset0_0-15.bin")).unwrap();
-    let i = (0..st.len()).find(|&i| st.get(i).unwrap().clip.id == original.id).unwrap();
+    let i = (0..st.len())
+        .find(|&i| st.get(i).unwrap().clip.id == original.id)
+        .unwrap();
     let got = st.get(i).unwrap();
     let (expect, norm) = normalize(&original);
-    assert_eq!(got.clip.vertices, expect.vertices, "stored vertices are normalised by frame 0");
+    assert_eq!(
+        got.clip.vertices, expect.vertices,
+        "stored vertices are normalised by frame 0"
+    );
     assert_eq!(got.normalization, norm);
     assert_eq!(got.fps, farthest_point_sampling(expect.frame(0), 8));
     assert_eq!(got.clip.faces, original.faces);
@@ -82,9 +116,16 @@ fn import_stores_normalised_windows_and_rejects_bad_files() {
     let rows = read_index(&out).unwrap();
     assert_eq!(rows.len(), 10);
     assert!(rows[..8].iter().all(|r| r.status == Status::Ok && r.split.is_some()));
-    assert!(rows[8..].iter().all(|r| r.status == Status::Rejected && !r.reason.is_empty() && r.split.is_none()));
+    assert!(
+        rows[8..]
+            .iter()
+            .all(|r| r.status == Status::Rejected && !r.reason.is_empty() && r.split.is_none())
+    );
     // The windows of the long clip share one object and therefore one split.
-    let long: Vec<_> = rows.iter().filter(|r| r.source.ends_with("objL_offset0_0-19.bin")).collect();
+    let long: Vec<_> = rows
+        .iter()
+        .filter(|r| r.source.ends_with("objL_offset0_0-19.bin"))
+        .collect();
     assert_eq!(long.len(), 5);
     assert!(long.iter().all(|r| r.object == "objL" && r.split == long[0].split));
 }
@@ -101,15 +142,31 @@ fn reimport_is_idempotent_and_unions_other_sources() {
 
     let again = store::import(&[src.join("objA_offset0_0-15.bin"), src.join("nested")], &out, &opts()).unwrap();
     assert_eq!((again.added, again.kept, again.total), (2, 0, 2));
-    assert_eq!(std::fs::read(out.join("clips.bin")).unwrap(), bytes, "same import twice must give the same file");
+    assert_eq!(
+        std::fs::read(out.join("clips.bin")).unwrap(),
+        bytes,
+        "same import twice must give the same file"
+    );
     assert_eq!(read_index(&out).unwrap(), rows);
 
-    let more =
-        store::import(&[src.join("objB_offset0_0-15.bin"), src.join("objS_offset0_0-15.bin")], &out, &opts()).unwrap();
+    let more = store::import(
+        &[src.join("objB_offset0_0-15.bin"), src.join("objS_offset0_0-15.bin")],
+        &out,
+        &opts(),
+    )
+    .unwrap();
     assert_eq!((more.added, more.kept, more.total), (1, 2, 3));
     let ids: Vec<String> = read_index(&out).unwrap().into_iter().map(|r| r.id).collect();
     // Sources are processed in canonical-path order (`nested/` sorts before `objA…`); kept clips come first.
-    assert_eq!(ids, ["objC_offset0_0-15", "objA_offset0_0-15", "objB_offset0_0-15", "objS_offset0_0-15.bin"]);
+    assert_eq!(
+        ids,
+        [
+            "objC_offset0_0-15",
+            "objA_offset0_0-15",
+            "objB_offset0_0-15",
+            "objS_offset0_0-15.bin"
+        ]
+    );
     // Re-importing a source replaces its clips instead of duplicating them.
     let b = store::import(&[src.join("objB_offset0_0-15.bin")], &out, &opts()).unwrap();
     assert_eq!((b.added, b.kept, b.total), (1, 2, 3));
@@ -129,7 +186,12 @@ fn import_refuses_foreign_folders_and_mismatched_stores() {
 
     let out = tmp.path().join("store");
     store::import(&[src.join("objA_offset0_0-15.bin")], &out, &opts()).unwrap();
-    let e = store::import(&[src.join("objB_offset0_0-15.bin")], &out, &ImportOptions { p: 4, ..opts() }).unwrap_err();
+    let e = store::import(
+        &[src.join("objB_offset0_0-15.bin")],
+        &out,
+        &ImportOptions { p: 4, ..opts() },
+    )
+    .unwrap_err();
     assert!(e.reason.contains("P = 8") && e.reason.contains("P = 4"), "{e}");
     // A missing source is a rejection, not an abort.
     let r = store::import(&[tmp.path().join("nope.bin")], &out, &opts()).unwrap();
@@ -156,13 +218,21 @@ fn split_groups_clips_by_object() {
     let st = Store::open(&out).unwrap();
     for obj in 0..40 {
         let uid = format!("object{obj}");
-        let sides: Vec<Split> = rows.iter().filter(|r| r.object == uid).map(|r| r.split.unwrap()).collect();
+        let sides: Vec<Split> = rows
+            .iter()
+            .filter(|r| r.object == uid)
+            .map(|r| r.split.unwrap())
+            .collect();
         assert_eq!(sides.len(), 3);
         assert!(sides.iter().all(|&s| s == sides[0]), "{uid} is on both sides");
         assert_eq!(sides[0], Split::of_object(&uid, store::SPLIT_SEED));
     }
     for (i, row) in rows.iter().enumerate() {
-        assert_eq!(st.split(i).unwrap(), row.split.unwrap(), "clips.bin and index disagree at {i}");
+        assert_eq!(
+            st.split(i).unwrap(),
+            row.split.unwrap(),
+            "clips.bin and index disagree at {i}"
+        );
     }
 }
 
@@ -171,7 +241,12 @@ fn corrupt_or_truncated_store_gives_errors_not_panics() {
     let tmp = tempfile::tempdir().unwrap();
     let src = sources(tmp.path());
     let out = tmp.path().join("store");
-    store::import(&[src.join("objA_offset0_0-15.bin"), src.join("objB_offset0_0-15.bin")], &out, &opts()).unwrap();
+    store::import(
+        &[src.join("objA_offset0_0-15.bin"), src.join("objB_offset0_0-15.bin")],
+        &out,
+        &opts(),
+    )
+    .unwrap();
     let path = out.join("clips.bin");
     let good = std::fs::read(&path).unwrap();
 
@@ -183,7 +258,10 @@ fn corrupt_or_truncated_store_gives_errors_not_panics() {
     bad[..8].copy_from_slice(b"NOTASTOR");
     std::fs::write(&path, &bad).unwrap();
     let e = Store::open(&out).unwrap_err();
-    assert!(e.field.contains("magic") && e.reason.contains("not an any4d store"), "{e}");
+    assert!(
+        e.field.contains("magic") && e.reason.contains("not an any4d store"),
+        "{e}"
+    );
 
     // The first record's frame count (after three length-prefixed strings) made huge.
     let mut bad = good.clone();
@@ -222,13 +300,19 @@ fn corrupt_or_truncated_store_gives_errors_not_panics() {
 fn synth_store_inspect_and_batches() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("synth");
-    let cfg = SynthConfig { clips: 6, seed: 3, ..SynthConfig::default() };
+    let cfg = SynthConfig {
+        clips: 6,
+        seed: 3,
+        ..SynthConfig::default()
+    };
     let report = store::write_synth_with(&cfg, &out, 16, None).unwrap();
     assert_eq!((report.total, report.rejected.len()), (6, 0), "{report}");
     let again = store::write_synth_with(&cfg, &out, 16, None).unwrap();
     assert_eq!(again.total, 6, "same seed replaces, never duplicates");
 
-    let Inspection::Store(s) = inspect(&out).unwrap() else { panic!("a store folder is a store") };
+    let Inspection::Store(s) = inspect(&out).unwrap() else {
+        panic!("a store folder is a store")
+    };
     assert_eq!(s, summarize(&out).unwrap());
     assert_eq!((s.clips, s.ok, s.rejected, s.train + s.val), (6, 6, 0, 6));
     assert_eq!(s.synthetic_families.values().sum::<usize>(), 6, "{s:?}");
@@ -257,10 +341,16 @@ fn synth_store_inspect_and_batches() {
     let n0 = items[0].clip.n_vertices;
     assert_eq!(v[..3], items[0].clip.vertices[0]);
     if n0 < n_max {
-        assert_eq!(v[n0 * 3..n_max * 3].iter().filter(|&&x| x != 0.0).count(), 0, "padding is zero");
+        assert_eq!(
+            v[n0 * 3..n_max * 3].iter().filter(|&&x| x != 0.0).count(),
+            0,
+            "padding is zero"
+        );
     }
     let fps: Vec<i64> = batch.fps.to_data().convert::<i64>().try_to_vec::<i64>().unwrap();
     assert_eq!(fps[..16].iter().map(|&i| i as u32).collect::<Vec<_>>(), items[0].fps);
-    let e = ClipBatcher::new(PadTo::Fixed(n_max - 1)).try_batch(&items, &device).unwrap_err();
+    let e = ClipBatcher::new(PadTo::Fixed(n_max - 1))
+        .try_batch(&items, &device)
+        .unwrap_err();
     assert!(e.reason.contains("exceed"), "{e}");
 }

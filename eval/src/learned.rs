@@ -147,16 +147,11 @@ impl MeshCodec {
             .map(i64::from)
             .collect();
         let edges = edges_from_faces(&clip.faces, n_real).map_err(|e| e.at(&clip.id))?;
-        let edges = EdgeList::new(&[edges], n, &self.device)
-            .map_err(|e| DataError::new(&clip.id, "faces", e.to_string()))?;
-        let (reference, vmask) =
-            pad_vertices(reference_rows, n_real, 1, n).map_err(|e| e.at(&clip.id))?;
-        let rows: Vec<[f32; 3]> = frames
-            .iter()
-            .flat_map(|&f| clip.frame(f).iter().copied())
-            .collect();
-        let (selected, _) =
-            pad_vertices(&rows, n_real, frames.len(), n).map_err(|e| e.at(&clip.id))?;
+        let edges =
+            EdgeList::new(&[edges], n, &self.device).map_err(|e| DataError::new(&clip.id, "faces", e.to_string()))?;
+        let (reference, vmask) = pad_vertices(reference_rows, n_real, 1, n).map_err(|e| e.at(&clip.id))?;
+        let rows: Vec<[f32; 3]> = frames.iter().flat_map(|&f| clip.frame(f).iter().copied()).collect();
+        let (selected, _) = pad_vertices(&rows, n_real, frames.len(), n).map_err(|e| e.at(&clip.id))?;
         let d = &self.device;
         Ok(VaeInput {
             reference: Tensor::from_data(TensorData::new(reference, [1, n, 3]), d),
@@ -197,20 +192,10 @@ impl MeshCodec {
         let input = self.input(clip, frames)?;
         let reference = input.reference.clone();
         let VaeEncoding { e0, z0, mu, .. } = match &self.vae {
-            MeshVae::Frame(vae) => vae.encode(
-                input.reference,
-                input.frames,
-                input.vmask,
-                input.fps,
-                &input.edges,
-            ),
-            MeshVae::Sequence { vae, .. } => vae.encode(
-                input.reference,
-                input.frames,
-                input.vmask,
-                input.fps,
-                &input.edges,
-            ),
+            MeshVae::Frame(vae) => vae.encode(input.reference, input.frames, input.vmask, input.fps, &input.edges),
+            MeshVae::Sequence { vae, .. } => {
+                vae.encode(input.reference, input.frames, input.vmask, input.fps, &input.edges)
+            }
         };
         Ok(WindowEncoding {
             e0,
@@ -237,19 +222,12 @@ impl MeshCodec {
             return Err(DataError::new(
                 &enc.id,
                 "latents",
-                format!(
-                    "shape {:?} does not match the encoding's [1, G, {p}, {c}]",
-                    z.dims()
-                ),
+                format!("shape {:?} does not match the encoding's [1, G, {p}, {c}]", z.dims()),
             ));
         }
         let x = match &self.vae {
-            MeshVae::Frame(vae) => {
-                vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z)
-            }
-            MeshVae::Sequence { vae, .. } => {
-                vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z)
-            }
+            MeshVae::Frame(vae) => vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z),
+            MeshVae::Sequence { vae, .. } => vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z),
         };
         real_rows(x, enc.n_real, &enc.id)
     }
@@ -281,24 +259,15 @@ impl MeshCodec {
 /// The first `n_real` rows of every frame of a decoded `[1, G, N, 3]` tensor, checked finite.
 fn real_rows(x: Tensor<4>, n_real: usize, id: &str) -> Result<Vec<[f32; 3]>> {
     let [_, g, n, _] = x.dims();
-    let flat = x.try_to_vec_as::<f32>().map_err(|e| {
-        DataError::new(
-            id,
-            "decoded vertices",
-            format!("cannot read the tensor: {e:?}"),
-        )
-    })?;
+    let flat = x
+        .try_to_vec_as::<f32>()
+        .map_err(|e| DataError::new(id, "decoded vertices", format!("cannot read the tensor: {e:?}")))?;
     if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
         let row = i / 3;
         return Err(DataError::new(
             id,
             "decoded vertices",
-            format!(
-                "non-finite value {} at frame {}, vertex {}",
-                flat[i],
-                row / n,
-                row % n
-            ),
+            format!("non-finite value {} at frame {}, vertex {}", flat[i], row / n, row % n),
         ));
     }
     Ok((0..g)
@@ -326,20 +295,13 @@ fn keyframe_list(clip: &Clip, keyframes: &[usize]) -> Result<Vec<usize>> {
 ///
 /// # Shapes
 /// `enc.mu`: `[1, K, P, C]` for `enc.frames`; returns `[1, T, P, C]` and `[T]`.
-fn scatter_keyframes(
-    enc: &WindowEncoding,
-    keys: &[usize],
-    device: &Device,
-) -> Result<(Tensor<4>, Vec<f32>)> {
+fn scatter_keyframes(enc: &WindowEncoding, keys: &[usize], device: &Device) -> Result<(Tensor<4>, Vec<f32>)> {
     let [_, k, p, c] = enc.mu.dims();
     let t = enc.window_frames;
-    let mu = enc.mu.try_to_vec_as::<f32>().map_err(|e| {
-        DataError::new(
-            &enc.id,
-            "keyframe latents",
-            format!("cannot read the tensor: {e:?}"),
-        )
-    })?;
+    let mu = enc
+        .mu
+        .try_to_vec_as::<f32>()
+        .map_err(|e| DataError::new(&enc.id, "keyframe latents", format!("cannot read the tensor: {e:?}")))?;
     let len = p * c;
     let mut out = vec![0.0f32; t * len];
     let mut mask = vec![0.0f32; t];
@@ -349,20 +311,11 @@ fn scatter_keyframes(
             .iter()
             .position(|&e| e == f)
             .filter(|&r| r < k)
-            .ok_or_else(|| {
-                DataError::new(
-                    &enc.id,
-                    "keyframes",
-                    format!("keyframe {f} was not encoded"),
-                )
-            })?;
+            .ok_or_else(|| DataError::new(&enc.id, "keyframes", format!("keyframe {f} was not encoded")))?;
         out[f * len..(f + 1) * len].copy_from_slice(&mu[row * len..(row + 1) * len]);
         mask[f] = 1.0;
     }
-    Ok((
-        Tensor::from_data(TensorData::new(out, [1, t, p, c]), device),
-        mask,
-    ))
+    Ok((Tensor::from_data(TensorData::new(out, [1, t, p, c]), device), mask))
 }
 
 /// Frames to encode for a keyframe set: frame 0 (the reference, always known) and the keyframes.
@@ -384,8 +337,7 @@ pub fn sampler_noise(seed: u64, dims: [usize; 4], device: &Device) -> Tensor<4> 
     let len = dims.iter().product();
     let values: Vec<f32> = (0..len)
         .map(|_| {
-            let (u1, u2): (f64, f64) =
-                (r.random::<f64>().max(f64::MIN_POSITIVE), r.random::<f64>());
+            let (u1, u2): (f64, f64) = (r.random::<f64>().max(f64::MIN_POSITIVE), r.random::<f64>());
             ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
         })
         .collect();
@@ -414,8 +366,7 @@ impl LearnedModels {
         text: Box<dyn TextEncoder + Send + Sync>,
     ) -> Result<Self> {
         codec.require_frame_wise("learned models")?;
-        let bad =
-            |field: &str, reason: String| Err(DataError::new("learned models", field, reason));
+        let bad = |field: &str, reason: String| Err(DataError::new("learned models", field, reason));
         if let Err(msg) = rf_config.validate() {
             return bad("rf config", msg);
         }
@@ -528,10 +479,7 @@ impl RfSampler {
             );
         }
         if !(0.0..=1.0).contains(&options.tau_star) {
-            return bad(
-                "tau_star",
-                format!("{} is outside [0, 1]", options.tau_star),
-            );
+            return bad("tau_star", format!("{} is outside [0, 1]", options.tau_star));
         }
         if !guidance.is_finite() {
             return bad("guidance", format!("{guidance} is not finite"));
@@ -580,13 +528,7 @@ impl RfSampler {
     ///
     /// # Shapes
     /// `clip.vertices`: `[T, N_v]` rows; `latents` `[1, T, P, C]`.
-    pub fn sample_latents(
-        &self,
-        clip: &Clip,
-        keyframes: &[usize],
-        caption: &str,
-        seed: u64,
-    ) -> Result<SampledWindow> {
+    pub fn sample_latents(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<SampledWindow> {
         let m = &self.models;
         let cfg = &m.rf_config;
         let device = m.codec.device().clone();
@@ -618,10 +560,7 @@ impl RfSampler {
         let mask_t: Tensor<2> = Tensor::from_data(TensorData::new(mask.clone(), [1, t]), &device);
         let cond = Conditioning {
             z0: m.stats.standardize_shape(encoding.z0.clone()),
-            z_key: m
-                .stats
-                .standardize_motion(keyframe_latents.clone())
-                .swap_dims(1, 2), // [1, P, T, C]
+            z_key: m.stats.standardize_motion(keyframe_latents.clone()).swap_dims(1, 2), // [1, P, T, C]
             mask: mask_t.clone(),
         };
         let text = m
@@ -632,10 +571,7 @@ impl RfSampler {
         let eps = sampler_noise(seed, [1, p, t, c], &device);
         let x1 = sample_mmdit(&m.rf, &cond, text, eps, self.guidance, &self.options); // (R6)
         let mut latents = m.stats.destandardize_motion(x1); // [1, P, T, C]
-        if matches!(
-            self.options.kf_mode,
-            KfMode::InputMask | KfMode::ReplaceNoised
-        ) {
+        if matches!(self.options.kf_mode, KfMode::InputMask | KfMode::ReplaceNoised) {
             // SPEC §4.6: keyframe slots are Z_key; done on raw latents so they are μ exactly.
             latents = replace_keyframes(latents, keyframe_latents.clone().swap_dims(1, 2), mask_t);
         }
@@ -649,13 +585,7 @@ impl RfSampler {
 }
 
 impl WindowSampler for RfSampler {
-    fn sample(
-        &self,
-        clip: &Clip,
-        keyframes: &[usize],
-        caption: &str,
-        seed: u64,
-    ) -> Result<Vec<[f32; 3]>> {
+    fn sample(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
         let s = self.sample_latents(clip, keyframes, caption, seed)?;
         self.models.codec.decode(&s.encoding, s.latents)
     }
@@ -683,29 +613,19 @@ impl LatentLerpSampler {
         let enc = self.codec.encode(clip, &encoded_frames(&keys))?;
         let (z, _) = scatter_keyframes(&enc, &keys, self.codec.device())?;
         let [_, t, p, c] = z.dims();
-        let flat = z.try_to_vec_as::<f32>().map_err(|e| {
-            DataError::new(
-                &clip.id,
-                "keyframe latents",
-                format!("cannot read the tensor: {e:?}"),
-            )
-        })?;
+        let flat = z
+            .try_to_vec_as::<f32>()
+            .map_err(|e| DataError::new(&clip.id, "keyframe latents", format!("cannot read the tensor: {e:?}")))?;
         // (L1) on z: ẑ_f = z_a + (f − a)/(b − a) · (z_b − z_a)
-        let filled = lerp_latents(&flat, t, p * c, &keys)
-            .map_err(|e| DataError::new(&clip.id, "lerp_latent", e.to_string()))?;
+        let filled =
+            lerp_latents(&flat, t, p * c, &keys).map_err(|e| DataError::new(&clip.id, "lerp_latent", e.to_string()))?;
         let z = Tensor::from_data(TensorData::new(filled, [1, t, p, c]), self.codec.device());
         Ok((enc, z))
     }
 }
 
 impl WindowSampler for LatentLerpSampler {
-    fn sample(
-        &self,
-        clip: &Clip,
-        keyframes: &[usize],
-        _caption: &str,
-        _seed: u64,
-    ) -> Result<Vec<[f32; 3]>> {
+    fn sample(&self, clip: &Clip, keyframes: &[usize], _caption: &str, _seed: u64) -> Result<Vec<[f32; 3]>> {
         let (enc, z) = self.latents(clip, keyframes)?;
         self.codec.decode(&enc, z)
     }

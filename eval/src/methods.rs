@@ -41,10 +41,7 @@ pub enum MethodKind {
     /// Non-keyframe RF with sampling-time replacement (R7)–(R8) (the paper's "Baseline").
     ReplacementRf,
     /// SceneMI-style imputation until τ* (R9) with clean or noisy keyframes.
-    ImputeUntil {
-        tau_star: f32,
-        keyframes: KeyframeNoise,
-    },
+    ImputeUntil { tau_star: f32, keyframes: KeyframeNoise },
     /// (L1) in normalised vertex space.
     Lerp,
     /// (L1) between keyframe latents, then decoded (`lerp_space = "latent"`).
@@ -90,9 +87,11 @@ impl MethodKind {
             },
             other => {
                 let rest = other.strip_prefix("impute_until_").ok_or_else(|| {
-                    bad("unknown method; expected keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest or \
+                    bad(
+                        "unknown method; expected keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest or \
                          impute_until[_<tau*>[_noisy<level>]]"
-                        .into())
+                            .into(),
+                    )
                 })?;
                 let (tau, noise) = match rest.split_once("_noisy") {
                     Some((t, l)) => (t, Some(l)),
@@ -105,15 +104,10 @@ impl MethodKind {
                 let keyframes = match noise {
                     None => KeyframeNoise::Clean,
                     Some(l) => KeyframeNoise::Noisy {
-                        level: l
-                            .parse()
-                            .map_err(|e| bad(format!("noise level {l:?}: {e}")))?,
+                        level: l.parse().map_err(|e| bad(format!("noise level {l:?}: {e}")))?,
                     },
                 };
-                MethodKind::ImputeUntil {
-                    tau_star,
-                    keyframes,
-                }
+                MethodKind::ImputeUntil { tau_star, keyframes }
             }
         })
     }
@@ -141,13 +135,7 @@ pub trait Method {
     ///
     /// # Shapes
     /// `clip.vertices`: `[T, N]` rows of xyz; returns `[T, N]` rows.
-    fn complete(
-        &self,
-        clip: &Clip,
-        keyframes: &[usize],
-        caption: &str,
-        seed: u64,
-    ) -> Result<Vec<[f32; 3]>>;
+    fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>>;
 }
 
 /// The training-free vertex-space methods: (L1) and the static nearest keyframe.
@@ -162,15 +150,8 @@ impl Method for VertexMethod {
         }
     }
 
-    fn complete(
-        &self,
-        clip: &Clip,
-        keyframes: &[usize],
-        _caption: &str,
-        _seed: u64,
-    ) -> Result<Vec<[f32; 3]>> {
-        let gt = Motion::from_clip(clip)
-            .map_err(|e| DataError::new(&clip.id, "vertices", e.to_string()))?;
+    fn complete(&self, clip: &Clip, keyframes: &[usize], _caption: &str, _seed: u64) -> Result<Vec<[f32; 3]>> {
+        let gt = Motion::from_clip(clip).map_err(|e| DataError::new(&clip.id, "vertices", e.to_string()))?;
         self.0
             .complete(gt, keyframes)
             .map_err(|e| DataError::new(&clip.id, self.kind().label(), e.to_string()))
@@ -184,13 +165,7 @@ pub trait WindowSampler {
     ///
     /// # Shapes
     /// `clip.vertices`: `[T, N]` rows; returns `[T, N]` rows.
-    fn sample(
-        &self,
-        clip: &Clip,
-        keyframes: &[usize],
-        caption: &str,
-        seed: u64,
-    ) -> Result<Vec<[f32; 3]>>;
+    fn sample(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>>;
 }
 
 /// An RF method (ours, the replacement baseline or impute-until-τ*) around its sampler. It applies the evaluation
@@ -209,11 +184,7 @@ impl<S: WindowSampler> RfMethod<S> {
             | MethodKind::ReplacementRf
             | MethodKind::ImputeUntil { .. }
             | MethodKind::LerpLatent => Ok(Self { kind, sampler }),
-            other => Err(DataError::new(
-                "method",
-                other.label(),
-                "is not a model-based method",
-            )),
+            other => Err(DataError::new("method", other.label(), "is not a model-based method")),
         }
     }
 }
@@ -223,13 +194,7 @@ impl<S: WindowSampler> Method for RfMethod<S> {
         self.kind
     }
 
-    fn complete(
-        &self,
-        clip: &Clip,
-        keyframes: &[usize],
-        caption: &str,
-        seed: u64,
-    ) -> Result<Vec<[f32; 3]>> {
+    fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
         let given = match self.kind {
             MethodKind::ImputeUntil {
                 keyframes: KeyframeNoise::Noisy { level },
@@ -276,14 +241,10 @@ pub fn noisy_keyframes(clip: &Clip, keyframes: &[usize], level: f32, seed: u64) 
     let std = level * KEYFRAME_NOISE_STD;
     let mut r = rng(seed, KEYFRAME_NOISE_STREAM);
     let last = clip.frames - 1;
-    for &f in keyframes
-        .iter()
-        .filter(|&&f| f != 0 && f != last && f < clip.frames)
-    {
+    for &f in keyframes.iter().filter(|&&f| f != 0 && f != last && f < clip.frames) {
         for p in out.frame_mut(f) {
             for c in p.iter_mut() {
-                let (u1, u2): (f64, f64) =
-                    (r.random::<f64>().max(f64::MIN_POSITIVE), r.random::<f64>());
+                let (u1, u2): (f64, f64) = (r.random::<f64>().max(f64::MIN_POSITIVE), r.random::<f64>());
                 let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
                 *c += std * g as f32;
             }
@@ -317,14 +278,9 @@ pub fn complete_and_score(
     let prediction = method.complete(&visible, keyframes, caption, seed)?;
     let pred = Motion::new(&prediction, gt.frames, gt.n_vertices)
         .map_err(|e| DataError::new(&gt.id, &label, format!("prediction: {e}")))?;
-    let truth =
-        Motion::from_clip(gt).map_err(|e| DataError::new(&gt.id, "vertices", e.to_string()))?;
-    let metrics = evaluate_clip(pred, truth, keyframes)
-        .map_err(|e| DataError::new(&gt.id, &label, e.to_string()))?;
-    Ok(Scored {
-        prediction,
-        metrics,
-    })
+    let truth = Motion::from_clip(gt).map_err(|e| DataError::new(&gt.id, "vertices", e.to_string()))?;
+    let metrics = evaluate_clip(pred, truth, keyframes).map_err(|e| DataError::new(&gt.id, &label, e.to_string()))?;
+    Ok(Scored { prediction, metrics })
 }
 
 /// The metrics of one clip as (name, value) pairs, for [`crate::tables::ClipRecord`].
@@ -346,8 +302,5 @@ pub fn metrics_map(m: &ClipMetrics) -> std::collections::BTreeMap<String, f64> {
         ("keyframe_rmse", m.keyframe_rmse),
         ("mean_vertex_error", m.mean_vertex_error),
     ];
-    fields
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect()
+    fields.into_iter().map(|(k, v)| (k.to_string(), v)).collect()
 }

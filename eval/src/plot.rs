@@ -225,34 +225,17 @@ fn tick_label(v: f64, step: f64) -> String {
 
 /// A line plot with markers, optional error bars and a legend, saved as PNG.
 /// Errors: no series, no points, or non-finite values (named by series label).
-pub fn line_plot(
-    title: &str,
-    x_label: &str,
-    y_label: &str,
-    series: &[Series],
-    path: &Path,
-) -> Result<()> {
+pub fn line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series], path: &Path) -> Result<()> {
     canvas_line_plot(title, x_label, y_label, series, path)?.save_png(path)
 }
 
 /// As [`line_plot`], returning the canvas instead of writing it (`path` only names errors).
-pub fn canvas_line_plot(
-    title: &str,
-    x_label: &str,
-    y_label: &str,
-    series: &[Series],
-    path: &Path,
-) -> Result<Canvas> {
+pub fn canvas_line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series], path: &Path) -> Result<Canvas> {
     let mut xs = Vec::new();
     let mut ys = Vec::new();
     for s in series {
         for (i, &(x, y)) in s.points.iter().enumerate() {
-            let e = s
-                .errors
-                .as_ref()
-                .and_then(|e| e.get(i))
-                .copied()
-                .unwrap_or(0.0);
+            let e = s.errors.as_ref().and_then(|e| e.get(i)).copied().unwrap_or(0.0);
             if !(x.is_finite() && y.is_finite() && e.is_finite()) {
                 return Err(DataError::new(
                     path,
@@ -265,11 +248,7 @@ pub fn canvas_line_plot(
         }
     }
     if xs.is_empty() {
-        return Err(DataError::new(
-            path,
-            "series",
-            "nothing to plot".to_string(),
-        ));
+        return Err(DataError::new(path, "series", "nothing to plot".to_string()));
     }
     let (w, h) = (720i64, 480i64);
     let (left, right, top, bottom) = (80i64, 200i64, 40i64, 60i64);
@@ -306,13 +285,7 @@ pub fn canvas_line_plot(
         }
         c.line(left, py(t), left + pw, py(t), GREY, 1);
         let lab = tick_label(t, ystep);
-        c.text(
-            left - 8 - i64::from(text_width(&lab, 1)),
-            py(t) - 3,
-            &lab,
-            BLACK,
-            1,
-        );
+        c.text(left - 8 - i64::from(text_width(&lab, 1)), py(t) - 3, &lab, BLACK, 1);
     }
     // Integer x values (such as K_x) get integer ticks; the x range is padded so end points clear the frame.
     let integer_x = xs.iter().all(|x| x.fract() == 0.0) && x1 - x0 <= 12.0;
@@ -329,13 +302,7 @@ pub fn canvas_line_plot(
         } else {
             tick_label(t, xstep)
         };
-        c.text(
-            px(t) - i64::from(text_width(&lab, 1)) / 2,
-            top + ph + 8,
-            &lab,
-            BLACK,
-            1,
-        );
+        c.text(px(t) - i64::from(text_width(&lab, 1)) / 2, top + ph + 8, &lab, BLACK, 1);
     }
     c.rect(left, top, pw + 1, ph + 1, BLACK);
     c.text(
@@ -349,23 +316,11 @@ pub fn canvas_line_plot(
     for (k, s) in series.iter().enumerate() {
         let col = PALETTE[k % PALETTE.len()];
         for pair in s.points.windows(2) {
-            c.line(
-                px(pair[0].0),
-                py(pair[0].1),
-                px(pair[1].0),
-                py(pair[1].1),
-                col,
-                2,
-            );
+            c.line(px(pair[0].0), py(pair[0].1), px(pair[1].0), py(pair[1].1), col, 2);
         }
         for (i, &(x, y)) in s.points.iter().enumerate() {
             c.fill_rect(px(x) - 3, py(y) - 3, 7, 7, col);
-            if let Some(e) = s
-                .errors
-                .as_ref()
-                .and_then(|e| e.get(i))
-                .filter(|e| **e > 0.0)
-            {
+            if let Some(e) = s.errors.as_ref().and_then(|e| e.get(i)).filter(|e| **e > 0.0) {
                 c.line(px(x), py(y - e), px(x), py(y + e), col, 1);
                 c.line(px(x) - 4, py(y - e), px(x) + 4, py(y - e), col, 1);
                 c.line(px(x) - 4, py(y + e), px(x) + 4, py(y + e), col, 1);

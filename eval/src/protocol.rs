@@ -190,8 +190,7 @@ impl Manifest {
 
     /// Write the manifest as pretty JSON (temp file, then rename).
     pub fn save(&self, path: &Path) -> Result<()> {
-        let text = serde_json::to_string_pretty(self)
-            .map_err(|e| DataError::new(path, "manifest", e.to_string()))?;
+        let text = serde_json::to_string_pretty(self).map_err(|e| DataError::new(path, "manifest", e.to_string()))?;
         write_atomic(path, text.as_bytes())
     }
 
@@ -267,8 +266,7 @@ impl Manifest {
 /// The noise seed of item `clip_index` under base seed `base` (SPEC §6.1: derived from (42, clip index)).
 /// SplitMix64 of the pair, so neighbouring items and seeds get unrelated streams; the same for every K_x.
 pub fn noise_seed(base: u64, clip_index: usize) -> u64 {
-    let mut z = base.wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        ^ (clip_index as u64).wrapping_add(0xD1B5_4A32_D192_ED03);
+    let mut z = base.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (clip_index as u64).wrapping_add(0xD1B5_4A32_D192_ED03);
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
@@ -281,9 +279,7 @@ fn draw_keyframes(placement: Placement, frames: usize, seed: u64, pos: u64) -> V
     let draw = |strategy: KeyframeStrategy| {
         // A fresh copy of the item's generator per set: FirstLastPlus sets are then nested across K_x.
         let mask = sample_keyframes(&strategy, frames, &mut item_rng.clone());
-        let mut set: Vec<usize> = (0..frames)
-            .filter(|&f| mask[f] || f == 0 || f == frames - 1)
-            .collect();
+        let mut set: Vec<usize> = (0..frames).filter(|&f| mask[f] || f == 0 || f == frames - 1).collect();
         set.dedup();
         set
     };
@@ -306,12 +302,8 @@ fn check_placement(placement: Placement, frames: usize) -> std::result::Result<(
             "k_extra_max = {k_extra_max} exceeds the {} interior frames",
             frames - 2
         )),
-        Placement::EveryR { r: 0 } | Placement::Stride { stride: 0 } => {
-            Err("the step must be at least 1".into())
-        }
-        Placement::Bernoulli { p } if !(0.0..=1.0).contains(&p) => {
-            Err(format!("p = {p} is outside [0, 1]"))
-        }
+        Placement::EveryR { r: 0 } | Placement::Stride { stride: 0 } => Err("the step must be at least 1".into()),
+        Placement::Bernoulli { p } if !(0.0..=1.0).contains(&p) => Err(format!("p = {p} is outside [0, 1]")),
         _ => Ok(()),
     }
 }
@@ -334,8 +326,7 @@ fn check_set(set: &[usize], frames: usize) -> std::result::Result<(), String> {
 /// Ids that do not follow the AAM form `<uid>_offset<k>_<start>-<end>` are skipped.
 pub fn long_horizon_pairs(clips: &[ClipRef]) -> Vec<Candidate> {
     let parsed: Vec<Option<(&str, usize)>> = clips.iter().map(|c| split_start(&c.id)).collect();
-    let mut by_key: std::collections::HashMap<(&str, usize), usize> =
-        std::collections::HashMap::new();
+    let mut by_key: std::collections::HashMap<(&str, usize), usize> = std::collections::HashMap::new();
     for (i, p) in parsed.iter().enumerate() {
         if let Some(key) = p {
             by_key.insert(*key, i);
@@ -383,11 +374,7 @@ impl StoreSource {
             return Err(DataError::new(
                 dir,
                 "index.parquet",
-                format!(
-                    "{} ok rows but clips.bin holds {} clips",
-                    ok.len(),
-                    store.len()
-                ),
+                format!("{} ok rows but clips.bin holds {} clips", ok.len(), store.len()),
             ));
         }
         let val = ok
@@ -491,9 +478,7 @@ fn join_shared_frame(a: &StoredClip, b: &StoredClip, dir: &Path) -> Result<Clip>
         return Err(DataError::new(
             dir,
             pair,
-            format!(
-                "last frame of the first and frame 0 of the second differ by {worst}: not a shared frame"
-            ),
+            format!("last frame of the first and frame 0 of the second differ by {worst}: not a shared frame"),
         ));
     }
     let mut vertices = a_abs.vertices.clone();

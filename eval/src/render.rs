@@ -38,12 +38,7 @@ impl Default for StripOptions {
 
 /// The strip as a canvas: a header row of frame numbers, the ground truth, then the prediction; keyframe columns
 /// framed in orange with a `K`. Errors when the two sequences do not share frame and vertex counts.
-pub fn strip_canvas(
-    gt: &Clip,
-    pred: &Clip,
-    keyframes: &[usize],
-    opts: &StripOptions,
-) -> Result<Canvas> {
+pub fn strip_canvas(gt: &Clip, pred: &Clip, keyframes: &[usize], opts: &StripOptions) -> Result<Canvas> {
     if gt.frames != pred.frames || gt.n_vertices != pred.n_vertices {
         return Err(DataError::new(
             &gt.id,
@@ -86,8 +81,7 @@ pub fn strip_canvas(
             1,
         );
         for (row, clip) in [gt, pred].into_iter().enumerate() {
-            let tile = rasterize_frame(clip.frame(f), &clip.faces, &view, cell)
-                .map_err(|e| e.at(&clip.id))?;
+            let tile = rasterize_frame(clip.frame(f), &clip.faces, &view, cell).map_err(|e| e.at(&clip.id))?;
             replace(&mut c.img, &tile, x, i64::from(header + cell * row as u32));
         }
         if keyframes.contains(&f) {
@@ -107,13 +101,7 @@ pub fn strip_canvas(
 }
 
 /// Write the strip of [`strip_canvas`] as PNG.
-pub fn write_strip(
-    gt: &Clip,
-    pred: &Clip,
-    keyframes: &[usize],
-    opts: &StripOptions,
-    path: &Path,
-) -> Result<()> {
+pub fn write_strip(gt: &Clip, pred: &Clip, keyframes: &[usize], opts: &StripOptions, path: &Path) -> Result<()> {
     strip_canvas(gt, pred, keyframes, opts)?.save_png(path)
 }
 
@@ -144,7 +132,12 @@ impl ExportFormat {
 
 /// Write `clip` (a prediction, in the normalised frame of its ground truth) in each of `formats` under `dir`,
 /// with the data crate's writers; returns the written paths.
-pub fn export_sequence(clip: &Clip, dir: &Path, stem: &str, formats: &[ExportFormat]) -> Result<Vec<std::path::PathBuf>> {
+pub fn export_sequence(
+    clip: &Clip,
+    dir: &Path,
+    stem: &str,
+    formats: &[ExportFormat],
+) -> Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))?;
     formats
         .iter()

@@ -175,14 +175,11 @@ pub fn rollout<F>(
 where
     F: FnMut(&WindowInput<'_>) -> Result<Vec<[f32; 3]>>,
 {
-    if n_vertices == 0 || gt.len() % n_vertices != 0 {
+    if n_vertices == 0 || !gt.len().is_multiple_of(n_vertices) {
         return Err(DataError::new(
             "rollout",
             "vertices",
-            format!(
-                "{} rows are not whole frames of {n_vertices} vertices",
-                gt.len()
-            ),
+            format!("{} rows are not whole frames of {n_vertices} vertices", gt.len()),
         ));
     }
     let total = gt.len() / n_vertices;
@@ -211,13 +208,8 @@ where
     for (w, &start) in starts.iter().enumerate() {
         // The window's reference mesh: ground truth for stage 1 and for a ground-truth overlap at a keyframe,
         // otherwise the frame the previous window generated (SPEC §7 steps 2 and 4).
-        let from_gt = w == 0
-            || (spec.overlap_source == OverlapSource::GroundTruth && keyframes.contains(&start));
-        let reference = if from_gt {
-            frame(gt, start)
-        } else {
-            frame(&out, start)
-        };
+        let from_gt = w == 0 || (spec.overlap_source == OverlapSource::GroundTruth && keyframes.contains(&start));
+        let reference = if from_gt { frame(gt, start) } else { frame(&out, start) };
         let stat = if w == 0 {
             WindowFrame::IDENTITY
         } else {
@@ -293,13 +285,7 @@ where
 ///
 /// # Shapes
 /// `seq`: `[T, N]` rows of xyz.
-pub fn seam_jerk(
-    seq: &[[f32; 3]],
-    n_vertices: usize,
-    seam: usize,
-    half_width: usize,
-    rate: f64,
-) -> Option<f64> {
+pub fn seam_jerk(seq: &[[f32; 3]], n_vertices: usize, seam: usize, half_width: usize, rate: f64) -> Option<f64> {
     let frames = seq.len() / n_vertices.max(1);
     let lo = seam.saturating_sub(half_width);
     let hi = (seam + half_width).min(frames.saturating_sub(1));
@@ -313,9 +299,8 @@ pub fn seam_jerk(
         for v in 0..n_vertices {
             let norm2: f64 = (0..3)
                 .map(|k| {
-                    let j = (at(f + 3, v, k) - 3.0 * at(f + 2, v, k) + 3.0 * at(f + 1, v, k)
-                        - at(f, v, k))
-                        * rate.powi(3); // (E5)
+                    let j =
+                        (at(f + 3, v, k) - 3.0 * at(f + 2, v, k) + 3.0 * at(f + 1, v, k) - at(f, v, k)) * rate.powi(3); // (E5)
                     j * j
                 })
                 .sum();

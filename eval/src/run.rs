@@ -15,14 +15,12 @@ use crate::baselines::VertexBaseline;
 use crate::methods::{Method, MethodKind, VertexMethod, complete_and_score, metrics_map};
 use crate::metrics::{Motion, evaluate_clip, replace_keyframes, vae_reconstruction};
 use crate::plot::{Series, line_plot};
-use crate::protocol::{
-    Manifest, ManifestOptions, Placement, StoreSource, noise_seed, write_atomic,
-};
+use crate::protocol::{Manifest, ManifestOptions, Placement, StoreSource, noise_seed, write_atomic};
 use crate::render::{ExportFormat, StripOptions, export_sequence, write_strip};
 use crate::rollout::{OverlapSource, RolloutSpec, rollout, seam_jerk};
 use crate::tables::{
-    ClipRecord, SummaryRow, TableHeader, TableKind, TimingRecord, csv, markdown, read_clip_parquet,
-    summarize, timing_tables, write_clip_parquet,
+    ClipRecord, SummaryRow, TableHeader, TableKind, TimingRecord, csv, markdown, read_clip_parquet, summarize,
+    timing_tables, write_clip_parquet,
 };
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
@@ -115,12 +113,8 @@ pub fn vertex_methods(kinds: &[MethodKind]) -> Result<Vec<Box<dyn Method>>> {
     kinds
         .iter()
         .map(|k| match k {
-            MethodKind::Lerp => {
-                Ok(Box::new(VertexMethod(VertexBaseline::Linear)) as Box<dyn Method>)
-            }
-            MethodKind::StaticNearest => {
-                Ok(Box::new(VertexMethod(VertexBaseline::NearestKeyframe)) as Box<dyn Method>)
-            }
+            MethodKind::Lerp => Ok(Box::new(VertexMethod(VertexBaseline::Linear)) as Box<dyn Method>),
+            MethodKind::StaticNearest => Ok(Box::new(VertexMethod(VertexBaseline::NearestKeyframe)) as Box<dyn Method>),
             other => Err(DataError::new(
                 "methods",
                 other.label(),
@@ -144,9 +138,8 @@ fn progress_bar(show: bool, len: usize, what: &str) -> Result<ProgressBar> {
     if !show {
         return Ok(ProgressBar::hidden());
     }
-    let style =
-        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} clips, {per_sec}, ETA {eta}")
-            .map_err(|e| DataError::new("progress bar", "template", e.to_string()))?;
+    let style = ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} clips, {per_sec}, ETA {eta}")
+        .map_err(|e| DataError::new("progress bar", "template", e.to_string()))?;
     let bar = ProgressBar::new(len as u64);
     bar.set_style(style.progress_chars("=> "));
     bar.set_message(what.to_string());
@@ -173,23 +166,10 @@ pub fn evaluate(
                 for method in methods {
                     let label = method.kind().label();
                     let (prediction, metrics) = if manifest.frames <= RolloutSpec::paper().window {
-                        let s = complete_and_score(
-                            method.as_ref(),
-                            &gt,
-                            keyframes,
-                            &captions[0],
-                            seed,
-                        )?;
+                        let s = complete_and_score(method.as_ref(), &gt, keyframes, &captions[0], seed)?;
                         (s.prediction, metrics_map(&s.metrics))
                     } else {
-                        long_horizon(
-                            method.as_ref(),
-                            &gt,
-                            keyframes,
-                            &captions,
-                            seed,
-                            overlap_source,
-                        )?
+                        long_horizon(method.as_ref(), &gt, keyframes, &captions, seed, overlap_source)?
                     };
                     records.push(ClipRecord {
                         method: label.clone(),
@@ -218,6 +198,9 @@ pub fn evaluate(
     Ok((records, kept))
 }
 
+/// A prediction and its metrics by name.
+type Scored = (Vec<[f32; 3]>, BTreeMap<String, f64>);
+
 /// One long-horizon generation (SPEC §7) scored by (E1)–(E7) over 𝒰 = {0..30} \ {0, 15, 30} plus the seam jerk.
 fn long_horizon(
     method: &dyn Method,
@@ -226,7 +209,7 @@ fn long_horizon(
     captions: &[String],
     seed: u64,
     overlap_source: OverlapSource,
-) -> Result<(Vec<[f32; 3]>, BTreeMap<String, f64>)> {
+) -> Result<Scored> {
     let spec = RolloutSpec {
         overlap_source,
         ..RolloutSpec::paper()
@@ -244,12 +227,7 @@ fn long_horizon(
             w.caption,
             &gt.source,
         )?;
-        method.complete(
-            &window,
-            &w.keyframes,
-            w.caption,
-            seed.wrapping_add(w.index as u64),
-        )
+        method.complete(&window, &w.keyframes, w.caption, seed.wrapping_add(w.index as u64))
     })?;
     let err = |e: crate::metrics::EvalError| DataError::new(&gt.id, &label, e.to_string());
     let pred = Motion::new(&r.vertices, gt.frames, n).map_err(err)?;
@@ -295,9 +273,7 @@ fn header_for(opts: &RunOptions, manifest_path: &Path) -> TableHeader {
         h.text_encoder = "none (no method reads text)".into();
     }
     for m in &opts.methods {
-        h.checkpoints
-            .entry(m.kind().label())
-            .or_insert_with(|| "none".into());
+        h.checkpoints.entry(m.kind().label()).or_insert_with(|| "none".into());
     }
     h
 }
@@ -310,11 +286,7 @@ fn write_text(path: &Path, text: &str, files: &mut Vec<PathBuf>) -> Result<()> {
 
 fn run_completion(opts: &RunOptions) -> Result<TableReport> {
     if opts.methods.is_empty() {
-        return Err(DataError::new(
-            "eval run",
-            "methods",
-            "no methods to evaluate",
-        ));
+        return Err(DataError::new("eval run", "methods", "no methods to evaluate"));
     }
     let source = StoreSource::open(&opts.data)?;
     let manifest_path = opts.out.join("manifest.json");
@@ -334,11 +306,7 @@ fn run_completion(opts: &RunOptions) -> Result<TableReport> {
                 seeds: opts.seeds.clone(),
                 ..base
             };
-            Manifest::build(
-                &source.candidates(mo.frames),
-                &mo,
-                &opts.data.display().to_string(),
-            )?
+            Manifest::build(&source.candidates(mo.frames), &mo, &opts.data.display().to_string())?
         }
     };
     let mut files = Vec::new();
@@ -364,8 +332,7 @@ fn run_completion(opts: &RunOptions) -> Result<TableReport> {
         &csv(opts.protocol, &rows, &header),
         &mut files,
     )?;
-    if opts.protocol == TableKind::Table1 && matches!(manifest.placement, Placement::Random { .. })
-    {
+    if opts.protocol == TableKind::Table1 && matches!(manifest.placement, Placement::Random { .. }) {
         let path = opts.out.join("rmse_vs_kx.png");
         plot_rmse_vs_kx(&rows, &path)?;
         files.push(path);
@@ -390,12 +357,7 @@ fn write_item_outputs(gt: &Clip, preds: &[&Prediction], out: &Path) -> Result<Ve
     std::fs::create_dir_all(&strips).map_err(|e| DataError::io(&strips, e))?;
     let mut files = Vec::new();
     for p in preds {
-        let stem = prediction_stem(
-            p.item,
-            &p.method,
-            p.keyframes.len().saturating_sub(2),
-            p.seed,
-        );
+        let stem = prediction_stem(p.item, &p.method, p.keyframes.len().saturating_sub(2), p.seed);
         let pred = Clip::new(
             &gt.id,
             p.vertices.clone(),
@@ -431,10 +393,7 @@ fn prediction_stem(item: usize, method: &str, k_extra: usize, seed: u64) -> Stri
 pub fn plot_rmse_vs_kx(rows: &[SummaryRow], path: &Path) -> Result<()> {
     let mut series: Vec<Series> = Vec::new();
     for r in rows {
-        let (mean, ci) = (
-            r.values[0].mean * 100.0,
-            r.values[0].ci95.map(|c| c * 100.0),
-        );
+        let (mean, ci) = (r.values[0].mean * 100.0, r.values[0].ci95.map(|c| c * 100.0));
         match series.iter_mut().find(|s| s.label == r.method) {
             Some(s) => {
                 s.points.push((r.k_extra as f64, mean));
@@ -463,7 +422,7 @@ pub fn plot_rmse_vs_kx(rows: &[SummaryRow], path: &Path) -> Result<()> {
 pub fn timing_clip(n: usize, frames: usize) -> Result<Clip> {
     let cols = (1..=((n as f64).sqrt() as usize))
         .rev()
-        .find(|c| n % c == 0)
+        .find(|c| n.is_multiple_of(*c))
         .unwrap_or(1);
     let rows = n / cols;
     if rows < 2 || cols < 2 {
@@ -535,14 +494,7 @@ fn run_timing(opts: &RunOptions) -> Result<TableReport> {
                             42,
                         )?;
                     } else {
-                        long_horizon(
-                            method.as_ref(),
-                            &clip,
-                            &keyframes,
-                            &captions,
-                            42,
-                            opts.overlap_source,
-                        )?;
+                        long_horizon(method.as_ref(), &clip, &keyframes, &captions, 42, opts.overlap_source)?;
                     }
                     Ok(())
                 };
@@ -579,11 +531,7 @@ fn run_timing(opts: &RunOptions) -> Result<TableReport> {
 
 fn run_reconstruction(opts: &RunOptions) -> Result<TableReport> {
     if opts.vaes.is_empty() {
-        return Err(DataError::new(
-            "eval run",
-            "vaes",
-            "table5 needs at least one VAE",
-        ));
+        return Err(DataError::new("eval run", "vaes", "table5 needs at least one VAE"));
     }
     let source = StoreSource::open(&opts.data)?;
     let manifest_path = opts.out.join("manifest.json");
@@ -595,11 +543,7 @@ fn run_reconstruction(opts: &RunOptions) -> Result<TableReport> {
                 seeds: vec![0],
                 ..ManifestOptions::table1(opts.data.display().to_string())
             };
-            Manifest::build(
-                &source.candidates(16),
-                &mo,
-                &opts.data.display().to_string(),
-            )?
+            Manifest::build(&source.candidates(16), &mo, &opts.data.display().to_string())?
         }
     };
     manifest.save(&manifest_path)?;
@@ -609,17 +553,12 @@ fn run_reconstruction(opts: &RunOptions) -> Result<TableReport> {
         let (gt, _) = source.item(item, manifest.frames)?;
         for vae in &opts.vaes {
             let rec = vae.reconstruct(&gt)?;
-            let err =
-                |e: crate::metrics::EvalError| DataError::new(&gt.id, vae.label(), e.to_string());
+            let err = |e: crate::metrics::EvalError| DataError::new(&gt.id, vae.label(), e.to_string());
             let decoded = Motion::new(&rec, gt.frames, gt.n_vertices).map_err(err)?;
-            let r =
-                vae_reconstruction(decoded, Motion::from_clip(&gt).map_err(err)?).map_err(err)?; // (E4)
-            let metrics = [
-                ("rmse".to_string(), r.rmse),
-                ("chamfer".to_string(), r.chamfer),
-            ]
-            .into_iter()
-            .collect();
+            let r = vae_reconstruction(decoded, Motion::from_clip(&gt).map_err(err)?).map_err(err)?; // (E4)
+            let metrics = [("rmse".to_string(), r.rmse), ("chamfer".to_string(), r.chamfer)]
+                .into_iter()
+                .collect();
             records.push(ClipRecord {
                 method: vae.label(),
                 placement: "all_frames".into(),
@@ -661,10 +600,7 @@ pub fn render_results(out: &Path, data: &Path) -> Result<Vec<PathBuf>> {
     let manifest = Manifest::load(&out.join("manifest.json"))?;
     let mut files = Vec::new();
     if manifest.frames == 16 && matches!(manifest.placement, Placement::Random { .. }) {
-        let rows = summarize(
-            &read_clip_parquet(&out.join("clips.parquet"))?,
-            TableKind::Table1,
-        )?;
+        let rows = summarize(&read_clip_parquet(&out.join("clips.parquet"))?, TableKind::Table1)?;
         let path = out.join("rmse_vs_kx.png");
         plot_rmse_vs_kx(&rows, &path)?;
         files.push(path);
@@ -676,10 +612,7 @@ pub fn render_results(out: &Path, data: &Path) -> Result<Vec<PathBuf>> {
     let source = StoreSource::open(data)?;
     let mut bins: Vec<PathBuf> = std::fs::read_dir(&pred_dir)
         .map_err(|e| DataError::io(&pred_dir, e))?
-        .map(|e| {
-            e.map(|e| e.path())
-                .map_err(|err| DataError::io(&pred_dir, err))
-        })
+        .map(|e| e.map(|e| e.path()).map_err(|err| DataError::io(&pred_dir, err)))
         .collect::<Result<Vec<_>>>()?;
     bins.retain(|p| p.extension().is_some_and(|e| e == "bin"));
     bins.sort();
@@ -691,21 +624,13 @@ pub fn render_results(out: &Path, data: &Path) -> Result<Vec<PathBuf>> {
             .and_then(|s| s.to_str())
             .map(str::to_owned)
             .ok_or_else(|| DataError::new(&bin, "file name", "is not UTF-8"))?;
-        let (item, method, k_extra) = parse_stem(&stem).ok_or_else(|| {
-            DataError::new(
-                &bin,
-                "file name",
-                "expected item<i>_<method>_k<K_x>_seed<s>.bin",
-            )
-        })?;
+        let (item, method, k_extra) = parse_stem(&stem)
+            .ok_or_else(|| DataError::new(&bin, "file name", "expected item<i>_<method>_k<K_x>_seed<s>.bin"))?;
         let entry = manifest.clips.get(item).ok_or_else(|| {
             DataError::new(
                 &bin,
                 "item",
-                format!(
-                    "{item} is past the manifest's {} items",
-                    manifest.clips.len()
-                ),
+                format!("{item} is past the manifest's {} items", manifest.clips.len()),
             )
         })?;
         let keyframes = entry

@@ -32,12 +32,8 @@ impl TableKind {
     /// Title line of the Markdown summary.
     pub fn title(&self) -> &'static str {
         match self {
-            TableKind::Table1 => {
-                "Table 1: short-horizon completion (16 frames, K_x extra keyframes)"
-            }
-            TableKind::Table2 => {
-                "Table 2: long-horizon completion (31 frames, two-stage rollout, keyframes 0/15/30)"
-            }
+            TableKind::Table1 => "Table 1: short-horizon completion (16 frames, K_x extra keyframes)",
+            TableKind::Table2 => "Table 2: long-horizon completion (31 frames, two-stage rollout, keyframes 0/15/30)",
             TableKind::Table4 => "Table 4: end-to-end inference seconds (encode → sample → decode)",
             TableKind::Table5 => "Table 5: VAE reconstruction on validation clips",
         }
@@ -192,9 +188,8 @@ pub struct SummaryRow {
 
 /// Student-t 97.5 % quantiles for 1..=30 degrees of freedom; 1.96 (normal) beyond.
 const T975: [f64; 30] = [
-    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
-    2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
-    2.052, 2.048, 2.045, 2.042,
+    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145, 2.131, 2.120,
+    2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048, 2.045, 2.042,
 ];
 
 /// Mean ± t_{0.975, n−1} · sd / √n of `xs` (sample sd); no interval for fewer than two values.
@@ -202,11 +197,7 @@ pub fn mean_ci95(xs: &[f64]) -> Estimate {
     let n = xs.len();
     let mean = xs.iter().sum::<f64>() / n.max(1) as f64;
     if n < 2 {
-        return Estimate {
-            mean,
-            ci95: None,
-            n,
-        };
+        return Estimate { mean, ci95: None, n };
     }
     let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
     let t = T975.get(n - 2).copied().unwrap_or(1.96);
@@ -223,8 +214,8 @@ pub fn summarize(records: &[ClipRecord], kind: TableKind) -> Result<Vec<SummaryR
     let columns = kind.columns();
     let mut method_order: Vec<&str> = Vec::new();
     // (method, placement, k) → seed → (sums per column, clip count)
-    let mut groups: BTreeMap<(usize, &str, usize), BTreeMap<u64, (Vec<f64>, usize)>> =
-        BTreeMap::new();
+    type PerSeed = BTreeMap<u64, (Vec<f64>, usize)>;
+    let mut groups: BTreeMap<(usize, &str, usize), PerSeed> = BTreeMap::new();
     for r in records {
         let m = match method_order.iter().position(|&m| m == r.method) {
             Some(i) => i,
@@ -254,14 +245,7 @@ pub fn summarize(records: &[ClipRecord], kind: TableKind) -> Result<Vec<SummaryR
     for ((m, placement, k), seeds) in groups {
         let clips = seeds.values().map(|(_, n)| *n).max().unwrap_or(0);
         let values = (0..columns.len())
-            .map(|c| {
-                mean_ci95(
-                    &seeds
-                        .values()
-                        .map(|(sums, n)| sums[c] / *n as f64)
-                        .collect::<Vec<_>>(),
-                )
-            })
+            .map(|c| mean_ci95(&seeds.values().map(|(sums, n)| sums[c] / *n as f64).collect::<Vec<_>>()))
             .collect();
         rows.push(SummaryRow {
             method: method_order[m].to_string(),
@@ -277,9 +261,7 @@ pub fn summarize(records: &[ClipRecord], kind: TableKind) -> Result<Vec<SummaryR
 /// Write the per-clip records as parquet: columns method, placement, k_extra, seed, item, clip_id, then one f64
 /// column per metric name (all records must carry the same names).
 pub fn write_clip_parquet(records: &[ClipRecord], path: &Path) -> Result<()> {
-    let names: Vec<&String> = records
-        .first()
-        .map_or_else(Vec::new, |r| r.metrics.keys().collect());
+    let names: Vec<&String> = records.first().map_or_else(Vec::new, |r| r.metrics.keys().collect());
     for r in records {
         if r.metrics.len() != names.len() || !names.iter().all(|n| r.metrics.contains_key(*n)) {
             return Err(DataError::new(
@@ -297,36 +279,21 @@ pub fn write_clip_parquet(records: &[ClipRecord], path: &Path) -> Result<()> {
     let mut cols = vec![
         Column::new(
             "method".into(),
-            records
-                .iter()
-                .map(|r| r.method.as_str())
-                .collect::<Vec<_>>(),
+            records.iter().map(|r| r.method.as_str()).collect::<Vec<_>>(),
         ),
         Column::new(
             "placement".into(),
-            records
-                .iter()
-                .map(|r| r.placement.as_str())
-                .collect::<Vec<_>>(),
+            records.iter().map(|r| r.placement.as_str()).collect::<Vec<_>>(),
         ),
         Column::new(
             "k_extra".into(),
             records.iter().map(|r| r.k_extra as u32).collect::<Vec<_>>(),
         ),
-        Column::new(
-            "seed".into(),
-            records.iter().map(|r| r.seed).collect::<Vec<_>>(),
-        ),
-        Column::new(
-            "item".into(),
-            records.iter().map(|r| r.item as u32).collect::<Vec<_>>(),
-        ),
+        Column::new("seed".into(), records.iter().map(|r| r.seed).collect::<Vec<_>>()),
+        Column::new("item".into(), records.iter().map(|r| r.item as u32).collect::<Vec<_>>()),
         Column::new(
             "clip_id".into(),
-            records
-                .iter()
-                .map(|r| r.clip_id.as_str())
-                .collect::<Vec<_>>(),
+            records.iter().map(|r| r.clip_id.as_str()).collect::<Vec<_>>(),
         ),
     ];
     for name in &names {
@@ -335,8 +302,7 @@ pub fn write_clip_parquet(records: &[ClipRecord], path: &Path) -> Result<()> {
             records.iter().map(|r| r.metrics[*name]).collect::<Vec<_>>(),
         ));
     }
-    let mut df = DataFrame::new(records.len(), cols)
-        .map_err(|e| DataError::new(path, "dataframe", e.to_string()))?;
+    let mut df = DataFrame::new(records.len(), cols).map_err(|e| DataError::new(path, "dataframe", e.to_string()))?;
     let mut buf = Vec::new();
     ParquetWriter::new(&mut buf)
         .finish(&mut df)
@@ -350,8 +316,7 @@ pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
     let df = ParquetReader::new(file)
         .finish()
         .map_err(|e| DataError::new(path, "parquet", e.to_string()))?;
-    let perr =
-        |field: &str, e: polars::prelude::PolarsError| DataError::new(path, field, e.to_string());
+    let perr = |field: &str, e: polars::prelude::PolarsError| DataError::new(path, field, e.to_string());
     let col = |name: &str| df.column(name).map_err(|e| perr(name, e));
     let strs = |name: &str| -> Result<Vec<String>> {
         let c = col(name)?;
@@ -429,9 +394,7 @@ fn header_lines(kind: TableKind, header: &TableHeader, seeds: usize) -> String {
         let _ = writeln!(s, "- backend / device: {}", header.device);
     }
     let ci = if seeds > 1 {
-        format!(
-            "mean over clips per seed, then mean ± 95 % CI over {seeds} seeds (Student t, n − 1 dof, sample sd)"
-        )
+        format!("mean over clips per seed, then mean ± 95 % CI over {seeds} seeds (Student t, n − 1 dof, sample sd)")
     } else {
         "mean over clips, one seed (no confidence interval)".to_string()
     };
@@ -463,11 +426,7 @@ pub fn markdown(kind: TableKind, rows: &[SummaryRow], header: &TableHeader) -> S
         } else {
             r.k_extra.to_string()
         };
-        let _ = write!(
-            s,
-            "| {} | {} | {} | {} |",
-            r.method, r.placement, k, r.clips
-        );
+        let _ = write!(s, "| {} | {} | {} | {} |", r.method, r.placement, k, r.clips);
         for (v, c) in r.values.iter().zip(cols) {
             let _ = write!(s, " {} |", fmt_estimate(v, c.scale));
         }
@@ -505,10 +464,7 @@ pub fn csv(kind: TableKind, rows: &[SummaryRow], header: &TableHeader) -> String
             .map(|c| format!("{}", c.scale))
             .collect::<Vec<_>>()
             .join("/");
-        let ckpt = header
-            .checkpoints
-            .get(&r.method)
-            .map_or("none", String::as_str);
+        let ckpt = header.checkpoints.get(&r.method).map_or("none", String::as_str);
         let _ = writeln!(
             s,
             ",{},{},{},{}",
@@ -568,10 +524,7 @@ pub fn timing_tables(records: &[TimingRecord], header: &TableHeader) -> (String,
     }
     let reps = records.iter().map(|r| r.seconds.len()).max().unwrap_or(0);
     let mut md = header_lines(TableKind::Table4, header, 1);
-    let _ = writeln!(
-        md,
-        "Median of {reps} timed runs after one warm-up, batch 1, seconds.\n"
-    );
+    let _ = writeln!(md, "Median of {reps} timed runs after one warm-up, batch 1, seconds.\n");
     md.push_str("| Method | Frames |");
     let mut csv = String::from("method,frames");
     for n in &sizes {

@@ -10,8 +10,7 @@ use any4d_data::batch::PadTo;
 use any4d_data::fps::farthest_point_sampling;
 use any4d_data::preprocess::edges_from_faces;
 use any4d_eval::learned::{
-    LatentLerpSampler, LearnedModels, MeshCodec, MeshVae, RfSampler, VaeReconstructor,
-    sampler_noise,
+    LatentLerpSampler, LearnedModels, MeshCodec, MeshVae, RfSampler, VaeReconstructor, sampler_noise,
 };
 use any4d_eval::methods::{Method, MethodKind, RfMethod, WindowSampler, hide_non_keyframes};
 use any4d_eval::run::Reconstructor;
@@ -85,11 +84,7 @@ fn wave_clip() -> Clip {
         for i in 0..SIDE {
             for j in 0..SIDE {
                 let (x, y) = (i as f32 / 2.5 - 1.0, j as f32 / 2.5 - 1.0);
-                vertices.push([
-                    x + 0.05 * f as f32,
-                    y,
-                    0.3 * (2.0 * x + phase).sin() * (y + 0.5),
-                ]);
+                vertices.push([x + 0.05 * f as f32, y, 0.3 * (2.0 * x + phase).sin() * (y + 0.5)]);
             }
         }
     }
@@ -102,16 +97,7 @@ fn wave_clip() -> Clip {
             faces.push([v + 1, v + s + 1, v + s]);
         }
     }
-    Clip::new(
-        "grid_offset0_0-4",
-        vertices,
-        T,
-        N,
-        faces,
-        "a waving flag",
-        "test",
-    )
-    .expect("valid clip")
+    Clip::new("grid_offset0_0-4", vertices, T, N, faces, "a waving flag", "test").expect("valid clip")
 }
 
 fn stats() -> LatentStats {
@@ -152,10 +138,7 @@ fn floats<const D: usize>(t: Tensor<D>) -> Vec<f32> {
 
 fn max_diff(a: &[f32], b: &[f32]) -> f32 {
     assert_eq!(a.len(), b.len());
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f32::max)
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
 }
 
 fn rows_diff(a: &[[f32; 3]], b: &[[f32; 3]]) -> f32 {
@@ -170,36 +153,24 @@ fn slot(z: &[f32], f: usize) -> &[f32] {
 #[test]
 fn rf_sampler_gives_t_times_n_rows_deterministic_per_seed() {
     let device = Device::flex();
-    let m = models(
-        frame_codec(&device, PadTo::BatchMax),
-        KfMode::InputMask,
-        &device,
-    );
+    let m = models(frame_codec(&device, PadTo::BatchMax), KfMode::InputMask, &device);
     let sampler = RfSampler::new(m, options(KfMode::InputMask), 1.0).unwrap();
     let gt = wave_clip();
     let keys = [0, 2, 3];
     let visible = hide_non_keyframes(&gt, &keys);
-    let a = sampler
-        .sample(&visible, &keys, "a waving flag", 42)
-        .unwrap();
+    let a = sampler.sample(&visible, &keys, "a waving flag", 42).unwrap();
     assert_eq!(a.len(), T * N);
     assert!(a.iter().flatten().all(|v| v.is_finite()));
-    let again = sampler
-        .sample(&visible, &keys, "a waving flag", 42)
-        .unwrap();
+    let again = sampler.sample(&visible, &keys, "a waving flag", 42).unwrap();
     assert_eq!(a, again, "same seed, same output");
-    let other = sampler
-        .sample(&visible, &keys, "a waving flag", 43)
-        .unwrap();
+    let other = sampler.sample(&visible, &keys, "a waving flag", 43).unwrap();
     assert!(
         rows_diff(&a[N..2 * N], &other[N..2 * N]) > 1e-4,
         "another seed changes the non-keyframe"
     );
     let full = sampler.sample(&gt, &keys, "a waving flag", 42).unwrap();
     assert_eq!(a, full, "only frame 0 and the keyframes are read");
-    let caption = sampler
-        .sample(&visible, &keys, "a jumping frog", 42)
-        .unwrap();
+    let caption = sampler.sample(&visible, &keys, "a jumping frog", 42).unwrap();
     assert!(
         rows_diff(&a[N..2 * N], &caption[N..2 * N]) > 1e-6,
         "the caption reaches the network"
@@ -219,22 +190,14 @@ fn keyframe_slots_hold_the_keyframe_latents_after_sampling() {
         (KfMode::InputMask, KfMode::InputMask),
         (KfMode::None, KfMode::ReplaceNoised),
     ] {
-        let sampler =
-            RfSampler::new(models(codec.clone(), net, &device), options(mode), 1.0).unwrap();
+        let sampler = RfSampler::new(models(codec.clone(), net, &device), options(mode), 1.0).unwrap();
         let visible = hide_non_keyframes(&gt, &keys);
         let s = sampler.sample_latents(&visible, &keys, "flag", 5).unwrap();
         assert_eq!(s.latents.dims(), [1, T, P, C]);
         assert_eq!(s.mask, vec![1.0, 0.0, 1.0, 1.0]);
-        let (z, key) = (
-            floats(s.latents.clone()),
-            floats(s.keyframe_latents.clone()),
-        );
+        let (z, key) = (floats(s.latents.clone()), floats(s.keyframe_latents.clone()));
         for &f in &keys {
-            assert_eq!(
-                slot(&z, f),
-                slot(&key, f),
-                "{mode:?}: slot {f} is the keyframe latent"
-            );
+            assert_eq!(slot(&z, f), slot(&key, f), "{mode:?}: slot {f} is the keyframe latent");
             assert!(
                 max_diff(slot(&key, f), slot(&mu_all, f)) < 1e-5,
                 "{mode:?}: keyframe latent = μ of frame {f}"
@@ -269,18 +232,13 @@ fn zero_velocity_leaves_the_seeded_noise_de_standardized() {
         channels: C,
         ..MmditConfig::tiny()
     };
-    let m = Arc::new(
-        LearnedModels::new(codec, cfg.init(&device), cfg, stats(), Box::new(ByteText)).unwrap(),
-    );
+    let m = Arc::new(LearnedModels::new(codec, cfg.init(&device), cfg, stats(), Box::new(ByteText)).unwrap());
     let s = RfSampler::new(m, options(KfMode::InputMask), 1.0)
         .unwrap()
         .sample_latents(&wave_clip(), &[0, 3], "flag", 11)
         .unwrap();
     let eps = sampler_noise(11, [1, P, T, C], &device).swap_dims(1, 2); // [1, T, P, C]
-    let expect = floats(
-        eps.mul_scalar(stats().motion_std)
-            .add_scalar(stats().motion_mean),
-    );
+    let expect = floats(eps.mul_scalar(stats().motion_std).add_scalar(stats().motion_mean));
     let z = floats(s.latents);
     for f in [1, 2] {
         assert!(max_diff(slot(&z, f), slot(&expect, f)) < 1e-5, "frame {f}");
@@ -304,9 +262,7 @@ fn sample_latents_match_a_hand_wired_sample_mmdit() {
         ..MmditConfig::tiny()
     };
     let rf = cfg.init(&device).map(&mut WakeZeros);
-    let m = Arc::new(
-        LearnedModels::new(codec.clone(), rf.clone(), cfg, stats(), Box::new(ByteText)).unwrap(),
-    );
+    let m = Arc::new(LearnedModels::new(codec.clone(), rf.clone(), cfg, stats(), Box::new(ByteText)).unwrap());
     let opts = options(KfMode::InputMask);
     let gt = wave_clip();
     let got = RfSampler::new(m, opts, 1.0)
@@ -319,39 +275,19 @@ fn sample_latents_match_a_hand_wired_sample_mmdit() {
     let cond = Conditioning {
         z0: st.standardize_shape(enc.z0.clone()),
         z_key: st.standardize_motion(enc.mu.clone()).swap_dims(1, 2),
-        mask: Tensor::from_data(
-            TensorData::new(vec![1.0f32, 0.0, 0.0, 1.0], [1, T]),
-            &device,
-        ),
+        mask: Tensor::from_data(TensorData::new(vec![1.0f32, 0.0, 0.0, 1.0], [1, T]), &device),
     };
-    let text = ByteText
-        .encode(&["flag".to_string()], &device)
-        .unwrap()
-        .states;
-    let x1 = sample_mmdit(
-        &rf,
-        &cond,
-        text,
-        sampler_noise(3, [1, P, T, C], &device),
-        1.0,
-        &opts,
-    );
+    let text = ByteText.encode(&["flag".to_string()], &device).unwrap().states;
+    let x1 = sample_mmdit(&rf, &cond, text, sampler_noise(3, [1, P, T, C], &device), 1.0, &opts);
     let expect = floats(st.destandardize_motion(x1).swap_dims(1, 2));
     let err = max_diff(&floats(got.latents), &expect);
-    assert!(
-        err < 1e-4,
-        "latents differ from the hand-wired sampler by {err}"
-    );
+    assert!(err < 1e-4, "latents differ from the hand-wired sampler by {err}");
 }
 
 #[test]
 fn impute_until_samples_and_differs_from_input_mask() {
     let device = Device::flex();
-    let m = models(
-        frame_codec(&device, PadTo::BatchMax),
-        KfMode::InputMask,
-        &device,
-    );
+    let m = models(frame_codec(&device, PadTo::BatchMax), KfMode::InputMask, &device);
     let gt = wave_clip();
     let keys = [0, 2, 3];
     let impute = MethodKind::ImputeUntil {
@@ -360,10 +296,7 @@ fn impute_until_samples_and_differs_from_input_mask() {
     };
     let base = options(KfMode::InputMask);
     let s = RfSampler::for_method(impute, m.clone(), base, 1.0).unwrap();
-    assert_eq!(
-        (s.options().kf_mode, s.options().tau_star),
-        (KfMode::ImputeUntil, 0.5)
-    );
+    assert_eq!((s.options().kf_mode, s.options().tau_star), (KfMode::ImputeUntil, 0.5));
     let a = s.sample_latents(&gt, &keys, "flag", 9).unwrap();
     let b = RfSampler::for_method(MethodKind::KeyframeRf, m.clone(), base, 1.0)
         .unwrap()
@@ -389,13 +322,8 @@ fn impute_until_samples_and_differs_from_input_mask() {
 #[test]
 fn rf_method_around_rf_sampler_returns_ground_truth_keyframes() {
     let device = Device::flex();
-    let m = models(
-        frame_codec(&device, PadTo::BatchMax),
-        KfMode::InputMask,
-        &device,
-    );
-    let sampler =
-        RfSampler::for_method(MethodKind::KeyframeRf, m, options(KfMode::InputMask), 1.0).unwrap();
+    let m = models(frame_codec(&device, PadTo::BatchMax), KfMode::InputMask, &device);
+    let sampler = RfSampler::for_method(MethodKind::KeyframeRf, m, options(KfMode::InputMask), 1.0).unwrap();
     let method = RfMethod::new(MethodKind::KeyframeRf, sampler).unwrap();
     let gt = wave_clip();
     let keys = [0, 3];
@@ -405,10 +333,7 @@ fn rf_method_around_rf_sampler_returns_ground_truth_keyframes() {
     for &f in &keys {
         assert_eq!(&out[f * N..(f + 1) * N], gt.frame(f), "keyframe {f}");
     }
-    assert!(
-        rows_diff(&out[N..2 * N], gt.frame(1)) > 1e-3,
-        "frame 1 is generated"
-    );
+    assert!(rows_diff(&out[N..2 * N], gt.frame(1)) > 1e-3, "frame 1 is generated");
 }
 
 #[test]
@@ -430,20 +355,14 @@ fn latent_lerp_interpolates_keyframe_latents_and_decodes_them() {
             .zip(slot(&mu, 3))
             .map(|(a, b)| a + w * (b - a))
             .collect();
-        assert!(
-            max_diff(slot(&z, f), &expect) < 1e-5,
-            "(L1) on z at frame {f}"
-        );
+        assert!(max_diff(slot(&z, f), &expect) < 1e-5, "(L1) on z at frame {f}");
     }
     let out = lerp.sample(&visible, &keys, "", 0).unwrap();
     assert_eq!(out.len(), T * N);
     for f in keys {
         let alone = codec.decode(&all, all.mu.clone().narrow(1, f, 1)).unwrap();
         let err = rows_diff(&out[f * N..(f + 1) * N], &alone);
-        assert!(
-            err < 1e-4,
-            "lerp at keyframe {f} is decode(μ_{f}); error {err}"
-        );
+        assert!(err < 1e-4, "lerp at keyframe {f} is decode(μ_{f}); error {err}");
     }
     let err = lerp.sample(&visible, &[0, 2], "", 0).unwrap_err();
     assert!(err.to_string().contains("first and last"), "{err}");
@@ -473,10 +392,7 @@ fn vae_reconstructors_match_the_model_reconstruct() {
     let batch = vae_batch(&gt, &device);
     let frame = FrameVaeConfig::tiny().init(&device).map(&mut WakeZeros);
     let expect_frame = floats(frame.reconstruct(&batch, Posterior::Mean).0);
-    let seq = DyMeshVaeConfig::tiny()
-        .with_frames(T)
-        .init(&device)
-        .map(&mut WakeZeros);
+    let seq = DyMeshVaeConfig::tiny().with_frames(T).init(&device).map(&mut WakeZeros);
     let expect_seq = floats(seq.reconstruct(&batch, Posterior::Mean).0);
     assert!(
         max_diff(&expect_frame, &gt.vertices.concat()) > 1e-3,
@@ -489,41 +405,14 @@ fn vae_reconstructors_match_the_model_reconstruct() {
             .unwrap()
             .concat()
     };
-    let f = rows(
-        MeshCodec::new(
-            MeshVae::Frame(frame.clone()),
-            P,
-            PadTo::BatchMax,
-            device.clone(),
-        )
-        .unwrap(),
-    );
+    let f = rows(MeshCodec::new(MeshVae::Frame(frame.clone()), P, PadTo::BatchMax, device.clone()).unwrap());
     assert!(max_diff(&f, &expect_frame) < 1e-5, "frame-wise (E4)");
-    let padded = rows(
-        MeshCodec::new(
-            MeshVae::Frame(frame),
-            P,
-            PadTo::Fixed(N + 7),
-            device.clone(),
-        )
-        .unwrap(),
-    );
+    let padded = rows(MeshCodec::new(MeshVae::Frame(frame), P, PadTo::Fixed(N + 7), device.clone()).unwrap());
     assert!(
         max_diff(&padded, &expect_frame) < 1e-4,
         "masked padded keys do not change the latents"
     );
-    let s = rows(
-        MeshCodec::new(
-            MeshVae::Sequence {
-                vae: seq,
-                frames: T,
-            },
-            P,
-            PadTo::BatchMax,
-            device,
-        )
-        .unwrap(),
-    );
+    let s = rows(MeshCodec::new(MeshVae::Sequence { vae: seq, frames: T }, P, PadTo::BatchMax, device).unwrap());
     assert!(max_diff(&s, &expect_seq) < 1e-5, "sequence-wise (E4)");
 }
 
@@ -536,10 +425,7 @@ fn mismatched_parts_and_bad_windows_are_errors() {
         .err()
         .expect("layout mismatch");
     assert!(e.to_string().contains("mask channels"), "{e}");
-    assert!(
-        RfSampler::for_method(MethodKind::Lerp, m.clone(), options(KfMode::InputMask), 1.0)
-            .is_err()
-    );
+    assert!(RfSampler::for_method(MethodKind::Lerp, m.clone(), options(KfMode::InputMask), 1.0).is_err());
     let sampler = RfSampler::new(m, options(KfMode::InputMask), 1.0).unwrap();
     let gt = wave_clip();
     let e = sampler.sample(&gt, &[0, 7], "", 0).unwrap_err();
@@ -561,18 +447,8 @@ fn mismatched_parts_and_bad_windows_are_errors() {
         .expect("text width");
     assert!(e.to_string().contains("text_dim 16"), "{e}");
     let seq = DyMeshVaeConfig::tiny().with_frames(T).init(&device);
-    let seq_codec = Arc::new(
-        MeshCodec::new(
-            MeshVae::Sequence {
-                vae: seq,
-                frames: T,
-            },
-            P,
-            PadTo::BatchMax,
-            device,
-        )
-        .unwrap(),
-    );
+    let seq_codec =
+        Arc::new(MeshCodec::new(MeshVae::Sequence { vae: seq, frames: T }, P, PadTo::BatchMax, device).unwrap());
     assert!(LatentLerpSampler::new(seq_codec.clone()).is_err());
     let e = seq_codec.encode(&gt, &[0, 3]).unwrap_err();
     assert!(e.to_string().contains("whole windows"), "{e}");
@@ -605,13 +481,10 @@ fn paper_size_window_timing() {
         .collect();
     let clip = Clip::new("big_offset0_0-16", vertices, t, n, faces, "flag", "test").unwrap();
     let vae = FrameVaeConfig::new().init(&device);
-    let codec = Arc::new(
-        MeshCodec::new(MeshVae::Frame(vae), 512, PadTo::BatchMax, device.clone()).unwrap(),
-    );
+    let codec = Arc::new(MeshCodec::new(MeshVae::Frame(vae), 512, PadTo::BatchMax, device.clone()).unwrap());
     let cfg = MmditConfig::paper(KfMode::InputMask, 8);
     let rf = cfg.init(&device);
-    let m =
-        Arc::new(LearnedModels::new(codec.clone(), rf, cfg, stats(), Box::new(ByteText)).unwrap());
+    let m = Arc::new(LearnedModels::new(codec.clone(), rf, cfg, stats(), Box::new(ByteText)).unwrap());
     let opts = SampleOptions {
         n_grid: 2,
         ..SampleOptions::paper(KfMode::InputMask)

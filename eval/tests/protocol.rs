@@ -3,12 +3,9 @@
 use any4d_data::Clip;
 use any4d_eval::baselines::VertexBaseline;
 use any4d_eval::methods::{
-    KeyframeNoise, Method, MethodKind, VertexMethod, complete_and_score, hide_non_keyframes,
-    noisy_keyframes,
+    KeyframeNoise, Method, MethodKind, VertexMethod, complete_and_score, hide_non_keyframes, noisy_keyframes,
 };
-use any4d_eval::protocol::{
-    Candidate, ClipRef, Manifest, ManifestOptions, Placement, long_horizon_pairs, noise_seed,
-};
+use any4d_eval::protocol::{Candidate, ClipRef, Manifest, ManifestOptions, Placement, long_horizon_pairs, noise_seed};
 
 fn candidates(n: usize) -> Vec<Candidate> {
     (0..n)
@@ -32,19 +29,8 @@ fn opts(n: usize) -> ManifestOptions {
 #[test]
 fn manifest_is_deterministic_nested_and_keeps_first_and_last() {
     let m = Manifest::build(&candidates(300), &opts(100), "store").unwrap();
-    assert_eq!(
-        m,
-        Manifest::build(&candidates(300), &opts(100), "store").unwrap()
-    );
-    let other = Manifest::build(
-        &candidates(300),
-        &ManifestOptions {
-            seed: 43,
-            ..opts(100)
-        },
-        "store",
-    )
-    .unwrap();
+    assert_eq!(m, Manifest::build(&candidates(300), &opts(100), "store").unwrap());
+    let other = Manifest::build(&candidates(300), &ManifestOptions { seed: 43, ..opts(100) }, "store").unwrap();
     assert_ne!(m.clips, other.clips, "the seed must change the draw");
     assert_eq!(m.clips.len(), 100);
     let mut ids: Vec<usize> = m.clips.iter().map(|c| c.clip.index).collect();
@@ -156,9 +142,7 @@ fn other_placements_keep_the_ends() {
         ..opts(3)
     };
     assert_eq!(
-        Manifest::build(&candidates(3), &bad, "s")
-            .unwrap_err()
-            .field,
+        Manifest::build(&candidates(3), &bad, "s").unwrap_err().field,
         "placement"
     );
 }
@@ -205,12 +189,7 @@ fn long_horizon_pairs_share_the_boundary_frame() {
 
 /// A linear-motion clip: vertex v of frame f at base_v + f · vel_v.
 pub fn linear_clip(frames: usize) -> Clip {
-    let base = [
-        [0.0, 0.0, 0.0],
-        [1.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [0.0, 0.0, 1.0],
-    ];
+    let base = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     let vel = [
         [0.01, 0.0, 0.02],
         [0.0, -0.03, 0.0],
@@ -238,13 +217,7 @@ impl Method for Peek {
     fn kind(&self) -> MethodKind {
         MethodKind::KeyframeRf
     }
-    fn complete(
-        &self,
-        clip: &Clip,
-        _k: &[usize],
-        _c: &str,
-        _s: u64,
-    ) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
+    fn complete(&self, clip: &Clip, _k: &[usize], _c: &str, _s: u64) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
         Ok(clip.vertices.clone())
     }
 }
@@ -254,24 +227,15 @@ fn methods_see_only_keyframes_and_lerp_is_exact_on_linear_motion() {
     let gt = linear_clip(16);
     let keys = [0, 6, 15];
     let hidden = hide_non_keyframes(&gt, &keys);
-    assert_eq!(
-        hidden.frame(3),
-        gt.frame(0),
-        "non-keyframes show the reference mesh"
-    );
+    assert_eq!(hidden.frame(3), gt.frame(0), "non-keyframes show the reference mesh");
     assert_eq!(hidden.frame(6), gt.frame(6));
     let peek = complete_and_score(&Peek, &gt, &keys, "", 1).unwrap();
     assert!(
         peek.metrics.rmse > 1e-3,
         "a method that copies its input must not recover hidden frames"
     );
-    let lerp =
-        complete_and_score(&VertexMethod(VertexBaseline::Linear), &gt, &keys, "", 1).unwrap();
-    assert!(
-        lerp.metrics.rmse < 1e-5,
-        "lerp on linear motion: {}",
-        lerp.metrics.rmse
-    );
+    let lerp = complete_and_score(&VertexMethod(VertexBaseline::Linear), &gt, &keys, "", 1).unwrap();
+    assert!(lerp.metrics.rmse < 1e-5, "lerp on linear motion: {}", lerp.metrics.rmse);
     for &k in &keys {
         assert_eq!(
             &lerp.prediction[k * 4..(k + 1) * 4],
@@ -279,14 +243,7 @@ fn methods_see_only_keyframes_and_lerp_is_exact_on_linear_motion() {
             "keyframe {k} returned exactly"
         );
     }
-    let nearest = complete_and_score(
-        &VertexMethod(VertexBaseline::NearestKeyframe),
-        &gt,
-        &keys,
-        "",
-        1,
-    )
-    .unwrap();
+    let nearest = complete_and_score(&VertexMethod(VertexBaseline::NearestKeyframe), &gt, &keys, "", 1).unwrap();
     assert!(nearest.metrics.rmse > lerp.metrics.rmse);
     assert!(
         nearest.metrics.energy_ratio < 1.0,
@@ -347,13 +304,7 @@ fn keyframe_noise_spares_the_ends_and_has_the_set_scale() {
 /// A stand-in sampler whose raw output misses the keyframes (as a decoded RF sample does).
 struct Drifting;
 impl any4d_eval::methods::WindowSampler for Drifting {
-    fn sample(
-        &self,
-        clip: &Clip,
-        _k: &[usize],
-        _c: &str,
-        seed: u64,
-    ) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
+    fn sample(&self, clip: &Clip, _k: &[usize], _c: &str, seed: u64) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
         Ok(clip
             .vertices
             .iter()
@@ -371,33 +322,21 @@ fn rf_methods_return_keyframes_exactly_in_the_eval_path() {
         let m = RfMethod::new(kind, Drifting).unwrap();
         let s = complete_and_score(&m, &gt, &keys, "", 7).unwrap();
         for &k in &keys {
-            assert_eq!(
-                &s.prediction[k * 4..(k + 1) * 4],
-                gt.frame(k),
-                "{kind}: keyframe {k}"
-            );
+            assert_eq!(&s.prediction[k * 4..(k + 1) * 4], gt.frame(k), "{kind}: keyframe {k}");
         }
         assert_eq!(s.metrics.keyframe_rmse, 0.0);
-        assert!(
-            s.metrics.rmse > 0.01,
-            "non-keyframes keep the sampler's output"
-        );
+        assert!(s.metrics.rmse > 0.01, "non-keyframes keep the sampler's output");
     }
     let noisy = MethodKind::ImputeUntil {
         tau_star: 0.98,
         keyframes: KeyframeNoise::Noisy { level: 1.0 },
     };
-    let s =
-        complete_and_score(&RfMethod::new(noisy, Drifting).unwrap(), &gt, &keys, "", 7).unwrap();
+    let s = complete_and_score(&RfMethod::new(noisy, Drifting).unwrap(), &gt, &keys, "", 7).unwrap();
     assert_ne!(
         &s.prediction[4 * 4..5 * 4],
         gt.frame(4),
         "noisy keyframes are what the method is given"
     );
-    assert_eq!(
-        &s.prediction[..4],
-        gt.frame(0),
-        "the first frame stays clean"
-    );
+    assert_eq!(&s.prediction[..4], gt.frame(0), "the first frame stays clean");
     assert!(RfMethod::new(MethodKind::Lerp, Drifting).is_err());
 }

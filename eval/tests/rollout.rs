@@ -6,20 +6,13 @@ use std::cell::RefCell;
 use any4d_data::DataError;
 use any4d_eval::baselines::VertexBaseline;
 use any4d_eval::metrics::Motion;
-use any4d_eval::rollout::{
-    OverlapSource, RolloutSpec, WindowFrame, WindowInput, rollout, seam_jerk,
-};
+use any4d_eval::rollout::{OverlapSource, RolloutSpec, WindowFrame, WindowInput, rollout, seam_jerk};
 
 const N: usize = 4;
 
 /// Vertex v of global frame f on a smooth, non-linear path (so a wrong frame index shows).
 fn sequence(frames: usize) -> Vec<[f32; 3]> {
-    let base = [
-        [0.0, 0.0, 0.0],
-        [1.0, 0.0, 0.0],
-        [0.0, 1.0, 0.0],
-        [0.0, 0.0, 1.0],
-    ];
+    let base = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     (0..frames)
         .flat_map(|f| {
             let t = f as f32 / 10.0;
@@ -66,15 +59,7 @@ fn thirty_one_frames_stitch_without_duplicating_frame_15() {
             .flat_map(|l| (0..N).map(move |_| [(w.index * 100 + l) as f32, 0.0, 0.0]))
             .collect())
     };
-    let r = rollout(
-        &gt,
-        N,
-        &[0, 15, 30],
-        &["first", "second"],
-        RolloutSpec::paper(),
-        tagger,
-    )
-    .unwrap();
+    let r = rollout(&gt, N, &[0, 15, 30], &["first", "second"], RolloutSpec::paper(), tagger).unwrap();
     assert_eq!(r.vertices.len(), 31 * N);
     assert_eq!(r.starts, vec![0, 15]);
     let calls = calls.into_inner();
@@ -85,11 +70,7 @@ fn thirty_one_frames_stitch_without_duplicating_frame_15() {
     let tags: Vec<usize> = (0..31)
         .map(|f| {
             let p = r.vertices[f * N];
-            let x = if f < 15 {
-                p[0]
-            } else {
-                (p[0] - f1.center[0]) / f1.scale
-            };
+            let x = if f < 15 { p[0] } else { (p[0] - f1.center[0]) / f1.scale };
             x.round() as usize
         })
         .collect();
@@ -156,10 +137,7 @@ fn overlap_source_picks_the_reference_and_hidden_frames_stay_hidden() {
     let gt = sequence(31);
     let offset = |w: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, DataError> {
         // Every generated frame is the input shifted by 0.1 in x (keyframes too, as a raw sampler output would be).
-        Ok(w.vertices
-            .iter()
-            .map(|p| [p[0] + 0.1, p[1], p[2]])
-            .collect())
+        Ok(w.vertices.iter().map(|p| [p[0] + 0.1, p[1], p[2]]).collect())
     };
     let seen = RefCell::new(Vec::new());
     let record = |w: &WindowInput<'_>| {
@@ -173,10 +151,7 @@ fn overlap_source_picks_the_reference_and_hidden_frames_stay_hidden() {
     let r = rollout(&gt, N, &[0, 15, 30], &["p"], spec, record).unwrap();
     let seen = seen.into_inner();
     // Generated: window 1's reference is stage 1's output at frame 15 (gt + 0.1 before any replacement).
-    let reference: Vec<[f32; 3]> = seen[1][..N]
-        .iter()
-        .map(|p| r.frames[1].denormalize(*p))
-        .collect();
+    let reference: Vec<[f32; 3]> = seen[1][..N].iter().map(|p| r.frames[1].denormalize(*p)).collect();
     for (a, b) in reference.iter().zip(&gt[15 * N..16 * N]) {
         assert!(
             (a[0] - (b[0] + 0.1)).abs() < 1e-5 && (a[1] - b[1]).abs() < 1e-5,
@@ -193,15 +168,7 @@ fn overlap_source_picks_the_reference_and_hidden_frames_stay_hidden() {
         seen_gt.borrow_mut().push(w.vertices.clone());
         offset(w)
     };
-    let r = rollout(
-        &gt,
-        N,
-        &[0, 15, 30],
-        &["p"],
-        RolloutSpec::paper(),
-        record_gt,
-    )
-    .unwrap();
+    let r = rollout(&gt, N, &[0, 15, 30], &["p"], RolloutSpec::paper(), record_gt).unwrap();
     let reference: Vec<[f32; 3]> = seen_gt.into_inner()[1][..N]
         .iter()
         .map(|p| r.frames[1].denormalize(*p))
@@ -217,9 +184,7 @@ fn generator_errors_and_bad_inputs_are_reported() {
     let short = |_: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, DataError> { Ok(vec![[0.0; 3]; 3]) };
     let e = rollout(&gt, N, &[0, 15, 30], &["p"], RolloutSpec::paper(), short).unwrap_err();
     assert_eq!(e.field, "window 0");
-    let nan = |w: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, DataError> {
-        Ok(vec![[f32::NAN; 3]; w.vertices.len()])
-    };
+    let nan = |w: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, DataError> { Ok(vec![[f32::NAN; 3]; w.vertices.len()]) };
     assert!(
         rollout(&gt, N, &[0, 15, 30], &["p"], RolloutSpec::paper(), nan)
             .unwrap_err()
@@ -227,16 +192,9 @@ fn generator_errors_and_bad_inputs_are_reported() {
             .contains("non-finite")
     );
     assert_eq!(
-        rollout(
-            &gt,
-            N,
-            &[0, 15, 30],
-            &["a", "b", "c"],
-            RolloutSpec::paper(),
-            lerp
-        )
-        .unwrap_err()
-        .field,
+        rollout(&gt, N, &[0, 15, 30], &["a", "b", "c"], RolloutSpec::paper(), lerp)
+            .unwrap_err()
+            .field,
         "captions"
     );
     assert_eq!(
@@ -253,10 +211,7 @@ fn rolling_extension_runs_three_windows() {
     let r = rollout(&gt, N, &[0, 15, 30, 45], &["p"], RolloutSpec::paper(), lerp).unwrap();
     assert_eq!(r.starts, vec![0, 15, 30]);
     for k in [0, 15, 30, 45] {
-        for (a, b) in r.vertices[k * N..(k + 1) * N]
-            .iter()
-            .zip(&gt[k * N..(k + 1) * N])
-        {
+        for (a, b) in r.vertices[k * N..(k + 1) * N].iter().zip(&gt[k * N..(k + 1) * N]) {
             assert!(
                 (0..3).all(|c| (a[c] - b[c]).abs() < 1e-5),
                 "keyframe {k}: {a:?} vs {b:?}"
@@ -269,15 +224,9 @@ fn rolling_extension_runs_three_windows() {
 fn seam_jerk_is_zero_on_linear_motion_and_positive_at_a_kink() {
     let linear: Vec<[f32; 3]> = (0..31).map(|f| [f as f32 * 0.1, 0.0, 0.0]).collect();
     assert!(seam_jerk(&linear, 1, 15, 2, 1.0).unwrap() < 1e-6);
-    let kink: Vec<[f32; 3]> = (0..31)
-        .map(|f| [f.min(15) as f32 * 0.1, 0.0, 0.0])
-        .collect();
+    let kink: Vec<[f32; 3]> = (0..31).map(|f| [f.min(15) as f32 * 0.1, 0.0, 0.0]).collect();
     // Band 13..=17: j_13 = x16 − 3x15 + 3x14 − x13 = −0.1 (|·| = 0.1), j_14 = x17 − 3x16 + 3x15 − x14 = 0.1.
     let j = seam_jerk(&kink, 1, 15, 2, 1.0).unwrap();
     assert!((j - 0.1).abs() < 1e-6, "{j}");
-    assert_eq!(
-        seam_jerk(&kink, 1, 15, 1, 1.0),
-        None,
-        "a ±1 band has only three frames"
-    );
+    assert_eq!(seam_jerk(&kink, 1, 15, 1, 1.0), None, "a ±1 band has only three frames");
 }

@@ -5,8 +5,8 @@ use std::collections::BTreeMap;
 
 use any4d_eval::plot::{Canvas, PALETTE, Series, WHITE, line_plot, nice_ticks};
 use any4d_eval::tables::{
-    ClipRecord, TableHeader, TableKind, TimingRecord, csv, markdown, mean_ci95, median, summarize,
-    timing_tables, write_clip_parquet,
+    ClipRecord, TableHeader, TableKind, TimingRecord, csv, markdown, mean_ci95, median, summarize, timing_tables,
+    write_clip_parquet,
 };
 use polars::prelude::{ParquetReader, SerReader};
 
@@ -38,12 +38,9 @@ fn header() -> TableHeader {
         data: "synthetic store (validation)".into(),
         manifest: "out/manifest.json".into(),
         text_encoder: "scratch".into(),
-        checkpoints: [(
-            "keyframe_rf".to_string(),
-            "runs/rf-1/checkpoints/step_100".to_string(),
-        )]
-        .into_iter()
-        .collect(),
+        checkpoints: [("keyframe_rf".to_string(), "runs/rf-1/checkpoints/step_100".to_string())]
+            .into_iter()
+            .collect(),
         device: String::new(),
     }
 }
@@ -75,14 +72,8 @@ fn summary_averages_clips_per_seed_then_seeds() {
         record("keyframe_rf", 1, 42, 0, 0.01),
     ];
     let rows = summarize(&records, TableKind::Table1).unwrap();
-    let labels: Vec<(&str, usize)> = rows
-        .iter()
-        .map(|r| (r.method.as_str(), r.k_extra))
-        .collect();
-    assert_eq!(
-        labels,
-        vec![("keyframe_rf", 0), ("keyframe_rf", 1), ("lerp", 0)]
-    );
+    let labels: Vec<(&str, usize)> = rows.iter().map(|r| (r.method.as_str(), r.k_extra)).collect();
+    assert_eq!(labels, vec![("keyframe_rf", 0), ("keyframe_rf", 1), ("lerp", 0)]);
     let rmse = rows[0].values[0];
     assert!((rmse.mean - 0.04).abs() < 1e-12 && rmse.n == 2 && rows[0].clips == 2);
     assert!((rmse.ci95.unwrap() - 12.706 * (0.0002f64).sqrt() / 2f64.sqrt()).abs() < 1e-9);
@@ -112,17 +103,9 @@ fn summary_averages_clips_per_seed_then_seeds() {
     assert_eq!(lines.len(), 4);
     let cols = lines[0].split(',').count();
     assert!(lines.iter().all(|l| l.split(',').count() == cols), "{text}");
-    assert!(
-        lines[1].starts_with("keyframe_rf,random,0,2,2,"),
-        "{}",
-        lines[1]
-    );
+    assert!(lines[1].starts_with("keyframe_rf,random,0,2,2,"), "{}", lines[1]);
     let rmse_mean: f64 = lines[1].split(',').nth(5).unwrap().parse().unwrap();
-    assert!(
-        (rmse_mean - 4.0).abs() < 1e-9,
-        "×100 in the CSV too: {}",
-        lines[1]
-    );
+    assert!((rmse_mean - 4.0).abs() < 1e-9, "×100 in the CSV too: {}", lines[1]);
     assert!(
         lines[3].contains(",none,scratch,"),
         "training-free methods name no checkpoint: {}",
@@ -142,10 +125,7 @@ fn missing_metric_is_named() {
 fn parquet_round_trips_per_clip_records() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("clips.parquet");
-    let records = vec![
-        record("lerp", 0, 42, 0, 0.1),
-        record("lerp", 1, 42, 0, 0.07),
-    ];
+    let records = vec![record("lerp", 0, 42, 0, 0.1), record("lerp", 1, 42, 0, 0.07)];
     write_clip_parquet(&records, &path).unwrap();
     let df = ParquetReader::new(std::fs::File::open(&path).unwrap())
         .finish()
@@ -153,20 +133,11 @@ fn parquet_round_trips_per_clip_records() {
     assert_eq!(df.height(), 2);
     let rmse = df.column("rmse").unwrap().f64().unwrap().get(1).unwrap();
     assert_eq!(rmse, 0.07);
-    assert_eq!(
-        df.column("method").unwrap().str().unwrap().get(0),
-        Some("lerp")
-    );
-    assert_eq!(
-        any4d_eval::tables::read_clip_parquet(&path).unwrap(),
-        records
-    );
+    assert_eq!(df.column("method").unwrap().str().unwrap().get(0), Some("lerp"));
+    assert_eq!(any4d_eval::tables::read_clip_parquet(&path).unwrap(), records);
     let mut bad = records.clone();
     bad[1].metrics.insert("extra".into(), 1.0);
-    assert_eq!(
-        write_clip_parquet(&bad, &path).unwrap_err().field,
-        "metrics"
-    );
+    assert_eq!(write_clip_parquet(&bad, &path).unwrap_err().field, "metrics");
 }
 
 #[test]
@@ -192,15 +163,9 @@ fn timing_table_reports_medians() {
         ..header()
     };
     let (md, csv) = timing_tables(&recs, &h);
-    assert!(
-        md.contains("| keyframe_rf | 16 | 2.000 | 4.000 | 3.000 |"),
-        "{md}"
-    );
+    assert!(md.contains("| keyframe_rf | 16 | 2.000 | 4.000 | 3.000 |"), "{md}");
     assert!(md.contains("flex / cpu"), "{md}");
-    assert_eq!(
-        csv.lines().nth(1).unwrap(),
-        "keyframe_rf,16,2,4,3,flex / cpu"
-    );
+    assert_eq!(csv.lines().nth(1).unwrap(), "keyframe_rf,16,2,4,3,flex / cpu");
 }
 
 #[test]
@@ -224,20 +189,14 @@ fn plot_writes_a_png_with_series_colours() {
     let img = image::open(&path).unwrap().to_rgb8();
     assert_eq!(img.dimensions(), (720, 480));
     for colour in [PALETTE[0], PALETTE[1]] {
-        assert!(
-            img.pixels().any(|p| p.0 == colour),
-            "series colour {colour:?} drawn"
-        );
+        assert!(img.pixels().any(|p| p.0 == colour), "series colour {colour:?} drawn");
     }
     let nan = vec![Series {
         label: "bad".into(),
         points: vec![(0.0, f64::NAN)],
         errors: None,
     }];
-    assert_eq!(
-        line_plot("t", "x", "y", &nan, &path).unwrap_err().field,
-        "bad"
-    );
+    assert_eq!(line_plot("t", "x", "y", &nan, &path).unwrap_err().field, "bad");
 }
 
 #[test]
@@ -250,11 +209,7 @@ fn font_draws_distinct_glyphs() {
     assert_eq!(draw(" "), 0);
     assert_eq!(draw("1"), 10);
     assert_ne!(draw("8"), draw("0"));
-    assert_eq!(
-        draw("a"),
-        draw("A"),
-        "lower case uses the upper-case glyphs"
-    );
+    assert_eq!(draw("a"), draw("A"), "lower case uses the upper-case glyphs");
 }
 
 /// End to end on a small procedural store: `run_protocol` writes the manifest, parquet, summaries, plot and strips.
@@ -311,11 +266,7 @@ fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
         assert!(out.join(f).is_file(), "{f} missing");
     }
     let strips: Vec<_> = std::fs::read_dir(out.join("strips")).unwrap().collect();
-    assert_eq!(
-        strips.len(),
-        2 * 4,
-        "one strip per method and K_x for the first item"
-    );
+    assert_eq!(strips.len(), 2 * 4, "one strip per method and K_x for the first item");
     let df = ParquetReader::new(std::fs::File::open(out.join("clips.parquet")).unwrap())
         .finish()
         .unwrap();
@@ -339,11 +290,7 @@ fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
     t2.progress = false;
     let report = run_protocol(&t2).unwrap();
     assert_eq!(report.rows.len(), 1);
-    assert!(
-        report.markdown.contains("seam jerk / GT"),
-        "{}",
-        report.markdown
-    );
+    assert!(report.markdown.contains("seam jerk / GT"), "{}", report.markdown);
     assert!(
         report.rows[0].values.iter().all(|v| v.mean.is_finite()),
         "{:?}",
@@ -357,16 +304,9 @@ fn timing_table_runs_for_a_training_free_method() {
     use any4d_eval::run::{RunOptions, run_protocol, timing_clip, vertex_methods};
     let c = timing_clip(512, 16).unwrap();
     assert_eq!((c.n_vertices, c.frames), (512, 16));
-    assert!(
-        timing_clip(7, 16).is_err(),
-        "a prime count has no 2-row grid"
-    );
+    assert!(timing_clip(7, 16).is_err(), "a prime count has no 2-row grid");
     let dir = tempfile::tempdir().unwrap();
-    let mut opts = RunOptions::new(
-        TableKind::Table4,
-        dir.path().join("none"),
-        dir.path().join("t4"),
-    );
+    let mut opts = RunOptions::new(TableKind::Table4, dir.path().join("none"), dir.path().join("t4"));
     opts.methods = vertex_methods(&[MethodKind::Lerp]).unwrap();
     opts.timing_vertices = vec![512, 1024];
     opts.timing_reps = 3;

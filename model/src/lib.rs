@@ -2,11 +2,11 @@
 //! the sequence-wise DyMeshVAE ablation, text encoders. No file IO except weight loading.
 
 pub mod attention;
-pub mod point_embed;
-pub mod frame_vae;
 pub mod dymesh_vae;
+pub mod frame_vae;
 pub mod latent_stats;
 pub mod mmdit;
+pub mod point_embed;
 pub mod rectified_flow;
-pub mod text;
 pub mod summary;
+pub mod text;

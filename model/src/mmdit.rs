@@ -114,7 +114,7 @@ impl MmditConfig {
                 return Err(format!("model.{name} must be positive, got 0"));
             }
         }
-        if self.width % self.heads != 0 {
+        if !self.width.is_multiple_of(self.heads) {
             return Err(format!(
                 "model.width ({}) must be a multiple of model.heads ({})",
                 self.width, self.heads
@@ -250,12 +250,7 @@ pub fn replace_keyframes(x: Tensor<4>, z_key: Tensor<4>, mask: Tensor<2>) -> Ten
 /// - state: `[B, P, T, C]` trajectory slots 1..T (already replaced where wanted)
 /// - mask: `[B, T]` mask channel values, 1 = observed
 /// - output: `[B, P, (T+1)(C+1)]` or `[B, P, (T+1)·C]`
-pub fn assemble_input(
-    z0: Tensor<3>,
-    state: Tensor<4>,
-    mask: Tensor<2>,
-    kf_mode: KfMode,
-) -> Tensor<3> {
+pub fn assemble_input(z0: Tensor<3>, state: Tensor<4>, mask: Tensor<2>, kf_mode: KfMode) -> Tensor<3> {
     let [b, p, t, c] = state.dims();
     let slots = Tensor::cat(vec![z0.unsqueeze_dim::<4>(2), state], 2); // [B, P, T+1, C]
     if !kf_mode.has_mask_channels() {
@@ -273,13 +268,7 @@ pub fn assemble_input(
 /// # Shapes
 /// - z0: `[B, P, C]`; x, z_key: `[B, P, T, C]`; mask: `[B, T]` (1 = observed)
 /// - output: `[B, P, in_channels]` with in_channels = (T+1)(C+1) or (T+1)·C
-pub fn build_input(
-    z0: Tensor<3>,
-    x: Tensor<4>,
-    mask: Tensor<2>,
-    z_key: Tensor<4>,
-    kf_mode: KfMode,
-) -> Tensor<3> {
+pub fn build_input(z0: Tensor<3>, x: Tensor<4>, mask: Tensor<2>, z_key: Tensor<4>, kf_mode: KfMode) -> Tensor<3> {
     let state = if kf_mode.replaces_keyframes() {
         replace_keyframes(x, z_key, mask.clone())
     } else {
@@ -323,8 +312,7 @@ impl TimestepEmbedder {
     /// - tau: `[B]` raw flow time (τ, not 1 − τ)
     /// - output: `[B, W]`
     pub fn forward(&self, tau: Tensor<1>) -> Tensor<2> {
-        self.fc2
-            .forward(gelu(self.fc1.forward(timestep_sinusoid(tau))))
+        self.fc2.forward(gelu(self.fc1.forward(timestep_sinusoid(tau))))
     }
 }
 
@@ -343,11 +331,7 @@ pub struct Modulation {
 
 impl Modulation {
     fn from_linear(ada: &Linear, temb_act: Tensor<2>) -> Self {
-        let mut parts = ada
-            .forward(temb_act)
-            .unsqueeze_dim::<3>(1)
-            .chunk(6, 2)
-            .into_iter();
+        let mut parts = ada.forward(temb_act).unsqueeze_dim::<3>(1).chunk(6, 2).into_iter();
         let mut next = || parts.next().expect("six adaLN chunks");
         Self {
             shift1: next(),
@@ -388,16 +372,8 @@ impl MmditBlock {
     ) -> (Tensor<3>, Modulation, Modulation) {
         let mod_m = Modulation::from_linear(&self.ada_motion, temb_act.clone());
         let mod_t = Modulation::from_linear(&self.ada_text, temb_act);
-        let nm = modulate(
-            plain_layer_norm(motion),
-            mod_m.shift1.clone(),
-            mod_m.scale1.clone(),
-        );
-        let nt = modulate(
-            plain_layer_norm(text),
-            mod_t.shift1.clone(),
-            mod_t.scale1.clone(),
-        );
+        let nm = modulate(plain_layer_norm(motion), mod_m.shift1.clone(), mod_m.scale1.clone());
+        let nt = modulate(plain_layer_norm(text), mod_t.shift1.clone(), mod_t.scale1.clone());
         (Tensor::cat(vec![nm, nt], 1), mod_m, mod_t)
     }
 
@@ -410,17 +386,9 @@ impl MmditBlock {
         let [b, s, w] = joint.dims();
         let h = self.heads;
         let hd = w / h;
-        let qkv = self
-            .qkv
-            .forward(joint)
-            .reshape([b, s, h, 3 * hd])
-            .swap_dims(1, 2); // [B, H, S, 3·hd]
+        let qkv = self.qkv.forward(joint).reshape([b, s, h, 3 * hd]).swap_dims(1, 2); // [B, H, S, 3·hd]
         let mut parts = qkv.chunk(3, 3).into_iter();
-        let (q, k, v) = (
-            parts.next().unwrap(),
-            parts.next().unwrap(),
-            parts.next().unwrap(),
-        );
+        let (q, k, v) = (parts.next().unwrap(), parts.next().unwrap(), parts.next().unwrap());
         let options = AttentionModuleOptions {
             scale: None,
             softcap: None,
@@ -448,19 +416,9 @@ impl MmditBlock {
         let at = attn.narrow(1, p, l);
         let motion = motion + mod_m.gate1 * am;
         let text = text + mod_t.gate1 * at;
-        let mm = modulate(
-            self.norm2_motion.forward(motion.clone()),
-            mod_m.shift2,
-            mod_m.scale2,
-        );
-        let mt = modulate(
-            self.norm2_text.forward(text.clone()),
-            mod_t.shift2,
-            mod_t.scale2,
-        );
-        let f = self
-            .fc2
-            .forward(gelu(self.fc1.forward(Tensor::cat(vec![mm, mt], 1))));
+        let mm = modulate(self.norm2_motion.forward(motion.clone()), mod_m.shift2, mod_m.scale2);
+        let mt = modulate(self.norm2_text.forward(text.clone()), mod_t.shift2, mod_t.scale2);
+        let f = self.fc2.forward(gelu(self.fc1.forward(Tensor::cat(vec![mm, mt], 1))));
         let fm = f.clone().narrow(1, 0, p);
         let ft = f.narrow(1, p, l);
         (motion + mod_m.gate2 * fm, text + mod_t.gate2 * ft)
@@ -468,12 +426,7 @@ impl MmditBlock {
 
     /// # Shapes
     /// - motion `[B, P, W]`, text `[B, L, W]`, temb_act `[B, W]`; outputs `[B, P, W]`, `[B, L, W]`
-    pub fn forward(
-        &self,
-        motion: Tensor<3>,
-        text: Tensor<3>,
-        temb_act: Tensor<2>,
-    ) -> (Tensor<3>, Tensor<3>) {
+    pub fn forward(&self, motion: Tensor<3>, text: Tensor<3>, temb_act: Tensor<2>) -> (Tensor<3>, Tensor<3>) {
         let (joint, mod_m, mod_t) = self.pre_attention(motion.clone(), text.clone(), temb_act);
         let attn = self.joint_attention(joint);
         self.post_attention(motion, text, attn, mod_m, mod_t)
@@ -510,13 +463,7 @@ impl Mmdit {
     ///
     /// # Panics
     /// If the channel axes do not match the config (checked with a message naming the tensor).
-    pub fn forward(
-        &self,
-        input: Tensor<3>,
-        text: Tensor<3>,
-        keep_txt: Tensor<1>,
-        tau: Tensor<1>,
-    ) -> Tensor<3> {
+    pub fn forward(&self, input: Tensor<3>, text: Tensor<3>, keep_txt: Tensor<1>, tau: Tensor<1>) -> Tensor<3> {
         let [b, _, in_ch] = input.dims();
         let [bt, _, d_txt] = text.dims();
         assert_eq!(
@@ -529,10 +476,7 @@ impl Mmdit {
             "Mmdit::forward: text has width {d_txt}, model expects {}",
             self.text_dim
         );
-        assert_eq!(
-            bt, b,
-            "Mmdit::forward: text batch {bt} differs from input batch {b}"
-        );
+        assert_eq!(bt, b, "Mmdit::forward: text batch {bt} differs from input batch {b}");
         let motion = self.input_norm.forward(self.input_proj.forward(input));
         let keep = keep_txt.reshape([b, 1, 1]);
         let text = self.text_norm.forward(self.text_proj.forward(text) * keep);

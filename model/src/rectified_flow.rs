@@ -62,11 +62,7 @@ impl TauSampler {
 
     /// Draws B times from the device's random stream (seed it with `device.seed`).
     pub fn sample(self, batch: usize, device: &Device) -> Tensor<1> {
-        self.map(Tensor::random(
-            [batch],
-            Distribution::Uniform(0.0, 1.0),
-            device,
-        ))
+        self.map(Tensor::random([batch], Distribution::Uniform(0.0, 1.0), device))
     }
 }
 
@@ -84,12 +80,7 @@ pub enum KeyframeLoss {
 ///
 /// # Shapes
 /// - v_pred, v_target: `[B, P, T, C]`; mask: `[B, T]` (1 = keyframe); output `[1]`
-pub fn rf_loss(
-    v_pred: Tensor<4>,
-    v_target: Tensor<4>,
-    mask: Tensor<2>,
-    keyframe_loss: KeyframeLoss,
-) -> Tensor<1> {
+pub fn rf_loss(v_pred: Tensor<4>, v_target: Tensor<4>, mask: Tensor<2>, keyframe_loss: KeyframeLoss) -> Tensor<1> {
     let se = (v_pred - v_target).square();
     match keyframe_loss {
         KeyframeLoss::All => se.mean(), // (R5)
@@ -164,13 +155,7 @@ pub fn rf_training_loss(
             let state = replace_keyframes(x_tau, batch.z_key.clone(), mask);
             assemble_input(batch.z0.clone(), state, batch.mask.clone(), opts.kf_mode)
         }
-        _ => build_input(
-            batch.z0.clone(),
-            x_tau,
-            mask.clone(),
-            batch.z_key.clone(),
-            opts.kf_mode,
-        ), // (R3)
+        _ => build_input(batch.z0.clone(), x_tau, mask.clone(), batch.z_key.clone(), opts.kf_mode), // (R3)
     };
     let v = split_output(
         model.forward(input, batch.text.clone(), batch.keep_txt.clone(), tau),
@@ -251,22 +236,14 @@ pub struct Conditioning {
 ///
 /// # Shapes
 /// - x: `[B, P, T, C]` ODE state; eps: `[B, P, T, C]` the initial noise; output `[B, P, in_channels]`
-pub fn sampler_input(
-    cond: &Conditioning,
-    x: Tensor<4>,
-    eps: &Tensor<4>,
-    tau: f64,
-    opts: &SampleOptions,
-) -> Tensor<3> {
+pub fn sampler_input(cond: &Conditioning, x: Tensor<4>, eps: &Tensor<4>, tau: f64, opts: &SampleOptions) -> Tensor<3> {
     let (z0, mask) = (cond.z0.clone(), cond.mask.clone());
     match opts.kf_mode {
         KfMode::InputMask => build_input(z0, x, mask, cond.z_key.clone(), KfMode::InputMask), // (R3)
         KfMode::ReplaceNoised => {
             let eps_key = match opts.replace_noise {
                 ReplaceNoise::Fixed => eps.clone(),
-                ReplaceNoise::Fresh => {
-                    Tensor::random(eps.dims(), Distribution::Normal(0.0, 1.0), &eps.device())
-                }
+                ReplaceNoise::Fresh => Tensor::random(eps.dims(), Distribution::Normal(0.0, 1.0), &eps.device()),
             };
             // (R7) keyframe latent noised to the state's level: (1 − τ) ε_key + τ Z_key
             let key_tau = eps_key.mul_scalar(1.0 - tau) + cond.z_key.clone().mul_scalar(tau);
@@ -294,12 +271,7 @@ pub fn sampler_input(
 ///
 /// # Panics
 /// If `opts.n_grid < 2`.
-pub fn sample<F>(
-    mut velocity: F,
-    cond: &Conditioning,
-    eps: Tensor<4>,
-    opts: &SampleOptions,
-) -> Tensor<4>
+pub fn sample<F>(mut velocity: F, cond: &Conditioning, eps: Tensor<4>, opts: &SampleOptions) -> Tensor<4>
 where
     F: FnMut(Tensor<3>, Tensor<1>) -> Tensor<3>,
 {
@@ -330,9 +302,7 @@ where
         };
     }
     match opts.kf_mode {
-        KfMode::InputMask | KfMode::ReplaceNoised => {
-            replace_keyframes(x, cond.z_key.clone(), cond.mask.clone())
-        }
+        KfMode::InputMask | KfMode::ReplaceNoised => replace_keyframes(x, cond.z_key.clone(), cond.mask.clone()),
         KfMode::ImputeUntil | KfMode::None => x,
     }
 }
@@ -359,10 +329,7 @@ pub fn mmdit_velocity(
         if guidance == 1.0 {
             return model.forward(input, text.clone(), Tensor::ones([b], &device), tau);
         }
-        let keep = Tensor::cat(
-            vec![Tensor::ones([b], &device), Tensor::zeros([b], &device)],
-            0,
-        );
+        let keep = Tensor::cat(vec![Tensor::ones([b], &device), Tensor::zeros([b], &device)], 0);
         let v = model.forward(
             Tensor::cat(vec![input.clone(), input], 0),
             Tensor::cat(vec![text.clone(), text.clone()], 0),

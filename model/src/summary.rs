@@ -16,11 +16,7 @@ struct TopLevelCounter {
 
 impl TopLevelCounter {
     fn add(&mut self, count: usize) {
-        let name = self
-            .path
-            .first()
-            .cloned()
-            .unwrap_or_else(|| "(root)".to_string());
+        let name = self.path.first().cloned().unwrap_or_else(|| "(root)".to_string());
         match self.rows.iter_mut().find(|(n, _)| *n == name) {
             Some((_, total)) => *total += count,
             None => self.rows.push((name, count)),
@@ -55,11 +51,7 @@ pub fn param_report<M: Module>(module: &M) -> Vec<(String, usize)> {
 
 /// Renders a report as aligned text lines (name, count, share of the total).
 pub fn format_report(title: &str, rows: &[(String, usize)]) -> String {
-    let total = rows
-        .iter()
-        .find(|(n, _)| n == TOTAL)
-        .map_or(0, |(_, n)| *n)
-        .max(1);
+    let total = rows.iter().find(|(n, _)| n == TOTAL).map_or(0, |(_, n)| *n).max(1);
     let width = rows.iter().map(|(n, _)| n.len()).max().unwrap_or(0).max(8);
     let mut out = format!("{title}\n");
     for (name, count) in rows {
@@ -102,9 +94,7 @@ pub fn time_rf_step(
         let tau = Tensor::<1>::random([batch], Distribution::Uniform(0.0, 1.0), &ad);
         let keep = Tensor::<1>::ones([batch], &ad);
         let start = std::time::Instant::now();
-        let loss = (model.forward(input, text, keep, tau) - target)
-            .square()
-            .mean();
+        let loss = (model.forward(input, text, keep, tau) - target).square().mean();
         let grads = loss.backward();
         drop(grads);
         if let Err(e) = ad.sync() {
@@ -186,26 +176,14 @@ fn synthetic_vae_batch(
         ));
     }
     let chain: Vec<[u32; 2]> = (0..vertices as u32 - 1).map(|i| [i, i + 1]).collect();
-    let edges = EdgeList::new(&vec![chain; batch], vertices, device)
-        .map_err(|e| format!("synthetic {e}"))?;
-    let reference = Tensor::<3>::random(
-        [batch, vertices, 3],
-        Distribution::Uniform(-1.0, 1.0),
-        device,
-    );
-    let motion = Tensor::<4>::random(
-        [batch, frames, vertices, 3],
-        Distribution::Normal(0.0, 0.05),
-        device,
-    );
+    let edges = EdgeList::new(&vec![chain; batch], vertices, device).map_err(|e| format!("synthetic {e}"))?;
+    let reference = Tensor::<3>::random([batch, vertices, 3], Distribution::Uniform(-1.0, 1.0), device);
+    let motion = Tensor::<4>::random([batch, frames, vertices, 3], Distribution::Normal(0.0, 0.05), device);
     let fps_ids: Vec<i64> = (0..batch).flat_map(|_| 0..tokens as i64).collect();
     Ok(VaeBatch {
         frames: reference.clone().unsqueeze_dim::<4>(1) + motion,
         reference,
-        vmask: Tensor::<2, Bool>::from_data(
-            TensorData::new(vec![true; batch * vertices], [batch, vertices]),
-            device,
-        ),
+        vmask: Tensor::<2, Bool>::from_data(TensorData::new(vec![true; batch * vertices], [batch, vertices]), device),
         fps: Tensor::from_data(TensorData::new(fps_ids, [batch, tokens]), device),
         edges,
     })
@@ -247,24 +225,20 @@ mod tests {
     #[test]
     fn vae_timings_report_every_timed_run() {
         let dev = Device::flex();
-        let seq =
-            time_dymesh_reconstruct(&DyMeshVaeConfig::tiny(), 1, 16, 4, 3, &dev).expect("times");
+        let seq = time_dymesh_reconstruct(&DyMeshVaeConfig::tiny(), 1, 16, 4, 3, &dev).expect("times");
         assert_eq!(seq.steps_ms.len(), 3);
         assert!(seq.steps_ms.iter().all(|&ms| ms > 0.0));
         assert_eq!(seq.median_ms, median(&seq.steps_ms));
-        let frame =
-            time_vae_reconstruct(&FrameVaeConfig::tiny(), 1, 16, 4, 2, 2, &dev).expect("times");
+        let frame = time_vae_reconstruct(&FrameVaeConfig::tiny(), 1, 16, 4, 2, 2, &dev).expect("times");
         assert_eq!(frame.steps_ms.len(), 2);
     }
 
     #[test]
     fn impossible_synthetic_clips_are_errors() {
         let dev = Device::flex();
-        let err =
-            time_dymesh_reconstruct(&DyMeshVaeConfig::tiny(), 1, 4, 8, 1, &dev).expect_err("P > N");
+        let err = time_dymesh_reconstruct(&DyMeshVaeConfig::tiny(), 1, 4, 8, 1, &dev).expect_err("P > N");
         assert!(err.contains("4 vertices and 8 tokens"), "{err}");
-        let err =
-            time_vae_reconstruct(&FrameVaeConfig::tiny(), 1, 1, 1, 2, 1, &dev).expect_err("N < 2");
+        let err = time_vae_reconstruct(&FrameVaeConfig::tiny(), 1, 1, 1, 2, 1, &dev).expect_err("N < 2");
         assert!(err.contains("at least 2 vertices"), "{err}");
     }
 

@@ -44,10 +44,7 @@ pub trait TextEncoder {
 pub enum TextError {
     /// Reading or writing a file failed.
     #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
+    Io { path: PathBuf, source: std::io::Error },
     /// The tokenizer library rejected a file or an input.
     #[error("{path}: tokenizer error: {message}")]
     Tokenizer { path: PathBuf, message: String },
@@ -83,18 +80,12 @@ pub struct PaddedIds {
 impl PaddedIds {
     /// Ids as a tensor `[B, L]`.
     pub fn ids_tensor(&self, device: &Device) -> Tensor<2, Int> {
-        Tensor::from_data(
-            TensorData::new(self.ids.clone(), [self.batch, self.len]),
-            device,
-        )
+        Tensor::from_data(TensorData::new(self.ids.clone(), [self.batch, self.len]), device)
     }
 
     /// Padding mask `[B, L]`, true = padding.
     pub fn pad_tensor(&self, device: &Device) -> Tensor<2, Bool> {
-        Tensor::from_data(
-            TensorData::new(self.pad.clone(), [self.batch, self.len]),
-            device,
-        )
+        Tensor::from_data(TensorData::new(self.pad.clone(), [self.batch, self.len]), device)
     }
 }
 
@@ -105,11 +96,10 @@ pub fn load_tokenizer(path: &Path) -> Result<tokenizers::Tokenizer, TextError> {
         message: e.to_string(),
     })?;
     tok.with_padding(None);
-    tok.with_truncation(None)
-        .map_err(|e| TextError::Tokenizer {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+    tok.with_truncation(None).map_err(|e| TextError::Tokenizer {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
     Ok(tok)
 }
 
@@ -182,10 +172,13 @@ pub(crate) fn text_self_attention(
     out.swap_dims(1, 2).reshape([b, l, d])
 }
 
+/// Host copy of one caption's encoding: states and padding mask.
+type CachedCaption = (Vec<f32>, Vec<bool>);
+
 /// A frozen encoder's outputs, cached per caption on the host (SPEC §4.4).
 pub struct CachedEncoder<E: TextEncoder> {
     inner: E,
-    cache: Mutex<HashMap<String, (Vec<f32>, Vec<bool>)>>,
+    cache: Mutex<HashMap<String, CachedCaption>>,
 }
 
 impl<E: TextEncoder> CachedEncoder<E> {
@@ -206,10 +199,7 @@ impl<E: TextEncoder> CachedEncoder<E> {
 impl<E: TextEncoder> TextEncoder for CachedEncoder<E> {
     fn encode(&self, captions: &[String], device: &Device) -> Result<TextBatch, TextError> {
         let (l, d) = (self.inner.max_len(), self.inner.dim());
-        let mut cache = self
-            .cache
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let mut cache = self.cache.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         let missing: Vec<String> = {
             let mut seen = std::collections::HashSet::new();
             captions
@@ -220,24 +210,24 @@ impl<E: TextEncoder> TextEncoder for CachedEncoder<E> {
         };
         if !missing.is_empty() {
             let batch = self.inner.encode(&missing, device)?;
-            let states: Vec<f32> = batch
-                .states
-                .into_data()
-                .convert::<f32>()
-                .try_into_vec()
-                .map_err(|e| TextError::Invalid {
-                    path: PathBuf::from("<cache>"),
-                    message: format!("{e:?}"),
-                })?;
-            let pad: Vec<bool> =
+            let states: Vec<f32> =
                 batch
-                    .pad_mask
+                    .states
                     .into_data()
+                    .convert::<f32>()
                     .try_into_vec()
                     .map_err(|e| TextError::Invalid {
                         path: PathBuf::from("<cache>"),
                         message: format!("{e:?}"),
                     })?;
+            let pad: Vec<bool> = batch
+                .pad_mask
+                .into_data()
+                .try_into_vec()
+                .map_err(|e| TextError::Invalid {
+                    path: PathBuf::from("<cache>"),
+                    message: format!("{e:?}"),
+                })?;
             for (i, caption) in missing.into_iter().enumerate() {
                 let row = states[i * l * d..(i + 1) * l * d].to_vec();
                 cache.insert(caption, (row, pad[i * l..(i + 1) * l].to_vec()));
@@ -288,12 +278,10 @@ pub(crate) fn load_safetensors<M: burn::store::ModuleSnapshot>(
     for (from, to) in remaps {
         store = store.with_key_remapping(*from, *to);
     }
-    let result = module
-        .load_from(&mut store)
-        .map_err(|e| TextError::Invalid {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+    let result = module.load_from(&mut store).map_err(|e| TextError::Invalid {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
     if let Some(err) = result.errors.first() {
         return Err(match err {
             ApplyError::ShapeMismatch {

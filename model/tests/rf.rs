@@ -5,13 +5,11 @@
 use std::sync::Mutex;
 
 use any4d_model::mmdit::{
-    KfMode, Mmdit, MmditConfig, TIME_FREQS, build_input, merge_slots, split_output,
-    timestep_sinusoid,
+    KfMode, Mmdit, MmditConfig, TIME_FREQS, build_input, merge_slots, split_output, timestep_sinusoid,
 };
 use any4d_model::rectified_flow::{
-    Conditioning, KeyframeLoss, ReplaceNoise, RfBatch, RfLossOptions, SampleOptions, Solver,
-    TauSampler, cfg_combine, interpolant, mmdit_velocity, rf_loss, rf_training_loss, sample,
-    target_velocity,
+    Conditioning, KeyframeLoss, ReplaceNoise, RfBatch, RfLossOptions, SampleOptions, Solver, TauSampler, cfg_combine,
+    interpolant, mmdit_velocity, rf_loss, rf_training_loss, sample, target_velocity,
 };
 use any4d_model::summary::param_report;
 use burn::module::{Module, ModuleVisitor, Param};
@@ -34,10 +32,7 @@ fn normal<const D: usize>(shape: [usize; D], device: &Device) -> Tensor<D> {
 }
 
 fn values<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data()
-        .convert::<f32>()
-        .try_into_vec()
-        .expect("f32 data")
+    t.into_data().convert::<f32>().try_into_vec().expect("f32 data")
 }
 
 fn max_abs_diff<const D: usize>(a: Tensor<D>, b: Tensor<D>) -> f32 {
@@ -72,11 +67,7 @@ fn interpolant_is_noise_at_zero_and_data_at_one() {
     assert!(max_abs_diff(at0, eps.clone()) < 1e-7, "X_0 must be ε");
     assert!(max_abs_diff(at1, x1.clone()) < 1e-7, "X_1 must be the data");
     // Per-sample τ: sample 0 at τ = 0.25 is 0.75 ε + 0.25 x1.
-    let mixed = interpolant(
-        eps.clone(),
-        x1.clone(),
-        Tensor::from_floats([0.25, 1.0], &d),
-    );
+    let mixed = interpolant(eps.clone(), x1.clone(), Tensor::from_floats([0.25, 1.0], &d));
     let expect = eps.clone().mul_scalar(0.75) + x1.clone().mul_scalar(0.25);
     assert!(max_abs_diff(mixed.narrow(0, 0, 1), expect.narrow(0, 0, 1)) < 1e-6);
     // (R2) target points from noise to data.
@@ -135,16 +126,11 @@ fn replacement_noises_keyframes_to_the_state_level() {
     let mut seen = Vec::new();
     let out = sample(
         |input: Tensor<3>, tau: Tensor<1>| {
-            assert_eq!(
-                input.dims()[2],
-                (t + 1) * c,
-                "ReplaceNoised has no mask channels"
-            );
+            assert_eq!(input.dims()[2], (t + 1) * c, "ReplaceNoised has no mask channels");
             let tau_v = values(tau)[0] as f64;
             // slot 2 (frame 1) occupies channels [2c, 3c) of the input
             let got = input.narrow(2, 2 * c, c);
-            let want = (eps.clone().mul_scalar(1.0 - tau_v) + z_key.clone().mul_scalar(tau_v))
-                .narrow(2, 1, 1);
+            let want = (eps.clone().mul_scalar(1.0 - tau_v) + z_key.clone().mul_scalar(tau_v)).narrow(2, 1, 1);
             seen.push((tau_v, max_abs_diff(got, want.reshape([b, p, c]))));
             Tensor::zeros([b, p, t * c], &d)
         },
@@ -217,10 +203,7 @@ fn sampler_passes_tau_increasing_from_zero() {
     };
     for (solver, expected) in [
         (Solver::Euler, vec![0.0, 0.25, 0.5, 0.75]),
-        (
-            Solver::Midpoint,
-            vec![0.0, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875],
-        ),
+        (Solver::Midpoint, vec![0.0, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875]),
     ] {
         let opts = SampleOptions {
             n_grid: 5,
@@ -231,10 +214,7 @@ fn sampler_passes_tau_increasing_from_zero() {
         sample(
             |_, tau: Tensor<1>| {
                 let v = values(tau);
-                assert!(
-                    v.iter().all(|x| *x == v[0]),
-                    "one τ per evaluation for the whole batch"
-                );
+                assert!(v.iter().all(|x| *x == v[0]), "one τ per evaluation for the whole batch");
                 taus.push(v[0] as f64);
                 Tensor::zeros([b, p, t * c], &d)
             },
@@ -259,23 +239,11 @@ fn sampler_passes_tau_increasing_from_zero() {
 
 #[test]
 fn channel_counts_at_paper_size() {
-    assert_eq!(
-        MmditConfig::paper(KfMode::InputMask, 768).in_channels(),
-        221
-    );
-    assert_eq!(
-        MmditConfig::paper(KfMode::ImputeUntil, 768).in_channels(),
-        221
-    );
+    assert_eq!(MmditConfig::paper(KfMode::InputMask, 768).in_channels(), 221);
+    assert_eq!(MmditConfig::paper(KfMode::ImputeUntil, 768).in_channels(), 221);
     assert_eq!(MmditConfig::paper(KfMode::None, 768).in_channels(), 204);
-    assert_eq!(
-        MmditConfig::paper(KfMode::ReplaceNoised, 768).in_channels(),
-        204
-    );
-    assert_eq!(
-        MmditConfig::paper(KfMode::InputMask, 768).out_channels(),
-        192
-    );
+    assert_eq!(MmditConfig::paper(KfMode::ReplaceNoised, 768).in_channels(), 204);
+    assert_eq!(MmditConfig::paper(KfMode::InputMask, 768).out_channels(), 192);
 }
 
 #[test]
@@ -286,28 +254,13 @@ fn build_input_places_keyframes_state_and_mask() {
     let x = Tensor::<4>::full([b, p, t, c], -1.0, &d);
     let z_key = Tensor::<4>::full([b, p, t, c], 5.0, &d);
     let mask = Tensor::from_data(TensorData::new(vec![1f32, 0.0, 1.0], [b, t]), &d);
-    let input = build_input(
-        z0.clone(),
-        x.clone(),
-        mask.clone(),
-        z_key.clone(),
-        KfMode::InputMask,
-    );
+    let input = build_input(z0.clone(), x.clone(), mask.clone(), z_key.clone(), KfMode::InputMask);
     assert_eq!(input.dims(), [b, p, (t + 1) * (c + 1)]);
     // slot-major [z_s(2) ‖ m̂_s(1)]: shape slot, key (m=1), state (m=0), key (m=1); m̂ = [0; m]
     let row: Vec<f32> = values(input.clone().narrow(1, 0, 1));
-    assert_eq!(
-        row,
-        vec![7.0, 7.0, 0.0, 5.0, 5.0, 1.0, -1.0, -1.0, 0.0, 5.0, 5.0, 1.0]
-    );
+    assert_eq!(row, vec![7.0, 7.0, 0.0, 5.0, 5.0, 1.0, -1.0, -1.0, 0.0, 5.0, 5.0, 1.0]);
     // Without mask channels: 204-style layout, no replacement for None.
-    let plain = build_input(
-        z0.clone(),
-        x.clone(),
-        mask.clone(),
-        z_key.clone(),
-        KfMode::None,
-    );
+    let plain = build_input(z0.clone(), x.clone(), mask.clone(), z_key.clone(), KfMode::None);
     assert_eq!(
         values(plain.narrow(1, 0, 1)),
         vec![7.0, 7.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0]
@@ -486,34 +439,14 @@ fn cfg_with_unit_guidance_equals_the_conditional_branch() {
     let cfg = MmditConfig::tiny();
     let model = trained_one_step(&cfg, &d);
     let (input, text, _, tau) = tiny_inputs(&cfg, 2, 5, 3, &d);
-    let v_cond = model.forward(
-        input.clone(),
-        text.clone(),
-        Tensor::ones([2], &d),
-        tau.clone(),
-    );
-    let v_uncond = model.forward(
-        input.clone(),
-        text.clone(),
-        Tensor::zeros([2], &d),
-        tau.clone(),
-    );
+    let v_cond = model.forward(input.clone(), text.clone(), Tensor::ones([2], &d), tau.clone());
+    let v_uncond = model.forward(input.clone(), text.clone(), Tensor::zeros([2], &d), tau.clone());
     assert!(
         max_abs_diff(v_cond.clone(), v_uncond.clone()) > 1e-6,
         "text must matter after a step"
     );
-    assert!(
-        max_abs_diff(
-            cfg_combine(v_cond.clone(), v_uncond.clone(), 1.0),
-            v_cond.clone()
-        ) < 1e-6
-    );
-    assert!(
-        max_abs_diff(
-            cfg_combine(v_cond.clone(), v_uncond.clone(), 0.0),
-            v_uncond.clone()
-        ) < 1e-6
-    );
+    assert!(max_abs_diff(cfg_combine(v_cond.clone(), v_uncond.clone(), 1.0), v_cond.clone()) < 1e-6);
+    assert!(max_abs_diff(cfg_combine(v_cond.clone(), v_uncond.clone(), 0.0), v_uncond.clone()) < 1e-6);
     let mut w1 = mmdit_velocity(&model, text.clone(), 1.0);
     assert!(max_abs_diff(w1(input.clone(), tau.clone()), v_cond.clone()) < 1e-5);
     let mut w3 = mmdit_velocity(&model, text, 3.0);
@@ -535,13 +468,7 @@ fn trained_one_step(cfg: &MmditConfig, d: &Device) -> Mmdit {
         tau_star: 0.98,
     };
     let eps = normal(batch.z.dims(), &ad);
-    let loss = rf_training_loss(
-        &model,
-        &batch,
-        eps,
-        Tensor::from_floats([0.2, 0.9], &ad),
-        &opts,
-    );
+    let loss = rf_training_loss(&model, &batch, eps, Tensor::from_floats([0.2, 0.9], &ad), &opts);
     let grads = GradientsParams::from_grads(loss.backward(), &model);
     AdamWConfig::new().init().step(1e-2, model, grads).valid()
 }
@@ -571,10 +498,7 @@ fn tiny_rf_overfits_one_batch() {
         model = optim.step(3e-3, model, grads);
     }
     let (first, last) = (losses[0], *losses.last().unwrap());
-    assert!(
-        last * 10.0 <= first,
-        "loss {first} → {last} did not fall 10×"
-    );
+    assert!(last * 10.0 <= first, "loss {first} → {last} did not fall 10×");
 }
 
 // ----------------------------------------------------------------------------------------------------------------
@@ -595,12 +519,7 @@ fn loss_on_non_keyframes_ignores_keyframe_slots() {
     }
     let pred = Tensor::from_data(TensorData::new(pred, [b, p, t, c]), &d);
     let mask = Tensor::from_data(TensorData::new(vec![1f32, 0.0, 0.0], [b, t]), &d);
-    let all = values(rf_loss(
-        pred.clone(),
-        target.clone(),
-        mask.clone(),
-        KeyframeLoss::All,
-    ))[0];
+    let all = values(rf_loss(pred.clone(), target.clone(), mask.clone(), KeyframeLoss::All))[0];
     let non = values(rf_loss(pred, target, mask, KeyframeLoss::NonKeyframesOnly))[0];
     assert!((all - (1.0 + 9.0) / 3.0).abs() < 1e-6, "all slots: {all}");
     assert!((non - 9.0 / 2.0).abs() < 1e-6, "non-keyframe slots: {non}");
@@ -612,10 +531,7 @@ fn cosmap_is_symmetric_and_maps_the_ends() {
     let u = Tensor::from_floats([0.0, 0.25, 0.5, 0.75, 1.0], &d);
     let v = values(TauSampler::Cosmap.map(u.clone()));
     assert!(v[0].abs() < 1e-7 && (v[4] - 1.0).abs() < 1e-6 && (v[2] - 0.5).abs() < 1e-6);
-    assert!(
-        (v[1] + v[3] - 1.0).abs() < 1e-6,
-        "cosmap(u) + cosmap(1 − u) = 1"
-    );
+    assert!((v[1] + v[3] - 1.0).abs() < 1e-6, "cosmap(u) + cosmap(1 − u) = 1");
     assert_eq!(values(TauSampler::Uniform.map(u.clone())), values(u));
 }
 
@@ -650,12 +566,7 @@ fn impute_until_stops_replacing_after_tau_star() {
     );
     assert_eq!(
         seen,
-        vec![
-            (0.0, 9.0, 1.0),
-            (0.25, 9.0, 1.0),
-            (0.5, 0.0, 1.0),
-            (0.75, 0.0, 1.0)
-        ]
+        vec![(0.0, 9.0, 1.0), (0.25, 9.0, 1.0), (0.5, 0.0, 1.0), (0.75, 0.0, 1.0)]
     );
 }
 

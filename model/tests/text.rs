@@ -17,9 +17,7 @@ fn dev() -> Device {
 }
 
 fn fixtures() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests")
-        .join("fixtures")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests").join("fixtures")
 }
 
 fn floats<const D: usize>(t: Tensor<D>) -> Vec<f32> {
@@ -46,9 +44,7 @@ fn scratch_tokenizer_trains_saves_and_loads() {
     ]);
     let tok = ScratchTokenizer::train(&corpus, 200).expect("train");
     assert!(tok.vocab_size() > 10);
-    let ids = tok
-        .pad_batch(&captions(&["A dog jumps", ""]), 6)
-        .expect("encode");
+    let ids = tok.pad_batch(&captions(&["A dog jumps", ""]), 6).expect("encode");
     assert_eq!(
         ids.pad,
         vec![
@@ -64,9 +60,7 @@ fn scratch_tokenizer_trains_saves_and_loads() {
         ids.ids[..6].to_vec()
     );
     // A missing folder names the file.
-    let err = ScratchTokenizer::load(&dir.path().join("nope"))
-        .err()
-        .expect("error");
+    let err = ScratchTokenizer::load(&dir.path().join("nope")).err().expect("error");
     assert!(err.to_string().contains("tokenizer.json"), "{err}");
 }
 
@@ -89,23 +83,15 @@ fn scratch_encoder_shapes_and_empty_caption_is_padding() {
     let batch = enc.encode(&captions(&["a dog runs", ""]), &d).unwrap();
     assert_eq!(batch.states.dims(), [2, 8, 16]);
     let pad = bools(batch.pad_mask);
-    assert_eq!(
-        &pad[..8],
-        &[false, false, false, true, true, true, true, true]
-    );
+    assert_eq!(&pad[..8], &[false, false, false, true, true, true, true, true]);
     assert!(pad[8..].iter().all(|p| *p), "empty caption is all padding");
     let states = floats(batch.states);
     assert!(
         states[8 * 16..].iter().all(|x| *x == 0.0),
         "unconditional caption has zero states"
     );
-    assert!(
-        states[..3 * 16].iter().all(|x| x.is_finite()) && states[..16].iter().any(|x| *x != 0.0)
-    );
-    assert!(
-        enc.model.num_params() > 0,
-        "the scratch model has trainable parameters"
-    );
+    assert!(states[..3 * 16].iter().all(|x| x.is_finite()) && states[..16].iter().any(|x| *x != 0.0));
+    assert!(enc.model.num_params() > 0, "the scratch model has trainable parameters");
 }
 
 // ----------------------------------------------------------------------------------------------------------------
@@ -121,8 +107,7 @@ struct ClipExpected {
 }
 
 fn clip_expected() -> ClipExpected {
-    let text =
-        std::fs::read_to_string(fixtures().join("clip_tiny/expected.json")).expect("fixture");
+    let text = std::fs::read_to_string(fixtures().join("clip_tiny/expected.json")).expect("fixture");
     serde_json::from_str(&text).expect("expected.json")
 }
 
@@ -166,14 +151,7 @@ fn clip_loader_names_missing_and_misshaped_tensors() {
     let d = dev();
     let exp = clip_expected();
     let dir = fixtures().join("clip_tiny");
-    let load = |file: &str| {
-        ClipTextEncoder::load(
-            exp.config.clone(),
-            &dir.join(file),
-            &dir.join("tokenizer.json"),
-            &d,
-        )
-    };
+    let load = |file: &str| ClipTextEncoder::load(exp.config.clone(), &dir.join(file), &dir.join("tokenizer.json"), &d);
     match load("missing.safetensors") {
         Err(e @ TextError::MissingTensor { .. }) => {
             assert!(e.to_string().contains("final_layer_norm"), "{e}")
@@ -197,15 +175,7 @@ fn clip_loader_names_missing_and_misshaped_tensors() {
         width: exp.config.width * 2,
         ..exp.config.clone()
     };
-    assert!(
-        ClipTextEncoder::load(
-            wide,
-            &dir.join("model.safetensors"),
-            &dir.join("tokenizer.json"),
-            &d
-        )
-        .is_err()
-    );
+    assert!(ClipTextEncoder::load(wide, &dir.join("model.safetensors"), &dir.join("tokenizer.json"), &d).is_err());
 }
 
 // ----------------------------------------------------------------------------------------------------------------
@@ -240,10 +210,8 @@ fn minilm_matches_numpy_reference() {
         return;
     };
     let d = dev();
-    let exp: MinilmExpected = serde_json::from_str(
-        &std::fs::read_to_string(fixtures().join("minilm_expected.json")).unwrap(),
-    )
-    .unwrap();
+    let exp: MinilmExpected =
+        serde_json::from_str(&std::fs::read_to_string(fixtures().join("minilm_expected.json")).unwrap()).unwrap();
     let cfg = BertConfig {
         max_len: exp.max_len,
         ..BertConfig::minilm_l6()

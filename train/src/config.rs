@@ -93,7 +93,7 @@ impl TrainConfig {
         if self.batch_size == 0 || self.micro_batch == 0 {
             return bad("batch_size", "batch_size and micro_batch must be positive".into());
         }
-        if self.batch_size % self.micro_batch != 0 {
+        if !self.batch_size.is_multiple_of(self.micro_batch) {
             return bad(
                 "micro_batch",
                 format!(
@@ -111,7 +111,7 @@ impl TrainConfig {
         if self.keep_last == 0 {
             return bad("keep_last", "must keep at least one checkpoint".into());
         }
-        if !(self.progress_every_secs > 0.0) {
+        if self.progress_every_secs.is_nan() || self.progress_every_secs <= 0.0 {
             return bad("progress_every_secs", "must be positive".into());
         }
         Ok(())

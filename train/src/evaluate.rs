@@ -6,9 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use any4d_data::batch::PadTo;
-use any4d_eval::learned::{
-    LatentLerpSampler, LearnedModels, MeshCodec, MeshVae, RfSampler, VaeReconstructor,
-};
+use any4d_eval::learned::{LatentLerpSampler, LearnedModels, MeshCodec, MeshVae, RfSampler, VaeReconstructor};
 use any4d_eval::methods::{Method, MethodKind, RfMethod};
 use any4d_eval::run::{Reconstructor, vertex_methods};
 use any4d_model::rectified_flow::{SampleOptions, Solver};
@@ -60,7 +58,10 @@ pub struct BuiltMethods {
 
 fn need<'a>(path: &'a Option<PathBuf>, flag: &str, kind: MethodKind) -> Result<&'a Path> {
     path.as_deref().ok_or_else(|| {
-        TrainError::Other(format!("method `{}` needs a trained run: pass {flag} RUN", kind.label()))
+        TrainError::Other(format!(
+            "method `{}` needs a trained run: pass {flag} RUN",
+            kind.label()
+        ))
     })
 }
 
@@ -83,7 +84,9 @@ fn codec_of(vae: &LoadedVae, tokens: usize, device: &Device) -> Result<Arc<MeshC
             )));
         }
     };
-    Ok(Arc::new(MeshCodec::new(model, tokens, PadTo::BatchMax, device.clone()).map_err(eval_err)?))
+    Ok(Arc::new(
+        MeshCodec::new(model, tokens, PadTo::BatchMax, device.clone()).map_err(eval_err)?,
+    ))
 }
 
 fn checkpoint_label(run: &Path, step: u64) -> String {
@@ -107,14 +110,8 @@ fn rf_method(
         tokenizer: rf.tokenizer,
         model: rf.model.text.valid(),
     };
-    let models = LearnedModels::new(
-        codec,
-        rf.model.mmdit.valid(),
-        rf_config,
-        vae.stats.clone(),
-        Box::new(text),
-    )
-    .map_err(eval_err)?;
+    let models =
+        LearnedModels::new(codec, rf.model.mmdit.valid(), rf_config, vae.stats, Box::new(text)).map_err(eval_err)?;
     let mut base = SampleOptions::paper(rf.config.model.kf_mode);
     base.n_grid = sampling.n_grid;
     base.solver = sampling.solver;
@@ -166,7 +163,10 @@ pub fn build_methods(
                 let vae = vae_run_for(runs, device)?;
                 let sampler = LatentLerpSampler::new(codec_of(&vae, tokens, device)?).map_err(eval_err)?;
                 let method = RfMethod::new(kind, sampler).map_err(eval_err)?;
-                (Box::new(method) as Box<dyn Method>, checkpoint_label(&vae.run, vae.step))
+                (
+                    Box::new(method) as Box<dyn Method>,
+                    checkpoint_label(&vae.run, vae.step),
+                )
             }
         };
         methods.push(method);
@@ -175,12 +175,11 @@ pub fn build_methods(
     Ok(BuiltMethods { methods, checkpoints })
 }
 
+/// Reconstructors in order, with label → checkpoint lines for the table header.
+pub type BuiltReconstructors = (Vec<Box<dyn Reconstructor>>, Vec<(String, String)>);
+
 /// Table 5 rows: `--vae` (and `--vae-b`) as reconstructors labelled by their VAE kind.
-pub fn build_reconstructors(
-    runs: &LearnedRuns,
-    tokens: usize,
-    device: &Device,
-) -> Result<(Vec<Box<dyn Reconstructor>>, Vec<(String, String)>)> {
+pub fn build_reconstructors(runs: &LearnedRuns, tokens: usize, device: &Device) -> Result<BuiltReconstructors> {
     let mut out: Vec<Box<dyn Reconstructor>> = Vec::new();
     let mut ckpts = Vec::new();
     for run in [&runs.vae, &runs.vae_b].into_iter().flatten() {
@@ -193,7 +192,9 @@ pub fn build_reconstructors(
         out.push(Box::new(VaeReconstructor::new(label, codec_of(&vae, tokens, device)?)));
     }
     if out.is_empty() {
-        return Err(TrainError::Other("table5 needs --vae RUN (and optionally --vae-b RUN)".into()));
+        return Err(TrainError::Other(
+            "table5 needs --vae RUN (and optionally --vae-b RUN)".into(),
+        ));
     }
     Ok((out, ckpts))
 }

@@ -219,15 +219,15 @@ pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>)
         bar.step(step, sums[n_terms], secs);
 
         let mut new_best = false;
-        if step % cfg.valid_every == 0 || step == total_steps {
-            if let Some(values) = objective.validate(&model.clone().valid(), &device.clone().without_autodiff())? {
-                let loss = *values.last().expect("validate returns the total last");
-                run.append_valid(step, &values)?;
-                bar.println(&format!("step {step}: validation loss {loss:.4e}"));
-                if state.best_valid.is_none_or(|(_, b)| loss < b) {
-                    state.best_valid = Some((step, loss));
-                    new_best = true;
-                }
+        if (step.is_multiple_of(cfg.valid_every) || step == total_steps)
+            && let Some(values) = objective.validate(&model.clone().valid(), &device.clone().without_autodiff())?
+        {
+            let loss = *values.last().expect("validate returns the total last");
+            run.append_valid(step, &values)?;
+            bar.println(&format!("step {step}: validation loss {loss:.4e}"));
+            if state.best_valid.is_none_or(|(_, b)| loss < b) {
+                state.best_valid = Some((step, loss));
+                new_best = true;
             }
         }
         if step % cfg.checkpoint_every == 0 || step == total_steps || new_best {

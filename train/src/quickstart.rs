@@ -68,7 +68,10 @@ fn fresh_folder(out: &Path) -> PathBuf {
     if !out.exists() {
         return out.to_path_buf();
     }
-    let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "quickstart".into());
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "quickstart".into());
     (2..)
         .map(|n| out.with_file_name(format!("{name}-{n}")))
         .find(|p| !p.exists())
@@ -107,7 +110,11 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
     // Every stage runs on the CPU backend that `configs/*/tiny.toml` names; check it before creating anything.
     backend::check(vae_cfg.device.backend, vae_cfg.device.precision)?;
 
-    stage(format!("1/5 synthesising {} procedural clips into {}", opts.clips, data.display()));
+    stage(format!(
+        "1/5 synthesising {} procedural clips into {}",
+        opts.clips,
+        data.display()
+    ));
     let synth = SynthConfig {
         clips: opts.clips,
         seed: opts.seed,
@@ -116,7 +123,10 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         max_vertices: opts.max_vertices,
     };
     let report = write_synth(&synth, &data).map_err(|e| TrainError::Other(e.to_string()))?;
-    stage(format!("      {} clips: {} train, {} validation", report.kept, report.train, report.val));
+    stage(format!(
+        "      {} clips: {} train, {} validation",
+        report.total, report.train, report.val
+    ));
 
     stage("2/5 training the tiny frame-wise VAE".into());
     let (vae_run, outcome) = train_vae(
@@ -146,7 +156,10 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
     let (baseline_run, outcome) = train_rf(&base_cfg, &rf_opts("baseline-rf"))?;
     finished("baseline RF training", outcome)?;
 
-    stage(format!("5/5 evaluating on {} validation clips, K_x = 0..3", opts.eval_clips));
+    stage(format!(
+        "5/5 evaluating on {} validation clips, K_x = 0..3",
+        opts.eval_clips
+    ));
     let device = backend::device(rf_cfg.device.backend, rf_cfg.device.precision)?;
     let runs = LearnedRuns {
         rf: Some(rf_run.root().to_path_buf()),
@@ -154,7 +167,12 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         vae: Some(vae_run.root().to_path_buf()),
         vae_b: None,
     };
-    let kinds = [MethodKind::KeyframeRf, MethodKind::ReplacementRf, MethodKind::Lerp, MethodKind::StaticNearest];
+    let kinds = [
+        MethodKind::KeyframeRf,
+        MethodKind::ReplacementRf,
+        MethodKind::Lerp,
+        MethodKind::StaticNearest,
+    ];
     let sampling = SamplingSetup {
         n_grid: opts.n_grid,
         solver: Solver::Midpoint,
@@ -190,5 +208,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
 }
 
 fn report_p(data: &Path) -> Result<usize> {
-    Ok(any4d_data::store::Store::open(data).map_err(|e| TrainError::Other(e.to_string()))?.p())
+    Ok(any4d_data::store::Store::open(data)
+        .map_err(|e| TrainError::Other(e.to_string()))?
+        .p())
 }

@@ -7,11 +7,17 @@ use any4d_data::Clip;
 use any4d_data::formats;
 
 fn any4d(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_any4d")).args(args).output().expect("the any4d binary runs")
+    Command::new(env!("CARGO_BIN_EXE_any4d"))
+        .args(args)
+        .output()
+        .expect("the any4d binary runs")
 }
 
 fn text(out: &Output) -> (String, String) {
-    (String::from_utf8_lossy(&out.stdout).into_owned(), String::from_utf8_lossy(&out.stderr).into_owned())
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
 fn p(path: &Path) -> &str {
@@ -23,7 +29,11 @@ fn grid_clip(id: &str, frames: usize, n: usize) -> Clip {
     let vertices = (0..frames)
         .flat_map(|f| {
             (0..n).map(move |v| {
-                [5.0 + (v % 25) as f32 * 0.1 + 0.01 * f as f32, 2.0 + (v / 25) as f32 * 0.1, (v % 7) as f32 * 0.05]
+                [
+                    5.0 + (v % 25) as f32 * 0.1 + 0.01 * f as f32,
+                    2.0 + (v / 25) as f32 * 0.1,
+                    (v % 7) as f32 * 0.05,
+                ]
             })
         })
         .collect();
@@ -35,7 +45,18 @@ fn grid_clip(id: &str, frames: usize, n: usize) -> Clip {
 fn synth_inspect_and_render_a_store() {
     let tmp = tempfile::tempdir().unwrap();
     let store = tmp.path().join("store");
-    let out = any4d(&["data", "synth", "--out", p(&store), "--clips", "3", "--seed", "5", "--p", "16"]);
+    let out = any4d(&[
+        "data",
+        "synth",
+        "--out",
+        p(&store),
+        "--clips",
+        "3",
+        "--seed",
+        "5",
+        "--p",
+        "16",
+    ]);
     assert!(out.status.success(), "{:?}", text(&out));
 
     let out = any4d(&["data", "inspect", p(&store), "--format", "json"]);
@@ -55,7 +76,15 @@ fn synth_inspect_and_render_a_store() {
     assert!(out.status.success(), "{:?}", text(&out));
     assert_eq!(&std::fs::read(&sheet).unwrap()[..8], b"\x89PNG\r\n\x1a\n");
 
-    let out = any4d(&["data", "render", p(&store), "--clip", "no-such-clip", "--out", p(&sheet)]);
+    let out = any4d(&[
+        "data",
+        "render",
+        p(&store),
+        "--clip",
+        "no-such-clip",
+        "--out",
+        p(&sheet),
+    ]);
     let (_, stderr) = text(&out);
     assert!(!out.status.success() && stderr.contains("no-such-clip"), "{stderr}");
 }
@@ -72,18 +101,30 @@ fn convert_changes_nothing_unless_asked() {
     assert!(out.status.success(), "{:?}", text(&out));
     let back = formats::read_clip(&glb).unwrap();
     assert_eq!((back.frames, back.n_vertices, back.faces.len()), (4, 50, 48));
-    assert!(back.vertices.iter().zip(&clip.vertices).all(|(a, b)| (0..3).all(|k| (a[k] - b[k]).abs() < 1e-5)));
+    assert!(
+        back.vertices
+            .iter()
+            .zip(&clip.vertices)
+            .all(|(a, b)| (0..3).all(|k| (a[k] - b[k]).abs() < 1e-5))
+    );
 
     let norm = tmp.path().join("norm.bin");
     let out = any4d(&["data", "convert", p(&src), p(&norm), "--normalize"]);
     assert!(out.status.success(), "{:?}", text(&out));
     let n = formats::read_clip(&norm).unwrap();
-    let max = n.frame(0).iter().flat_map(|q| q.iter().map(|x| x.abs())).fold(0.0f32, f32::max);
+    let max = n
+        .frame(0)
+        .iter()
+        .flat_map(|q| q.iter().map(|x| x.abs()))
+        .fold(0.0f32, f32::max);
     assert!((max - 1.0).abs() < 1e-5, "normalised frame 0 has L∞ extent {max}");
 
     let info = any4d(&["data", "inspect", p(&src), "--format", "json"]);
     let json: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
-    assert_eq!((json["frames"].as_u64(), json["vertices"].as_u64()), (Some(4), Some(50)));
+    assert_eq!(
+        (json["frames"].as_u64(), json["vertices"].as_u64()),
+        (Some(4), Some(50))
+    );
 }
 
 #[test]
@@ -93,7 +134,16 @@ fn import_lists_rejected_files_and_fails() {
     std::fs::create_dir(&src).unwrap();
     formats::write_clip(&src.join("good.bin"), &grid_clip("good_offset0_0-15", 16, 40)).unwrap();
     let store = tmp.path().join("store");
-    let args = ["--out", p(&store), "--min-vertices", "16", "--max-vertices", "64", "--p", "8"];
+    let args = [
+        "--out",
+        p(&store),
+        "--min-vertices",
+        "16",
+        "--max-vertices",
+        "64",
+        "--p",
+        "8",
+    ];
 
     let out = any4d(&[&["data", "import", p(&src)], &args[..]].concat());
     let (stdout, stderr) = text(&out);
@@ -105,7 +155,10 @@ fn import_lists_rejected_files_and_fails() {
     let (stdout, _) = text(&out);
     assert_eq!(out.status.code(), Some(2), "{stdout}");
     assert!(stdout.contains("rejected") && stdout.contains("broken.bin"), "{stdout}");
-    assert!(stdout.contains("holds 1 clips"), "re-import must not duplicate: {stdout}");
+    assert!(
+        stdout.contains("holds 1 clips"),
+        "re-import must not duplicate: {stdout}"
+    );
 }
 
 #[test]
@@ -131,11 +184,28 @@ fn missing_files_fail_with_their_name() {
 
 #[test]
 fn bench_data_reports_throughput() {
-    let out = any4d(&["bench", "data", "--clips", "2", "--vertices", "600", "--frames", "4", "--p", "16"]);
+    let out = any4d(&[
+        "bench",
+        "data",
+        "--clips",
+        "2",
+        "--vertices",
+        "600",
+        "--frames",
+        "4",
+        "--p",
+        "16",
+    ]);
     let (stdout, stderr) = text(&out);
     assert!(out.status.success(), "{stdout} {stderr}");
-    assert!(stdout.contains("ours (1 thread)") && stdout.contains("clips/s"), "{stdout}");
+    assert!(
+        stdout.contains("ours (1 thread)") && stdout.contains("clips/s"),
+        "{stdout}"
+    );
     if stdout.contains("numpy reference") {
-        assert!(stdout.contains("FPS indices agree") && stdout.contains(": yes"), "{stdout}");
+        assert!(
+            stdout.contains("FPS indices agree") && stdout.contains(": yes"),
+            "{stdout}"
+        );
     }
 }

@@ -48,27 +48,16 @@ pub fn read_bin_bytes(bytes: &[u8], source: &str) -> Result<Clip> {
 
     let f = array(&value, "faces", source)?;
     let [_, 3] = f.shape[..] else {
-        return Err(err(
-            "faces",
-            format!("shape {:?}, expected (faces, 3)", f.shape),
-        ));
+        return Err(err("faces", format!("shape {:?}, expected (faces, 3)", f.shape)));
     };
     let ArrayData::Int(idx) = &f.data else {
-        return Err(err(
-            "faces",
-            format!("dtype {}, expected integers", f.dtype.descr()),
-        ));
+        return Err(err("faces", format!("dtype {}, expected integers", f.dtype.descr())));
     };
     let idx = idx
         .iter()
         .enumerate()
         .map(|(i, &x)| {
-            u32::try_from(x).map_err(|_| {
-                err(
-                    "faces",
-                    format!("index {x} in face {} is not a vertex index", i / 3),
-                )
-            })
+            u32::try_from(x).map_err(|_| err("faces", format!("index {x} in face {} is not a vertex index", i / 3)))
         })
         .collect::<Result<Vec<u32>>>()?;
     let faces = idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
@@ -76,13 +65,11 @@ pub fn read_bin_bytes(bytes: &[u8], source: &str) -> Result<Clip> {
     let caption = match value.get("caption") {
         None => MISSING_CAPTION.to_string(),
         Some(Value::Str(s)) => s.clone(),
-        Some(Value::Bytes(b)) => String::from_utf8(b.clone())
-            .map_err(|e| err("caption", format!("bytes are not valid UTF-8: {e}")))?,
+        Some(Value::Bytes(b)) => {
+            String::from_utf8(b.clone()).map_err(|e| err("caption", format!("bytes are not valid UTF-8: {e}")))?
+        }
         Some(other) => {
-            return Err(err(
-                "caption",
-                format!("is a {}, expected str", other.kind()),
-            ));
+            return Err(err("caption", format!("is a {}, expected str", other.kind())));
         }
     };
 
@@ -119,10 +106,7 @@ pub fn bin_bytes(clip: &Clip) -> Result<Vec<u8>> {
     let dict = Value::Dict(vec![
         (Value::Str("vertices".into()), Value::NdArray(vertices)),
         (Value::Str("faces".into()), Value::NdArray(faces)),
-        (
-            Value::Str("caption".into()),
-            Value::Str(clip.caption.clone()),
-        ),
+        (Value::Str("caption".into()), Value::Str(clip.caption.clone())),
     ]);
     pickle::dumps(&dict)
 }
@@ -168,12 +152,7 @@ mod tests {
     #[test]
     fn bad_dicts_name_the_field() {
         let dict = |items: Vec<(&str, Value)>| {
-            Value::Dict(
-                items
-                    .into_iter()
-                    .map(|(k, v)| (Value::Str(k.into()), v))
-                    .collect(),
-            )
+            Value::Dict(items.into_iter().map(|(k, v)| (Value::Str(k.into()), v)).collect())
         };
         let v3 = Value::NdArray(NdArray {
             shape: vec![2, 3, 3],
@@ -188,15 +167,9 @@ mod tests {
             })
         };
         let read = |v: Value| read_bin_bytes(&pickle::dumps(&v).unwrap(), "x.bin").unwrap_err();
-        assert_eq!(
-            read(dict(vec![("faces", faces(vec![0, 1, 2]))])).field,
-            "vertices"
-        );
+        assert_eq!(read(dict(vec![("faces", faces(vec![0, 1, 2]))])).field, "vertices");
         assert_eq!(read(dict(vec![("vertices", v3.clone())])).field, "faces");
-        let e = read(dict(vec![
-            ("vertices", v3.clone()),
-            ("faces", faces(vec![0, -1, 2])),
-        ]));
+        let e = read(dict(vec![("vertices", v3.clone()), ("faces", faces(vec![0, -1, 2]))]));
         assert!(e.field == "faces" && e.reason.contains("-1"), "{e}");
         let e = read(dict(vec![
             ("vertices", v3),

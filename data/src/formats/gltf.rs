@@ -173,10 +173,7 @@ fn slerp(a: &[f64], b: &[f64], u: f64) -> Vec<f64> {
             (u * theta).sin() / theta.sin(),
         )
     };
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| wa * x + wb * sign * y)
-        .collect()
+    a.iter().zip(b).map(|(x, y)| wa * x + wb * sign * y).collect()
 }
 
 /// Read and bake a `.gltf` / `.glb` clip. Errors name the file and the glTF part (field) at fault.
@@ -185,17 +182,10 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
     let source = path.display().to_string();
     let err = |field: &str, reason: String| DataError::new(path, field, reason);
     if !(opts.fps.is_finite() && opts.fps > 0.0) {
-        return Err(err(
-            "fps",
-            format!("{} is not a positive frame rate", opts.fps),
-        ));
+        return Err(err("fps", format!("{} is not a positive frame rate", opts.fps)));
     }
-    let gltf::Gltf {
-        document: doc,
-        blob,
-    } = gltf::Gltf::from_slice(&bytes).map_err(|e| err("gltf", e.to_string()))?;
-    let buffers = gltf::import_buffers(&doc, path.parent(), blob)
-        .map_err(|e| err("buffers", e.to_string()))?;
+    let gltf::Gltf { document: doc, blob } = gltf::Gltf::from_slice(&bytes).map_err(|e| err("gltf", e.to_string()))?;
+    let buffers = gltf::import_buffers(&doc, path.parent(), blob).map_err(|e| err("buffers", e.to_string()))?;
     let data = |b: gltf::Buffer| Some(&buffers[b.index()].0[..]);
 
     let anim = doc
@@ -204,10 +194,7 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
         .ok_or_else(|| err("animations", "no animation".into()))?;
     let node = doc
         .nodes()
-        .find(|n| {
-            n.mesh()
-                .is_some_and(|m| opts.mesh.is_none_or(|i| m.index() == i))
-        })
+        .find(|n| n.mesh().is_some_and(|m| opts.mesh.is_none_or(|i| m.index() == i)))
         .ok_or_else(|| match opts.mesh {
             Some(i) => err("meshes", format!("no node instantiates mesh {i}")),
             None => err("meshes", "no node has a mesh".into()),
@@ -235,10 +222,7 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
             format!("{} indices is not a multiple of 3", indices.len()),
         ));
     }
-    let faces: Vec<[u32; 3]> = indices
-        .chunks_exact(3)
-        .map(|c| [c[0], c[1], c[2]])
-        .collect();
+    let faces: Vec<[u32; 3]> = indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     let targets: Vec<Vec<[f64; 3]>> = reader
         .read_morph_targets()
         .map(|(p, _, _)| p.map_or_else(|| vec![[0.0; 3]; n], |p| p.map(to_f64).collect()))
@@ -246,10 +230,7 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
     if let Some(k) = targets.iter().position(|t| t.len() != n) {
         return Err(err(
             &mesh_field,
-            format!(
-                "morph target {k} has {} positions, base has {n}",
-                targets[k].len()
-            ),
+            format!("morph target {k} has {} positions, base has {n}", targets[k].len()),
         ));
     }
 
@@ -267,11 +248,7 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
             if ibms.len() != joints.len() {
                 return Err(err(
                     "skins",
-                    format!(
-                        "{} inverse bind matrices for {} joints",
-                        ibms.len(),
-                        joints.len()
-                    ),
+                    format!("{} inverse bind matrices for {} joints", ibms.len(), joints.len()),
                 ));
             }
             let mut set = 0;
@@ -292,10 +269,7 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
                 set += 1;
             }
             if set == 0 {
-                return Err(err(
-                    &mesh_field,
-                    "skinned node without JOINTS_0/WEIGHTS_0".into(),
-                ));
+                return Err(err(&mesh_field, "skinned node without JOINTS_0/WEIGHTS_0".into()));
             }
             if let Some(v) = influences.iter().position(|i| i.is_empty()) {
                 return Err(err("WEIGHTS_0", format!("vertex {v} has no joint weight")));
@@ -313,18 +287,12 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
             .read_inputs()
             .ok_or_else(|| err(&field, "no input times".into()))?
             .collect();
-        let (values, width): (Vec<f64>, usize) = match r
-            .read_outputs()
-            .ok_or_else(|| err(&field, "no outputs".into()))?
-        {
-            ReadOutputs::Translations(o) | ReadOutputs::Scales(o) => {
-                (o.flat_map(to_f64).collect(), 3)
-            }
-            ReadOutputs::Rotations(o) => (o.into_f32().flat_map(to_f64).collect(), 4),
-            ReadOutputs::MorphTargetWeights(o) => {
-                (o.into_f32().map(f64::from).collect(), targets.len().max(1))
-            }
-        };
+        let (values, width): (Vec<f64>, usize) =
+            match r.read_outputs().ok_or_else(|| err(&field, "no outputs".into()))? {
+                ReadOutputs::Translations(o) | ReadOutputs::Scales(o) => (o.flat_map(to_f64).collect(), 3),
+                ReadOutputs::Rotations(o) => (o.into_f32().flat_map(to_f64).collect(), 4),
+                ReadOutputs::MorphTargetWeights(o) => (o.into_f32().map(f64::from).collect(), targets.len().max(1)),
+            };
         let interpolation = ch.sampler().interpolation();
         let per_key = if interpolation == Interpolation::CubicSpline {
             3 * width
@@ -353,10 +321,7 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
             width,
         });
     }
-    let duration = tracks
-        .iter()
-        .map(|t| t.times[t.times.len() - 1])
-        .fold(0.0f32, f32::max);
+    let duration = tracks.iter().map(|t| t.times[t.times.len() - 1]).fold(0.0f32, f32::max);
     let mut frames = (duration as f64 * opts.fps as f64 + 1e-4).floor() as usize + 1;
     if let Some(m) = opts.max_frames {
         frames = frames.min(m);
@@ -375,14 +340,11 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
         .map(|nd| nd.transform().decomposed())
         .map(|(t, r, s)| (to_f64(t), to_f64(r), to_f64(s)))
         .collect();
-    let rest_matrix: Vec<Mat> = doc
-        .nodes()
-        .map(|nd| nd.transform().matrix().map(to_f64))
-        .collect();
-    let default_weights: Vec<f64> = node.weights().or(mesh.weights()).map_or_else(
-        || vec![0.0; targets.len()],
-        |w| w.iter().map(|&x| x as f64).collect(),
-    );
+    let rest_matrix: Vec<Mat> = doc.nodes().map(|nd| nd.transform().matrix().map(to_f64)).collect();
+    let default_weights: Vec<f64> = node
+        .weights()
+        .or(mesh.weights())
+        .map_or_else(|| vec![0.0; targets.len()], |w| w.iter().map(|&x| x as f64).collect());
     if default_weights.len() != targets.len() {
         return Err(err(
             &mesh_field,
@@ -446,11 +408,7 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
         });
         if skin.is_some() {
             // (skin) v = Σ_i w_i · G(joint_i) · IBM_i · p, weights normalised to sum 1
-            let skin_mats: Vec<Mat> = joints
-                .iter()
-                .zip(&ibms)
-                .map(|(&j, ibm)| mul(&world(j), ibm))
-                .collect();
+            let skin_mats: Vec<Mat> = joints.iter().zip(&ibms).map(|(&j, ibm)| mul(&world(j), ibm)).collect();
             for (p, inf) in morphed.zip(&influences) {
                 let total: f64 = inf.iter().map(|(_, w)| w).sum();
                 let mut out = [0.0; 3];
@@ -498,9 +456,7 @@ pub fn write_gltf(path: &Path, clip: &Clip, fps: f32) -> Result<()> {
             format!("{fps} is not a positive frame rate"),
         ));
     }
-    let binary = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    let binary = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
     let t = clip.frames;
     let mut buf: Vec<u8> = Vec::new();
     let mut views = Vec::new();
@@ -523,11 +479,7 @@ pub fn write_gltf(path: &Path, clip: &Clip, fps: f32) -> Result<()> {
         let hi: Vec<f32> = (0..3)
             .map(|c| rows.iter().map(|r| r[c]).fold(f32::NEG_INFINITY, f32::max))
             .collect();
-        let bytes = rows
-            .iter()
-            .flatten()
-            .flat_map(|x| x.to_le_bytes())
-            .collect();
+        let bytes = rows.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
         (
             bytes,
             json!({"componentType": 5126, "count": rows.len(), "type": "VEC3", "min": lo, "max": hi}),
@@ -535,12 +487,7 @@ pub fn write_gltf(path: &Path, clip: &Clip, fps: f32) -> Result<()> {
     };
     let (b, a) = vec3(clip.frame(0));
     let position = push(b, a);
-    let idx: Vec<u8> = clip
-        .faces
-        .iter()
-        .flatten()
-        .flat_map(|i| i.to_le_bytes())
-        .collect();
+    let idx: Vec<u8> = clip.faces.iter().flatten().flat_map(|i| i.to_le_bytes()).collect();
     let indices = push(
         idx,
         json!({"componentType": 5125, "count": clip.faces.len() * 3, "type": "SCALAR"}),
@@ -564,16 +511,10 @@ pub fn write_gltf(path: &Path, clip: &Clip, fps: f32) -> Result<()> {
     let onehot: Vec<u8> = (0..t * t)
         .flat_map(|i| if i / t == i % t { 1.0f32 } else { 0.0 }.to_le_bytes())
         .collect();
-    let weights_acc = push(
-        onehot,
-        json!({"componentType": 5126, "count": t * t, "type": "SCALAR"}),
-    );
+    let weights_acc = push(onehot, json!({"componentType": 5126, "count": t * t, "type": "SCALAR"}));
     let mut buffer = json!({"byteLength": buf.len()});
     if !binary {
-        buffer["uri"] = json!(format!(
-            "data:application/octet-stream;base64,{}",
-            base64(&buf)
-        ));
+        buffer["uri"] = json!(format!("data:application/octet-stream;base64,{}", base64(&buf)));
     }
     let names: Vec<String> = (0..t).map(|f| format!("frame_{f:04}")).collect();
     let doc = json!({
@@ -628,9 +569,7 @@ fn base64(data: &[u8]) -> String {
     const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut s = String::with_capacity(data.len().div_ceil(3) * 4);
     for c in data.chunks(3) {
-        let w = (c[0] as u32) << 16
-            | (*c.get(1).unwrap_or(&0) as u32) << 8
-            | *c.get(2).unwrap_or(&0) as u32;
+        let w = (c[0] as u32) << 16 | (*c.get(1).unwrap_or(&0) as u32) << 8 | *c.get(2).unwrap_or(&0) as u32;
         for k in 0..4 {
             if k <= c.len() {
                 s.push(A[(w >> (18 - 6 * k) & 63) as usize] as char);

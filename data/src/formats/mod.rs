@@ -48,9 +48,7 @@ impl Format {
             other => Err(DataError::new(
                 path,
                 "format",
-                format!(
-                    "unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb or a folder of .obj)"
-                ),
+                format!("unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb or a folder of .obj)"),
             )),
         }
     }
@@ -80,30 +78,15 @@ mod tests {
 
     #[test]
     fn format_by_extension() {
-        assert_eq!(
-            Format::from_path(Path::new("a/x.BIN")).unwrap(),
-            Format::Bin
-        );
-        assert_eq!(
-            Format::from_path(Path::new("a/x.gltf")).unwrap(),
-            Format::Gltf
-        );
-        assert_eq!(
-            Format::from_path(Path::new("a/x.glb")).unwrap(),
-            Format::Glb
-        );
-        assert_eq!(
-            Format::from_path(Path::new("a/new_seq")).unwrap(),
-            Format::ObjSeq
-        );
+        assert_eq!(Format::from_path(Path::new("a/x.BIN")).unwrap(), Format::Bin);
+        assert_eq!(Format::from_path(Path::new("a/x.gltf")).unwrap(), Format::Gltf);
+        assert_eq!(Format::from_path(Path::new("a/x.glb")).unwrap(), Format::Glb);
+        assert_eq!(Format::from_path(Path::new("a/new_seq")).unwrap(), Format::ObjSeq);
         assert_eq!(
             Format::from_path(Path::new(env!("CARGO_MANIFEST_DIR"))).unwrap(),
             Format::ObjSeq
         );
-        assert_eq!(
-            Format::from_path(Path::new("x.fbx")).unwrap_err().field,
-            "format"
-        );
+        assert_eq!(Format::from_path(Path::new("x.fbx")).unwrap_err().field, "format");
         assert!(
             Format::from_path(Path::new("x.obj"))
                 .unwrap_err()

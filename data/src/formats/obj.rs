@@ -33,22 +33,14 @@ pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
                     return Err(DataError::new(
                         file,
                         "vertices",
-                        format!(
-                            "{} vertices, frame 0 ({}) has {n}",
-                            v.len(),
-                            files[0].display()
-                        ),
+                        format!("{} vertices, frame 0 ({}) has {n}", v.len(), files[0].display()),
                     ));
                 }
                 if let Some(i) = (0..faces.len().max(f.len())).find(|&i| faces.get(i) != f.get(i)) {
                     return Err(DataError::new(
                         file,
                         "faces",
-                        format!(
-                            "triangle {i} is {:?}, frame 0 has {:?}",
-                            f.get(i),
-                            faces.get(i)
-                        ),
+                        format!("triangle {i} is {:?}, frame 0 has {:?}", f.get(i), faces.get(i)),
                     ));
                 }
             }
@@ -66,10 +58,9 @@ pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => MISSING_CAPTION.to_string(),
         Err(e) => return Err(DataError::io(&caption_path, e)),
     };
-    let id = dir.file_name().map_or_else(
-        || dir.display().to_string(),
-        |s| s.to_string_lossy().into_owned(),
-    );
+    let id = dir
+        .file_name()
+        .map_or_else(|| dir.display().to_string(), |s| s.to_string_lossy().into_owned());
     Clip::new(
         id,
         vertices,
@@ -87,11 +78,7 @@ fn frame_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
     for entry in entries {
         let path = entry.map_err(|e| DataError::io(dir, e))?.path();
-        if path.is_file()
-            && path
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("obj"))
-        {
+        if path.is_file() && path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) {
             files.push(path);
         }
     }
@@ -158,10 +145,7 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<ObjFrame> {
                     })
                     .collect::<Result<_>>()?;
                 let [x, y, z] = xyz[..] else {
-                    return Err(line_err(format!(
-                        "vertex has {} coordinates, expected 3",
-                        xyz.len()
-                    )));
+                    return Err(line_err(format!("vertex has {} coordinates, expected 3", xyz.len())));
                 };
                 if !(x.is_finite() && y.is_finite() && z.is_finite()) {
                     return Err(line_err(format!("non-finite vertex ({x}, {y}, {z})")));
@@ -172,16 +156,12 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<ObjFrame> {
                 let corners = tokens
                     .map(|t| {
                         let first = t.split('/').next().unwrap_or("");
-                        let i: i64 = first
-                            .parse()
-                            .map_err(|e| line_err(format!("face corner `{t}`: {e}")))?;
+                        let i: i64 = first.parse().map_err(|e| line_err(format!("face corner `{t}`: {e}")))?;
                         let n = positions.len() as i64;
                         // 1-based; negative counts back from the last vertex read so far.
                         let idx = if i > 0 { i - 1 } else { n + i };
                         if i == 0 || idx < 0 || idx >= n {
-                            return Err(line_err(format!(
-                                "face index {i} outside the {n} vertices read so far"
-                            )));
+                            return Err(line_err(format!("face index {i} outside the {n} vertices read so far")));
                         }
                         Ok(idx as u32)
                     })
@@ -192,9 +172,7 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<ObjFrame> {
                         corners.len()
                     )));
                 }
-                faces.extend(
-                    (1..corners.len() - 1).map(|i| [corners[0], corners[i], corners[i + 1]]),
-                );
+                faces.extend((1..corners.len() - 1).map(|i| [corners[0], corners[i], corners[i + 1]]));
             }
             _ => {}
         }
@@ -226,10 +204,7 @@ pub fn write_obj_seq(dir: &Path, clip: &Clip) -> Result<()> {
         text.push_str(&faces);
         write_atomic(&dir.join(format!("frame_{f:04}.obj")), text.as_bytes())?;
     }
-    write_atomic(
-        &dir.join(CAPTION_FILE),
-        format!("{}\n", clip.caption).as_bytes(),
-    )
+    write_atomic(&dir.join(CAPTION_FILE), format!("{}\n", clip.caption).as_bytes())
 }
 
 #[cfg(test)]

@@ -193,11 +193,7 @@ enum Global {
 
 const ALLOWED_GLOBALS: &[(&str, &str, Global)] = &[
     ("numpy.core.multiarray", "_reconstruct", Global::Reconstruct),
-    (
-        "numpy._core.multiarray",
-        "_reconstruct",
-        Global::Reconstruct,
-    ),
+    ("numpy._core.multiarray", "_reconstruct", Global::Reconstruct),
     ("numpy", "ndarray", Global::NdArrayType),
     ("numpy", "dtype", Global::DTypeType),
     ("_codecs", "encode", Global::CodecsEncode),
@@ -372,8 +368,7 @@ impl Machine<'_> {
     }
 
     fn text(&mut self, len_bytes: usize, what: &str) -> Step<String> {
-        String::from_utf8(self.sized(len_bytes, what)?)
-            .map_err(|e| format!("{what}: invalid UTF-8: {e}"))
+        String::from_utf8(self.sized(len_bytes, what)?).map_err(|e| format!("{what}: invalid UTF-8: {e}"))
     }
 
     fn line(&mut self, what: &str) -> Step<String> {
@@ -382,8 +377,7 @@ impl Machine<'_> {
             .iter()
             .position(|&b| b == b'\n')
             .ok_or(format!("truncated: {what} has no newline"))?;
-        let s = String::from_utf8(rest[..end].to_vec())
-            .map_err(|e| format!("{what}: invalid UTF-8: {e}"))?;
+        let s = String::from_utf8(rest[..end].to_vec()).map_err(|e| format!("{what}: invalid UTF-8: {e}"))?;
         self.pos += end + 1;
         Ok(s)
     }
@@ -391,11 +385,7 @@ impl Machine<'_> {
     /// Push a non-container item, or an empty container.
     fn push(&mut self, item: Item) {
         let meta = Meta::of(&item);
-        self.stack.push(Slot {
-            item,
-            memo: None,
-            meta,
-        });
+        self.stack.push(Slot { item, memo: None, meta });
     }
 
     /// Push a container holding children of combined meta `children`.
@@ -407,11 +397,7 @@ impl Machine<'_> {
         if meta.depth > MAX_DEPTH {
             return Err(format!("containers nest deeper than {MAX_DEPTH}"));
         }
-        self.stack.push(Slot {
-            item,
-            memo: None,
-            meta,
-        });
+        self.stack.push(Slot { item, memo: None, meta });
         Ok(())
     }
 
@@ -440,8 +426,7 @@ impl Machine<'_> {
     fn pop_mark(&mut self, what: &str) -> Step<(Vec<Item>, Meta)> {
         let mark = self.marks.pop().ok_or(format!("{what} without MARK"))?;
         let slots = self.stack.split_off(mark);
-        let (items, metas): (Vec<Item>, Vec<Meta>) =
-            slots.into_iter().map(|s| self.release(s)).unzip();
+        let (items, metas): (Vec<Item>, Vec<Meta>) = slots.into_iter().map(|s| self.release(s)).unzip();
         Ok((items, Meta::all(metas)))
     }
 
@@ -526,10 +511,7 @@ impl Machine<'_> {
             b'.' => {
                 let item = self.pop("STOP")?;
                 if !self.stack.is_empty() || !self.marks.is_empty() {
-                    return Err(format!(
-                        "STOP with {} items left on the stack",
-                        self.stack.len()
-                    ));
+                    return Err(format!("STOP with {} items left on the stack", self.stack.len()));
                 }
                 return Ok(Some(item));
             }
@@ -544,11 +526,7 @@ impl Machine<'_> {
                 let top = self.top("DUP")?;
                 let (item, meta) = (top.item.clone(), top.meta);
                 self.charge(meta.size)?;
-                self.stack.push(Slot {
-                    item,
-                    memo: None,
-                    meta,
-                });
+                self.stack.push(Slot { item, memo: None, meta });
             }
             b'N' => self.push(Item::None),
             0x88 => self.push(Item::Bool(true)),
@@ -569,10 +547,7 @@ impl Machine<'_> {
                 let what = if op == 0x8a { "LONG1" } else { "LONG4" };
                 let b = self.sized(if op == 0x8a { 1 } else { 4 }, what)?;
                 if b.len() > 8 {
-                    return Err(format!(
-                        "{what}: integer of {} bytes does not fit i64",
-                        b.len()
-                    ));
+                    return Err(format!("{what}: integer of {} bytes does not fit i64", b.len()));
                 }
                 let mut v = b.iter().rev().fold(0i64, |acc, &x| (acc << 8) | x as i64);
                 if let Some(&last) = b.last()
@@ -690,16 +665,10 @@ impl Machine<'_> {
                 let args = self.pop(what)?;
                 let callable = self.pop(what)?;
                 let Item::Tuple(args) = args else {
-                    return Err(format!(
-                        "{what} arguments are a {}, not a tuple",
-                        args.kind()
-                    ));
+                    return Err(format!("{what} arguments are a {}, not a tuple", args.kind()));
                 };
                 let Item::Global(g) = callable else {
-                    return Err(format!(
-                        "{what} of a {}, not an allowed global",
-                        callable.kind()
-                    ));
+                    return Err(format!("{what} of a {}, not an allowed global", callable.kind()));
                 };
                 self.push(call(g, args)?);
             }
@@ -758,10 +727,7 @@ impl Machine<'_> {
 
 fn pairs(items: Vec<Item>, what: &str) -> Step<Vec<(Item, Item)>> {
     if !items.len().is_multiple_of(2) {
-        return Err(format!(
-            "{what} with an odd number ({}) of items",
-            items.len()
-        ));
+        return Err(format!("{what} with an odd number ({}) of items", items.len()));
     }
     let mut it = items.into_iter();
     let mut out = Vec::new();
@@ -778,9 +744,7 @@ fn shape_of(item: &Item) -> Step<Vec<usize>> {
     dims.iter()
         .map(|d| match d {
             Item::Int(n) if *n >= 0 => Ok(*n as usize),
-            other => Err(format!(
-                "array dimension {other:?} is not a non-negative int"
-            )),
+            other => Err(format!("array dimension {other:?} is not a non-negative int")),
         })
         .collect()
 }
@@ -790,36 +754,19 @@ fn call(g: Global, args: Vec<Item>) -> Step<Item> {
     match (g, args.as_slice()) {
         (Global::Reconstruct, [Item::Global(Global::NdArrayType), _, _]) => Ok(Item::EmptyArray),
         (Global::DTypeType, [Item::Str(descr), ..]) => {
-            let (dtype, order) =
-                DType::parse(descr).ok_or(format!("unsupported dtype `{descr}`"))?;
+            let (dtype, order) = DType::parse(descr).ok_or(format!("unsupported dtype `{descr}`"))?;
             Ok(Item::DTypeObj(dtype, order))
         }
         (Global::CodecsEncode, [Item::Str(s), Item::Str(enc)]) => {
-            if !matches!(
-                enc.to_ascii_lowercase().as_str(),
-                "latin1" | "latin-1" | "iso-8859-1"
-            ) {
-                return Err(format!(
-                    "_codecs.encode with encoding `{enc}`; only latin1 is data"
-                ));
+            if !matches!(enc.to_ascii_lowercase().as_str(), "latin1" | "latin-1" | "iso-8859-1") {
+                return Err(format!("_codecs.encode with encoding `{enc}`; only latin1 is data"));
             }
             s.chars()
-                .map(|c| {
-                    u8::try_from(c as u32)
-                        .map_err(|_| format!("_codecs.encode: {c:?} is not latin1"))
-                })
+                .map(|c| u8::try_from(c as u32).map_err(|_| format!("_codecs.encode: {c:?} is not latin1")))
                 .collect::<Step<Vec<u8>>>()
                 .map(Item::Bytes)
         }
-        (
-            Global::FromBuffer,
-            [
-                Item::Bytes(buf),
-                Item::DTypeObj(dtype, order),
-                shape,
-                Item::Str(o),
-            ],
-        ) => {
+        (Global::FromBuffer, [Item::Bytes(buf), Item::DTypeObj(dtype, order), shape, Item::Str(o)]) => {
             let fortran = match o.as_str() {
                 "C" => false,
                 "F" => true,
@@ -849,18 +796,8 @@ fn build(obj: Item, state: Item) -> Step<Item> {
     match obj {
         Item::EmptyArray => {
             // (version, shape, dtype, is_fortran, raw data); numpy ≤ 1.x may omit the version.
-            let s = if state.len() == 5 {
-                &state[1..]
-            } else {
-                &state[..]
-            };
-            let [
-                shape,
-                Item::DTypeObj(dtype, order),
-                Item::Bool(fortran),
-                raw,
-            ] = s
-            else {
+            let s = if state.len() == 5 { &state[1..] } else { &state[..] };
+            let [shape, Item::DTypeObj(dtype, order), Item::Bool(fortran), raw] = s else {
                 return Err(format!(
                     "ndarray state of {} items is not (version, shape, dtype, fortran, data)",
                     state.len()
@@ -898,13 +835,7 @@ fn build(obj: Item, state: Item) -> Step<Item> {
 }
 
 /// Decode raw array bytes to C-order widened elements.
-fn decode_array(
-    shape: Vec<usize>,
-    dtype: DType,
-    order: ByteOrder,
-    fortran: bool,
-    raw: &[u8],
-) -> Step<NdArray> {
+fn decode_array(shape: Vec<usize>, dtype: DType, order: ByteOrder, fortran: bool, raw: &[u8]) -> Step<NdArray> {
     let count = shape
         .iter()
         .try_fold(1usize, |a, &d| a.checked_mul(d))
@@ -934,9 +865,7 @@ fn decode_array(
         DType::I2 => ArrayData::Int(chunks.map(|w| w as u16 as i16 as i64).collect()),
         DType::I4 => ArrayData::Int(chunks.map(|w| w as u32 as i32 as i64).collect()),
         DType::I8 => ArrayData::Int(chunks.map(|w| w as i64).collect()),
-        DType::U1 | DType::U2 | DType::U4 | DType::Bool => {
-            ArrayData::Int(chunks.map(|w| w as i64).collect())
-        }
+        DType::U1 | DType::U2 | DType::U4 | DType::Bool => ArrayData::Int(chunks.map(|w| w as i64).collect()),
         DType::U8 => ArrayData::Int(
             chunks
                 .map(|w| i64::try_from(w).map_err(|_| format!("u8 element {w} does not fit i64")))
@@ -1114,9 +1043,7 @@ fn encode_elements(a: &NdArray) -> Result<Vec<u8>> {
         )
     };
     match (&a.data, a.dtype) {
-        (ArrayData::Float(v), DType::F4) => {
-            v.iter().for_each(|&x| raw.extend((x as f32).to_le_bytes()))
-        }
+        (ArrayData::Float(v), DType::F4) => v.iter().for_each(|&x| raw.extend((x as f32).to_le_bytes())),
         (ArrayData::Float(v), DType::F8) => v.iter().for_each(|&x| raw.extend(x.to_le_bytes())),
         (ArrayData::Float(_), _) => return Err(mismatch()),
         (ArrayData::Int(_), d) if d.is_float() => return Err(mismatch()),
@@ -1144,9 +1071,7 @@ mod tests {
         let mut p = vec![0x80, 2, b'}', b'(', b'X', 1, 0, 0, 0, b'a', b']', b'('];
         p.extend([b'K', 1, b'J', 0xfe, 0xff, 0xff, 0xff, b'G']);
         p.extend(3.5f64.to_be_bytes());
-        p.extend([
-            b'N', 0x88, b'e', 0x8c, 1, b'b', b'C', 2, b'x', b'y', 0x85, b'u', b'.',
-        ]);
+        p.extend([b'N', 0x88, b'e', 0x8c, 1, b'b', b'C', 2, b'x', b'y', 0x85, b'u', b'.']);
         let v = loads(&p, "t.bin").unwrap();
         assert_eq!(
             v.get("a"),
@@ -1158,10 +1083,7 @@ mod tests {
                 Value::Bool(true)
             ]))
         );
-        assert_eq!(
-            v.get("b"),
-            Some(&Value::Tuple(vec![Value::Bytes(b"xy".to_vec())]))
-        );
+        assert_eq!(v.get("b"), Some(&Value::Tuple(vec![Value::Bytes(b"xy".to_vec())])));
     }
 
     #[test]
@@ -1176,21 +1098,14 @@ mod tests {
     fn hostile_global_is_refused_by_name() {
         let e = err(b"\x80\x02cos\nsystem\nX\x04\x00\x00\x00echo\x85R.");
         assert_eq!(e.field, "pickle");
-        assert!(
-            e.reason.contains("`os.system`") && e.reason.contains("byte 2"),
-            "{e}"
-        );
+        assert!(e.reason.contains("`os.system`") && e.reason.contains("byte 2"), "{e}");
         let e = err(b"\x80\x04\x8c\x08builtins\x8c\x04eval\x93.");
         assert!(e.reason.contains("`builtins.eval`"), "{e}");
     }
 
     #[test]
     fn truncated_unknown_and_underflow() {
-        assert!(
-            err(&[0x80, 2, b'X', 9, 0, 0, 0, b'a'])
-                .reason
-                .contains("truncated")
-        );
+        assert!(err(&[0x80, 2, b'X', 9, 0, 0, 0, b'a']).reason.contains("truncated"));
         assert!(err(&[0x80, 2, b'N']).reason.contains("before STOP"));
         assert!(err(&[0x80, 2, 0xff]).reason.contains("opcode 0xff"));
         assert!(err(&[0x80, 2, b't', b'.']).reason.contains("without MARK"));
@@ -1210,11 +1125,7 @@ mod tests {
         deep.extend([b']'; 300]);
         deep.extend([b'a'; 299]);
         deep.push(b'.');
-        assert!(
-            err(&deep).reason.contains("deeper than 256"),
-            "{}",
-            err(&deep)
-        );
+        assert!(err(&deep).reason.contains("deeper than 256"), "{}", err(&deep));
         // 200 levels are fine.
         let mut ok = vec![0x80, 4];
         ok.extend([b']'; 200]);
@@ -1229,10 +1140,7 @@ mod tests {
         assert_eq!(f16_to_f64(0xc000), -2.0);
         assert_eq!(f16_to_f64(0x0001), 2f64.powi(-24));
         // column-major [[0,1,2],[3,4,5]] stored as 0,3,1,4,2,5
-        assert_eq!(
-            fortran_to_c(&[0, 3, 1, 4, 2, 5], &[2, 3]),
-            vec![0, 1, 2, 3, 4, 5]
-        );
+        assert_eq!(fortran_to_c(&[0, 3, 1, 4, 2, 5], &[2, 3]), vec![0, 1, 2, 3, 4, 5]);
     }
 
     #[test]
@@ -1254,17 +1162,10 @@ mod tests {
                     data: ArrayData::Int(vec![0, 1, -2]),
                 }),
             ),
-            (
-                Value::Str("caption".into()),
-                Value::Str("a cat ".repeat(60)),
-            ),
+            (Value::Str("caption".into()), Value::Str("a cat ".repeat(60))),
             (
                 Value::Str("n".into()),
-                Value::List(vec![
-                    Value::Int(-70000),
-                    Value::Int(1 << 40),
-                    Value::Bool(false),
-                ]),
+                Value::List(vec![Value::Int(-70000), Value::Int(1 << 40), Value::Bool(false)]),
             ),
         ]);
         let bytes = dumps(&v).unwrap();

@@ -47,8 +47,15 @@ impl StoreWriter {
         let file = File::create(&tmp).map_err(|e| DataError::io(&tmp, e))?;
         let frames = u32_field(frames, dest, "header.frames")?;
         let p = u32_field(p, dest, "header.p")?;
-        let mut w =
-            Self { tmp, dest: dest.to_path_buf(), out: BufWriter::new(file), pos: 0, entries: Vec::new(), frames, p };
+        let mut w = Self {
+            tmp,
+            dest: dest.to_path_buf(),
+            out: BufWriter::new(file),
+            pos: 0,
+            entries: Vec::new(),
+            frames,
+            p,
+        };
         let mut header = Vec::with_capacity(HEADER_LEN as usize);
         header.extend_from_slice(MAGIC);
         for v in [VERSION, frames, p, 0] {
@@ -107,7 +114,10 @@ impl StoreWriter {
         table.extend_from_slice(&(self.entries.len() as u64).to_le_bytes());
         table.extend_from_slice(END_MAGIC);
         self.write(&table)?;
-        let file = self.out.into_inner().map_err(|e| DataError::io(&self.tmp, e.into_error()))?;
+        let file = self
+            .out
+            .into_inner()
+            .map_err(|e| DataError::io(&self.tmp, e.into_error()))?;
         file.sync_all().map_err(|e| DataError::io(&self.tmp, e))?;
         std::fs::rename(&self.tmp, &self.dest).map_err(|e| DataError::io(&self.dest, e))
     }
@@ -131,9 +141,12 @@ pub fn encode(c: &StoredClip, path: &Path) -> Result<Vec<u8>> {
         b.extend_from_slice(&u32_field(s.len(), path, field)?.to_le_bytes());
         b.extend_from_slice(s.as_bytes());
     }
-    for (field, v) in
-        [("frames", clip.frames), ("vertices", clip.n_vertices), ("faces", clip.faces.len()), ("fps", c.fps.len())]
-    {
+    for (field, v) in [
+        ("frames", clip.frames),
+        ("vertices", clip.n_vertices),
+        ("faces", clip.faces.len()),
+        ("fps", c.fps.len()),
+    ] {
         b.extend_from_slice(&u32_field(v, path, field)?.to_le_bytes());
     }
     for p in &clip.vertices {
@@ -185,18 +198,31 @@ pub fn read_catalog(path: &Path) -> Result<Catalog> {
     if size < HEADER_LEN + TRAILER_LEN {
         return Err(err(
             "file",
-            format!("{size} bytes is shorter than header + trailer ({} bytes)", HEADER_LEN + TRAILER_LEN),
+            format!(
+                "{size} bytes is shorter than header + trailer ({} bytes)",
+                HEADER_LEN + TRAILER_LEN
+            ),
         ));
     }
     let header = read_at(&mut file, path, 0, HEADER_LEN as usize, "header")?;
     if &header[..8] != MAGIC {
         return Err(err(
             "header.magic at byte 0",
-            format!("expected {:?}, found {:?}: not an any4d store", as_text(MAGIC), as_text(&header[..8])),
+            format!(
+                "expected {:?}, found {:?}: not an any4d store",
+                as_text(MAGIC),
+                as_text(&header[..8])
+            ),
         ));
     }
-    let word =
-        |i: usize| u32::from_le_bytes([header[8 + 4 * i], header[9 + 4 * i], header[10 + 4 * i], header[11 + 4 * i]]);
+    let word = |i: usize| {
+        u32::from_le_bytes([
+            header[8 + 4 * i],
+            header[9 + 4 * i],
+            header[10 + 4 * i],
+            header[11 + 4 * i],
+        ])
+    };
     if word(0) != VERSION {
         return Err(err(
             "header.version at byte 8",
@@ -225,12 +251,22 @@ pub fn read_catalog(path: &Path) -> Result<Catalog> {
             format!("table offset {table_offset} and clip count {count} do not fit a {size}-byte file"),
         ));
     }
-    let table = read_at(&mut file, path, table_offset, (trailer_at - table_offset) as usize, "table")?;
+    let table = read_at(
+        &mut file,
+        path,
+        table_offset,
+        (trailer_at - table_offset) as usize,
+        "table",
+    )?;
     let mut entries = Vec::with_capacity(count as usize);
     for i in 0..count as usize {
         let at = i * ENTRY_LEN as usize;
         let offset = u64_at(&table, at);
-        let end = if i + 1 < count as usize { u64_at(&table, at + ENTRY_LEN as usize) } else { table_offset };
+        let end = if i + 1 < count as usize {
+            u64_at(&table, at + ENTRY_LEN as usize)
+        } else {
+            table_offset
+        };
         let entry_at = table_offset + at as u64;
         if offset < HEADER_LEN || end < offset || end > table_offset {
             return Err(err(
@@ -244,7 +280,11 @@ pub fn read_catalog(path: &Path) -> Result<Catalog> {
                 format!("unknown split code {}", table[at + 8]),
             )
         })?;
-        entries.push(Entry { offset, len: end - offset, split });
+        entries.push(Entry {
+            offset,
+            len: end - offset,
+            split,
+        });
     }
     Ok(Catalog { frames, p, entries })
 }
@@ -293,7 +333,11 @@ impl Cursor<'_> {
     }
 
     fn error(&self, field: &str, reason: String) -> DataError {
-        DataError::new(self.path, format!("clip {} {field} at byte {}", self.clip, self.base + self.at as u64), reason)
+        DataError::new(
+            self.path,
+            format!("clip {} {field} at byte {}", self.clip, self.base + self.at as u64),
+            reason,
+        )
     }
 
     fn u32(&mut self, field: &str) -> Result<u32> {
@@ -316,8 +360,9 @@ impl Cursor<'_> {
 
     /// `count` little-endian 4-byte words; the length is checked before anything is allocated.
     fn words(&mut self, count: Option<usize>, field: &str) -> Result<&[u8]> {
-        let n =
-            count.and_then(|c| c.checked_mul(4)).ok_or_else(|| self.error(field, "element count overflows".into()))?;
+        let n = count
+            .and_then(|c| c.checked_mul(4))
+            .ok_or_else(|| self.error(field, "element count overflows".into()))?;
         self.take(n, field)
     }
 }
@@ -332,7 +377,13 @@ pub fn decode(
     frames: usize,
     p: usize,
 ) -> Result<StoredClip> {
-    let mut c = Cursor { bytes: record, at: 0, base: offset, path, clip: index };
+    let mut c = Cursor {
+        bytes: record,
+        at: 0,
+        base: offset,
+        path,
+        clip: index,
+    };
     let id = c.string("id")?;
     let caption = c.string("caption")?;
     let source = c.string("source")?;
@@ -341,9 +392,10 @@ pub fn decode(
     let m = c.u32("faces")? as usize;
     let np = c.u32("fps")? as usize;
     if t != frames || np != p {
-        return Err(
-            c.error("frames/fps", format!("clip {id} has T = {t}, P = {np}; the header says T = {frames}, P = {p}"))
-        );
+        return Err(c.error(
+            "frames/fps",
+            format!("clip {id} has T = {t}, P = {np}; the header says T = {frames}, P = {p}"),
+        ));
     }
     let vertices: Vec<[f32; 3]> = c
         .words(t.checked_mul(n).and_then(|x| x.checked_mul(3)), "vertices")?
@@ -356,8 +408,11 @@ pub fn decode(
         .map(|b| [0, 4, 8].map(|k| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
         .collect();
     let fps_at = c.at;
-    let fps: Vec<u32> =
-        c.words(Some(np), "fps")?.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+    let fps: Vec<u32> = c
+        .words(Some(np), "fps")?
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
     if let Some(bad) = fps.iter().find(|&&i| i as usize >= n) {
         return Err(DataError::new(
             path,
@@ -375,6 +430,14 @@ pub fn decode(
     }
     let clip = Clip::new(id, vertices, t, n, faces, caption, source)
         .map_err(|e| DataError::new(path, format!("clip {index} at byte {offset}: {}", e.field), e.reason))?;
-    let normalization = Normalization { center: [norm[0], norm[1], norm[2]], scale: norm[3] };
-    Ok(StoredClip { clip, fps, normalization, split })
+    let normalization = Normalization {
+        center: [norm[0], norm[1], norm[2]],
+        scale: norm[3],
+    };
+    Ok(StoredClip {
+        clip,
+        fps,
+        normalization,
+        split,
+    })
 }

@@ -49,7 +49,13 @@ pub struct ImportOptions {
 
 impl Default for ImportOptions {
     fn default() -> Self {
-        Self { filter: VertexFilter::default(), frames: 16, stride: 1, weld: Weld::Off, p: DEFAULT_P }
+        Self {
+            filter: VertexFilter::default(),
+            frames: 16,
+            stride: 1,
+            weld: Weld::Off,
+            p: DEFAULT_P,
+        }
     }
 }
 
@@ -111,8 +117,15 @@ enum Outcome {
 
 /// One unit of work: a file or folder found under the sources, or one procedural clip.
 enum Job {
-    File { source: String, path: PathBuf, format: Result<Format> },
-    Synth { source: String, index: usize },
+    File {
+        source: String,
+        path: PathBuf,
+        format: Result<Format>,
+    },
+    Synth {
+        source: String,
+        index: usize,
+    },
 }
 
 impl Job {
@@ -156,7 +169,9 @@ pub fn import_with_progress(
     check_options(opts)?;
     let existing = prepare_out(out, opts.frames, opts.p)?;
     let jobs = discover(sources, out)?;
-    run_jobs(out, existing, &jobs, opts.frames, opts.p, progress, |job| process_file(job, opts))
+    run_jobs(out, existing, &jobs, opts.frames, opts.p, progress, |job| {
+        process_file(job, opts)
+    })
 }
 
 /// Write `cfg.clips` procedural clips into the store `out` with P = [`DEFAULT_P`].
@@ -188,13 +203,20 @@ pub fn write_synth_windows(
         return Err(DataError::new(
             out,
             "window",
-            format!("window {window} / stride {stride} do not fit clips of {} frames", cfg.frames),
+            format!(
+                "window {window} / stride {stride} do not fit clips of {} frames",
+                cfg.frames
+            ),
         ));
     }
     cfg.validate()?;
     let existing = prepare_out(out, window, p)?;
-    let jobs: Vec<Job> =
-        (0..cfg.clips).map(|index| Job::Synth { source: format!("synth:{}:{index}", cfg.seed), index }).collect();
+    let jobs: Vec<Job> = (0..cfg.clips)
+        .map(|index| Job::Synth {
+            source: format!("synth:{}:{index}", cfg.seed),
+            index,
+        })
+        .collect();
     run_jobs(out, existing, &jobs, window, p, progress, |job| match job {
         Job::Synth { source, index } => match synth::generate_one(cfg, *index) {
             Ok(mut clip) => {
@@ -210,7 +232,10 @@ pub fn write_synth_windows(
 fn check_options(opts: &ImportOptions) -> Result<()> {
     let err = |field: &str, reason: String| Err(DataError::new("import options", field, reason));
     if opts.frames < 2 {
-        return err("frames", format!("a window needs at least 2 frames, got {}", opts.frames));
+        return err(
+            "frames",
+            format!("a window needs at least 2 frames, got {}", opts.frames),
+        );
     }
     if opts.stride == 0 {
         return err("stride", "must be at least 1".into());
@@ -219,7 +244,10 @@ fn check_options(opts: &ImportOptions) -> Result<()> {
         return err("p", "needs at least 1 FPS token".into());
     }
     if opts.filter.min > opts.filter.max {
-        return err("vertex filter", format!("min {} > max {}", opts.filter.min, opts.filter.max));
+        return err(
+            "vertex filter",
+            format!("min {} > max {}", opts.filter.min, opts.filter.max),
+        );
     }
     if let Weld::Eps(e) = opts.weld
         && !(e.is_finite() && e >= 0.0)
@@ -251,7 +279,10 @@ fn prepare_out(out: &Path, frames: usize, p: usize) -> Result<Option<(Store, Vec
             return Err(DataError::new(
                 out,
                 "index.parquet",
-                format!("lists {ok} stored clips but clips.bin holds {}: the store is inconsistent", store.len()),
+                format!(
+                    "lists {ok} stored clips but clips.bin holds {}: the store is inconsistent",
+                    store.len()
+                ),
             ));
         }
         return Ok(Some((store, rows)));
@@ -283,7 +314,11 @@ fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
                 if path.join(CLIPS_FILE).exists() {
                     found.push((
                         path,
-                        Err(DataError::new(src, CLIPS_FILE, "this folder is an any4d store, not a source")),
+                        Err(DataError::new(
+                            src,
+                            CLIPS_FILE,
+                            "this folder is an any4d store, not a source",
+                        )),
                     ));
                 } else {
                     walk(&path, &out_canon, &mut found);
@@ -297,7 +332,14 @@ fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
     }
     found.sort_by(|a, b| a.0.cmp(&b.0));
     found.dedup_by(|a, b| a.0 == b.0);
-    Ok(found.into_iter().map(|(path, format)| Job::File { source: path.display().to_string(), path, format }).collect())
+    Ok(found
+        .into_iter()
+        .map(|(path, format)| Job::File {
+            source: path.display().to_string(),
+            path,
+            format,
+        })
+        .collect())
 }
 
 /// Recursively collect clip files and OBJ-sequence folders under `dir`. Unreadable folders become rejected jobs.
@@ -330,7 +372,11 @@ fn walk(dir: &Path, out: &Path, found: &mut Vec<(PathBuf, Result<Format>)>) {
 
 /// The reason text of a rejection: `field: reason`, prefixed by the file when it is not the source itself.
 fn reason(e: &DataError, source: &str) -> String {
-    if e.path == source { format!("{}: {}", e.field, e.reason) } else { e.to_string() }
+    if e.path == source {
+        format!("{}: {}", e.field, e.reason)
+    } else {
+        e.to_string()
+    }
 }
 
 fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
@@ -371,7 +417,15 @@ fn preprocess_windows(clip: &Clip, frames: usize, stride: usize, p: usize) -> Ve
         .map(|w| {
             let (clip, normalization) = preprocess::normalize(w);
             let fps = farthest_point_sampling(clip.frame(0), p);
-            (StoredClip { clip, fps, normalization, split }, object.clone())
+            (
+                StoredClip {
+                    clip,
+                    fps,
+                    normalization,
+                    split,
+                },
+                object.clone(),
+            )
         })
         .collect()
 }
@@ -397,7 +451,9 @@ fn ok_row(c: &StoredClip, format: &str, object: String) -> IndexRow {
 
 fn rejected_row(job: &Job, reason: String) -> IndexRow {
     let source = job.source().to_owned();
-    let id = Path::new(&source).file_name().map_or_else(|| source.clone(), |n| n.to_string_lossy().into_owned());
+    let id = Path::new(&source)
+        .file_name()
+        .map_or_else(|| source.clone(), |n| n.to_string_lossy().into_owned());
     IndexRow {
         object: object_uid(&id).to_owned(),
         id,
@@ -454,7 +510,11 @@ fn run_jobs(
             ok_rows.push(row);
             kept += 1;
         }
-        rejected_rows.extend(old_rejected.into_iter().filter(|r| !replaced.contains(r.source.as_str())));
+        rejected_rows.extend(
+            old_rejected
+                .into_iter()
+                .filter(|r| !replaced.contains(r.source.as_str())),
+        );
     }
     let mut rejected = Vec::new();
     let mut added = 0;
@@ -470,7 +530,10 @@ fn run_jobs(
                     }
                 }
                 Outcome::Rejected(reason) => {
-                    rejected.push(Rejected { source: job.source().to_owned(), reason: reason.clone() });
+                    rejected.push(Rejected {
+                        source: job.source().to_owned(),
+                        reason: reason.clone(),
+                    });
                     rejected_rows.push(rejected_row(job, reason));
                 }
             }

@@ -69,7 +69,10 @@ pub fn write_index(dir: &Path, rows: &[IndexRow]) -> Result<()> {
         Column::new("vertices".into(), rows.iter().map(|r| r.vertices).collect::<Vec<_>>()),
         Column::new("faces".into(), rows.iter().map(|r| r.faces).collect::<Vec<_>>()),
         Column::new("caption".into(), strings(|r| &r.caption)),
-        Column::new("split".into(), rows.iter().map(|r| r.split.map(Split::as_str)).collect::<Vec<_>>()),
+        Column::new(
+            "split".into(),
+            rows.iter().map(|r| r.split.map(Split::as_str)).collect::<Vec<_>>(),
+        ),
         Column::new("status".into(), strings(|r| r.status.as_str())),
         Column::new("reason".into(), strings(|r| &r.reason)),
         Column::new("object".into(), strings(|r| &r.object)),
@@ -88,7 +91,9 @@ pub fn write_index(dir: &Path, rows: &[IndexRow]) -> Result<()> {
 pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
     let path = dir.join(INDEX_FILE);
     let file = File::open(&path).map_err(|e| DataError::io(&path, e))?;
-    let df = ParquetReader::new(file).finish().map_err(|e| polars_err(&path, "parquet", e))?;
+    let df = ParquetReader::new(file)
+        .finish()
+        .map_err(|e| polars_err(&path, "parquet", e))?;
     let col = |name: &str| df.column(name).map_err(|e| polars_err(&path, name, e));
     let strs = |name: &str| -> Result<Vec<Option<String>>> {
         let c = col(name)?;
@@ -124,7 +129,13 @@ pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
         let status = match status[i].as_str() {
             "ok" => Status::Ok,
             "rejected" => Status::Rejected,
-            other => return Err(DataError::new(&path, format!("status row {i}"), format!("unknown status {other:?}"))),
+            other => {
+                return Err(DataError::new(
+                    &path,
+                    format!("status row {i}"),
+                    format!("unknown status {other:?}"),
+                ));
+            }
         };
         let split = match &split[i] {
             None => None,

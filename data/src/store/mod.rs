@@ -52,7 +52,8 @@ use crate::preprocess::Normalization;
 
 pub use format::{Catalog, Entry, StoreWriter, encode, read_catalog};
 pub use import::{
-    ImportOptions, ImportReport, Progress, Rejected, Weld, import, import_with_progress, write_synth, write_synth_windows, write_synth_with,
+    ImportOptions, ImportReport, Progress, Rejected, Weld, import, import_with_progress, write_synth,
+    write_synth_windows, write_synth_with,
 };
 pub use index::{IndexRow, Status, read_index, write_index};
 
@@ -151,10 +152,18 @@ impl Store {
     pub fn open(dir: &Path) -> Result<Self> {
         let path = dir.join(CLIPS_FILE);
         if !path.is_file() {
-            return Err(DataError::new(dir, CLIPS_FILE, "not found: this folder holds no any4d store"));
+            return Err(DataError::new(
+                dir,
+                CLIPS_FILE,
+                "not found: this folder holds no any4d store",
+            ));
         }
         let catalog = read_catalog(&path)?;
-        Ok(Self { dir: dir.to_path_buf(), path, catalog })
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            path,
+            catalog,
+        })
     }
 
     /// The store folder.
@@ -189,14 +198,24 @@ impl Store {
 
     /// Indices of the clips in `split`, in store order.
     pub fn indices(&self, split: Split) -> Vec<usize> {
-        (0..self.len()).filter(|&i| self.catalog.entries[i].split == split).collect()
+        (0..self.len())
+            .filter(|&i| self.catalog.entries[i].split == split)
+            .collect()
     }
 
     /// Read and decode clip `i`.
     pub fn get(&self, i: usize) -> Result<StoredClip> {
         let bytes = self.raw(i)?;
         let e = self.catalog.entries[i];
-        format::decode(&bytes, e.offset, &self.path, i, e.split, self.catalog.frames, self.catalog.p)
+        format::decode(
+            &bytes,
+            e.offset,
+            &self.path,
+            i,
+            e.split,
+            self.catalog.frames,
+            self.catalog.p,
+        )
     }
 
     /// Position of the clip with this id, if any (reads every clip until found).
@@ -218,7 +237,11 @@ impl Store {
 
     fn entry(&self, i: usize) -> Result<Entry> {
         self.catalog.entries.get(i).copied().ok_or_else(|| {
-            DataError::new(&self.path, "clip index", format!("clip {i} requested, the store holds {}", self.len()))
+            DataError::new(
+                &self.path,
+                "clip index",
+                format!("clip {i} requested, the store holds {}", self.len()),
+            )
         })
     }
 }
@@ -229,14 +252,18 @@ mod tests {
 
     #[test]
     fn split_is_about_80_20_and_stable() {
-        let val = (0..4000).filter(|i| Split::of_object(&format!("obj{i}"), SPLIT_SEED) == Split::Val).count();
+        let val = (0..4000)
+            .filter(|i| Split::of_object(&format!("obj{i}"), SPLIT_SEED) == Split::Val)
+            .count();
         // Binomial(4000, 0.2): mean 800, sd 25; ±100 is 4 sd.
         assert!((700..=900).contains(&val), "{val} of 4000 in val");
         // Fixed values guard against an accidental change of the hash (which would move objects across splits).
-        let sides: String =
-            (0..32).map(|i| Split::of_object(&format!("obj{i}"), SPLIT_SEED).as_str().as_bytes()[0] as char).collect();
-        let other: String =
-            (0..32).map(|i| Split::of_object(&format!("obj{i}"), 1).as_str().as_bytes()[0] as char).collect();
+        let sides: String = (0..32)
+            .map(|i| Split::of_object(&format!("obj{i}"), SPLIT_SEED).as_str().as_bytes()[0] as char)
+            .collect();
+        let other: String = (0..32)
+            .map(|i| Split::of_object(&format!("obj{i}"), 1).as_str().as_bytes()[0] as char)
+            .collect();
         assert_ne!(sides, other, "the seed must matter");
         assert_eq!(sides, SPLIT_GOLDEN);
     }

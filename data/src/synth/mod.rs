@@ -149,10 +149,7 @@ impl SynthConfig {
     pub fn validate(&self) -> Result<()> {
         let err = |field: &str, reason: String| Err(DataError::new("synth config", field, reason));
         if self.frames < 2 {
-            return err(
-                "frames",
-                format!("needs at least 2 frames, got {}", self.frames),
-            );
+            return err("frames", format!("needs at least 2 frames, got {}", self.frames));
         }
         if self.min_vertices < 256 {
             return err(
@@ -182,12 +179,7 @@ pub fn generate_one(cfg: &SynthConfig, index: usize) -> Result<Clip> {
 }
 
 /// Clip `index` with the families forced; equals [`generate_one`] when they match the drawn ones.
-pub fn generate_with(
-    cfg: &SynthConfig,
-    index: usize,
-    shape: ShapeFamily,
-    motion: MotionFamily,
-) -> Result<Clip> {
+pub fn generate_with(cfg: &SynthConfig, index: usize, shape: ShapeFamily, motion: MotionFamily) -> Result<Clip> {
     let mut r = rng(cfg.seed, index as u64);
     let _families: (usize, usize) = (
         r.random_range(0..ShapeFamily::ALL.len()),
@@ -199,10 +191,7 @@ pub fn generate_with(
 /// All `cfg.clips` clips, in index order, generated in parallel.
 pub fn generate(cfg: &SynthConfig) -> Result<Vec<Clip>> {
     cfg.validate()?;
-    (0..cfg.clips)
-        .into_par_iter()
-        .map(|i| generate_one(cfg, i))
-        .collect()
+    (0..cfg.clips).into_par_iter().map(|i| generate_one(cfg, i)).collect()
 }
 
 /// The families encoded in a synthetic clip id (`synth-<shape>-<motion>-<seed>-<index>_offset0_0-<T−1>`).
@@ -224,8 +213,7 @@ fn build(
     cfg.validate()?;
     let source = format!("synth:{}:{index}", cfg.seed);
     let target = r.random_range(cfg.min_vertices..=cfg.max_vertices);
-    let body = shapes::build(shape, target, cfg.min_vertices, cfg.max_vertices, r)
-        .map_err(|e| e.at(&source))?;
+    let body = shapes::build(shape, target, cfg.min_vertices, cfg.max_vertices, r).map_err(|e| e.at(&source))?;
     let geo = motions::Geometry::of(&body);
     let (drawn, phrase) = motions::draw(motion, &body, &geo, r);
     let n = body.pos.len();

@@ -40,10 +40,7 @@ impl Geometry {
         Self {
             center: [0, 1, 2].map(|k| (lo[k] + hi[k]) / 2.0),
             size: (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f32::max),
-            width: (0..3)
-                .filter(|&k| k != a)
-                .map(|k| hi[k] - lo[k])
-                .fold(0.0, f32::max),
+            width: (0..3).filter(|&k| k != a).map(|k| hi[k] - lo[k]).fold(0.0, f32::max),
             lo: lo[a],
             hi: hi[a],
             s0,
@@ -95,12 +92,7 @@ pub(super) enum Motion {
 }
 
 /// Draw the parameters of `family` for `body` and the caption phrase they earn (verb, manner, direction).
-pub(super) fn draw(
-    family: MotionFamily,
-    body: &Body,
-    geo: &Geometry,
-    r: &mut DataRng,
-) -> (Motion, String) {
+pub(super) fn draw(family: MotionFamily, body: &Body, geo: &Geometry, r: &mut DataRng) -> (Motion, String) {
     let a = body.axis;
     // Bends and waves of a sheet stay out of its plane.
     let perp: Vec<usize> = if body.closed {
@@ -110,12 +102,7 @@ pub(super) fn draw(
     };
     let sign = |r: &mut DataRng| if r.random_bool(0.5) { 1.0f32 } else { -1.0 };
     let cardinal = |r: &mut DataRng| {
-        let base = [
-            [1.0, 0.0, 0.0],
-            [-1.0, 0.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [0.0, 0.0, -1.0],
-        ][r.random_range(0..4usize)];
+        let base = [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]][r.random_range(0..4usize)];
         let jitter = r.random_range(-0.3f32..0.3);
         let (s, c) = jitter.sin_cos();
         [base[0] * c + base[2] * s, 0.0, -base[0] * s + base[2] * c]
@@ -138,11 +125,7 @@ pub(super) fn draw(
             // Lying shapes twist both ends (in opposite senses), so less at each end.
             let angle = sign(r) * r.random_range(0.8f32..2.4) * if lying { 0.75 } else { 1.0 };
             let cycles = r.random_range(0.5f32..2.0);
-            let turn = if angle > 0.0 {
-                "counterclockwise"
-            } else {
-                "clockwise"
-            };
+            let turn = if angle > 0.0 { "counterclockwise" } else { "clockwise" };
             (
                 Motion::Twist { angle, cycles },
                 format!("twisting {} {turn}", pace(cycles)),
@@ -243,10 +226,7 @@ pub(super) fn draw(
             } else {
                 "squashing and stretching"
             };
-            (
-                Motion::Squash { amount, cycles },
-                format!("{order} {}", pace(cycles)),
-            )
+            (Motion::Squash { amount, cycles }, format!("{order} {}", pace(cycles)))
         }
         MotionFamily::Rigid => {
             let spin = sign(r) * r.random_range(1.0f32..5.0);
@@ -258,17 +238,10 @@ pub(super) fn draw(
             } else {
                 "steadily"
             };
-            let turn = if spin > 0.0 {
-                "counterclockwise"
-            } else {
-                "clockwise"
-            };
+            let turn = if spin > 0.0 { "counterclockwise" } else { "clockwise" };
             (
                 Motion::Rigid { spin, travel },
-                format!(
-                    "spinning {turn} {manner} while sliding {}",
-                    vec_word(travel)
-                ),
+                format!("spinning {turn} {manner} while sliding {}", vec_word(travel)),
             )
         }
     }
@@ -298,9 +271,7 @@ fn axis_word(k: usize, sign: f32) -> &'static str {
 }
 
 fn vec_word(v: V3) -> &'static str {
-    let k = (0..3)
-        .max_by(|&i, &j| v[i].abs().total_cmp(&v[j].abs()))
-        .unwrap_or(0);
+    let k = (0..3).max_by(|&i, &j| v[i].abs().total_cmp(&v[j].abs())).unwrap_or(0);
     axis_word(k, v[k])
 }
 

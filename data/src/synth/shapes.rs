@@ -59,12 +59,7 @@ impl Mesh {
     /// A closed sphere-topology part with `rings` rings of `segs` vertices plus two poles; `f(ring, t, phi)` gives
     /// the position, t ∈ [0, 1] from pole to pole (ring 0 and `rings + 1` are the poles), phi ∈ [0, 2π).
     /// With a right-handed frame (axis, e1, e2 = axis × e1) and phi turning e1 towards e2, faces point outwards.
-    fn sphere_part(
-        &mut self,
-        rings: usize,
-        segs: usize,
-        f: impl Fn(usize, f32, f32) -> V3,
-    ) -> Range<usize> {
+    fn sphere_part(&mut self, rings: usize, segs: usize, f: impl Fn(usize, f32, f32) -> V3) -> Range<usize> {
         let b = self.pos.len();
         self.pos.push(f(0, 0.0, 0.0));
         for i in 1..=rings {
@@ -93,8 +88,7 @@ impl Mesh {
         let b = self.pos.len();
         for i in 0..nx {
             for k in 0..nz {
-                self.pos
-                    .push(f(i as f32 / (nx - 1) as f32, k as f32 / (nz - 1) as f32));
+                self.pos.push(f(i as f32 / (nx - 1) as f32, k as f32 / (nz - 1) as f32));
             }
         }
         let v = |i: usize, k: usize| (b + i * nz + k) as u32;
@@ -107,14 +101,7 @@ impl Mesh {
     }
 
     /// A capsule from `p0` (radius `r0`) to `p1` (radius `r1`) with hemispherical-ish ends, rings spaced by arc.
-    fn capsule(
-        &mut self,
-        (rings, segs): (usize, usize),
-        p0: V3,
-        p1: V3,
-        r0: f32,
-        r1: f32,
-    ) -> Range<usize> {
+    fn capsule(&mut self, (rings, segs): (usize, usize), p0: V3, p1: V3, r0: f32, r1: f32) -> Range<usize> {
         let d = sub(p1, p0);
         let len = norm(d).max(1e-6);
         let a = scale(d, 1.0 / len);
@@ -183,10 +170,7 @@ impl Mesh {
             } else {
                 r
             };
-            add(
-                c,
-                add(scale(n, rho * phi.cos()), scale(b, rho * ratio * phi.sin())),
-            )
+            add(c, add(scale(n, rho * phi.cos()), scale(b, rho * ratio * phi.sin())))
         })
     }
 }
@@ -200,12 +184,7 @@ fn sphere_dir(t: f32, phi: f32) -> V3 {
 
 /// Ring and segment counts of parts with given (length, girth) so that the total vertex count is as close to
 /// `target` as one ring allows and inside `lo..=hi`.
-fn allocate(
-    target: usize,
-    lo: usize,
-    hi: usize,
-    parts: &[(f32, f32)],
-) -> Result<Vec<(usize, usize)>> {
+fn allocate(target: usize, lo: usize, hi: usize, parts: &[(f32, f32)]) -> Result<Vec<(usize, usize)>> {
     let area: f32 = parts.iter().map(|(l, g)| l * g).sum();
     let mut res: Vec<(usize, usize)> = parts
         .iter()
@@ -256,22 +235,14 @@ fn allocate(
         return Err(DataError::new(
             "synth",
             "vertices",
-            format!(
-                "cannot fit a mesh of these parts into {lo}..={hi} vertices (got {n}, target {target})"
-            ),
+            format!("cannot fit a mesh of these parts into {lo}..={hi} vertices (got {n}, target {target})"),
         ));
     }
     Ok(res)
 }
 
 /// Draw a rest body of `family` with about `target` vertices, inside `lo..=hi`.
-pub(super) fn build(
-    family: ShapeFamily,
-    target: usize,
-    lo: usize,
-    hi: usize,
-    r: &mut DataRng,
-) -> Result<Body> {
+pub(super) fn build(family: ShapeFamily, target: usize, lo: usize, hi: usize, r: &mut DataRng) -> Result<Body> {
     let mut m = Mesh::default();
     let mut body = Body {
         pos: Vec::new(),
@@ -349,8 +320,7 @@ pub(super) fn build(
             }
             // Adjective order: size, then build.
             body.words.extend(pick(height, 1.3, 1.9, "short", "tall"));
-            body.words
-                .extend(pick(rad / height, 0.1, 0.15, "thin", "thick"));
+            body.words.extend(pick(rad / height, 0.1, 0.15, "thin", "thick"));
         }
         ShapeFamily::Humanoid => {
             let h = r.random_range(1.5f32..1.9);
@@ -458,8 +428,7 @@ pub(super) fn build(
             body.pivot = Pivot::Center;
             body.forward = Some(0);
             body.leg = leg;
-            body.words
-                .extend(pick(leg_f, 0.4, 0.5, "short-legged", "long-legged"));
+            body.words.extend(pick(leg_f, 0.4, 0.5, "short-legged", "long-legged"));
         }
         ShapeFamily::Sheet => {
             let lx = r.random_range(1.0f32..2.0);
@@ -478,8 +447,7 @@ pub(super) fn build(
             body.pivot = Pivot::Center;
             body.closed = false;
             body.words.extend(pick(lx, 1.3, 1.7, "small", "large"));
-            body.words
-                .extend(pick(aspect, 0.6, 0.85, "narrow", "square"));
+            body.words.extend(pick(aspect, 0.6, 0.85, "narrow", "square"));
         }
         ShapeFamily::Worm => {
             let len = r.random_range(1.0f32..2.5);
@@ -494,8 +462,7 @@ pub(super) fn build(
             body.pivot = Pivot::Center;
             body.forward = Some(0);
             body.words.extend(pick(len, 1.5, 2.0, "short", "long"));
-            body.words
-                .extend(pick(rad / len, 0.04, 0.055, "thin", "fat"));
+            body.words.extend(pick(rad / len, 0.04, 0.055, "thin", "fat"));
         }
         ShapeFamily::Helix => {
             let height = r.random_range(0.8f32..1.8);
@@ -508,8 +475,7 @@ pub(super) fn build(
                 let a = TAU * turns * s;
                 [coil * a.cos(), wire + s * height, coil * a.sin()]
             });
-            body.words
-                .extend(pick(turns / height, 2.2, 3.5, "loosely", "tightly"));
+            body.words.extend(pick(turns / height, 2.2, 3.5, "loosely", "tightly"));
             if body.words.is_empty() {
                 body.words.push("coiled");
             } else {

@@ -20,11 +20,9 @@ fn centroid(frame: &[[f32; 3]]) -> [f32; 3] {
 fn extent(frame: &[[f32; 3]]) -> f32 {
     (0..3)
         .map(|k| {
-            let (lo, hi) = frame
-                .iter()
-                .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), p| {
-                    (l.min(p[k]), h.max(p[k]))
-                });
+            let (lo, hi) = frame.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), p| {
+                (l.min(p[k]), h.max(p[k]))
+            });
             hi - lo
         })
         .fold(0.0, f32::max)
@@ -66,18 +64,10 @@ fn every_family_pair_is_a_valid_visible_smooth_clip() {
             let moved = (1..clip.frames)
                 .flat_map(|f| clip.frame(f).iter().zip(f0).map(|(p, q)| dist(*p, *q)))
                 .fold(0.0, f32::max);
-            assert!(
-                moved > 0.1 * size,
-                "{tag}: largest displacement {moved} of size {size}"
-            );
+            assert!(moved > 0.1 * size, "{tag}: largest displacement {moved} of size {size}");
             // Smooth: no vertex jumps more than 40 % of the size between consecutive frames.
             let step = (1..clip.frames)
-                .flat_map(|f| {
-                    clip.frame(f)
-                        .iter()
-                        .zip(clip.frame(f - 1))
-                        .map(|(p, q)| dist(*p, *q))
-                })
+                .flat_map(|f| clip.frame(f).iter().zip(clip.frame(f - 1)).map(|(p, q)| dist(*p, *q)))
                 .fold(0.0, f32::max);
             assert!(step < 0.4 * size, "{tag}: frame step {step} of size {size}");
         }
@@ -100,20 +90,13 @@ fn closed_shapes_are_oriented_closed_surfaces_with_outward_faces() {
         }
         if shape == ShapeFamily::Sheet {
             assert!(
-                directed
-                    .keys()
-                    .any(|&(a, b)| !directed.contains_key(&(b, a))),
+                directed.keys().any(|&(a, b)| !directed.contains_key(&(b, a))),
                 "the sheet has a border"
             );
             continue;
         }
         for (&(a, b), &count) in &directed {
-            assert_eq!(
-                count,
-                1,
-                "{}: edge {a}->{b} used {count} times",
-                shape.name()
-            );
+            assert_eq!(count, 1, "{}: edge {a}->{b} used {count} times", shape.name());
             assert!(
                 directed.contains_key(&(b, a)),
                 "{}: edge {a}->{b} has no twin",
@@ -168,34 +151,19 @@ fn direction_words_match_the_motion() {
     for index in 0..60 {
         let motion = [MotionFamily::Rigid, MotionFamily::Walk, MotionFamily::Jump][index % 3];
         let clip = generate_with(&c, index, ShapeFamily::ALL[index % 7], motion).unwrap();
-        let (a, b) = (
-            centroid(clip.frame(0)),
-            centroid(clip.frame(clip.frames - 1)),
-        );
+        let (a, b) = (centroid(clip.frame(0)), centroid(clip.frame(clip.frames - 1)));
         let d = [b[0] - a[0], b[2] - a[2]];
         let word = if d[0].abs() > d[1].abs() {
-            if d[0] > 0.0 {
-                "to the right"
-            } else {
-                "to the left"
-            }
+            if d[0] > 0.0 { "to the right" } else { "to the left" }
         } else if d[1] > 0.0 {
             "toward the viewer"
         } else {
             "away from the viewer"
         };
         if clip.caption.contains("in place") {
-            assert!(
-                d[0].hypot(d[1]) < 0.05 * extent(clip.frame(0)),
-                "{}",
-                clip.caption
-            );
+            assert!(d[0].hypot(d[1]) < 0.05 * extent(clip.frame(0)), "{}", clip.caption);
         } else {
-            assert!(
-                clip.caption.ends_with(word),
-                "{}: centroid moved {d:?}",
-                clip.caption
-            );
+            assert!(clip.caption.ends_with(word), "{}: centroid moved {d:?}", clip.caption);
             checked += 1;
         }
     }
@@ -218,10 +186,7 @@ fn twist_and_bend_words_match_the_motion() {
             .zip(top)
             .filter(|(p, _)| p[1] > 0.9 * h)
             .map(|(p, q)| {
-                let (u, v) = (
-                    [p[0] - cen[0], p[2] - cen[2]],
-                    [q[0] - cen[0], q[2] - cen[2]],
-                );
+                let (u, v) = ([p[0] - cen[0], p[2] - cen[2]], [q[0] - cen[0], q[2] - cen[2]]);
                 // Counterclockwise from above (+y) maps +x towards −z: z·x' − x·z' > 0.
                 u[1] * v[0] - u[0] * v[1]
             })
@@ -247,11 +212,7 @@ fn twist_and_bend_words_match_the_motion() {
             (_, true) => "toward the viewer",
             (_, false) => "away from the viewer",
         };
-        assert!(
-            clip.caption.ends_with(word),
-            "{}: top moved {d:?}",
-            clip.caption
-        );
+        assert!(clip.caption.ends_with(word), "{}: top moved {d:?}", clip.caption);
     }
 }
 
@@ -259,8 +220,7 @@ fn twist_and_bend_words_match_the_motion() {
 fn spin_words_match_the_motion() {
     // Rigid spin: the yaw of offsets from the centroid, frame 0 → frame 4 (under half a turn).
     for index in 0..12 {
-        let clip =
-            generate_with(&cfg(4), index, ShapeFamily::Quadruped, MotionFamily::Rigid).unwrap();
+        let clip = generate_with(&cfg(4), index, ShapeFamily::Quadruped, MotionFamily::Rigid).unwrap();
         let (f0, f4) = (clip.frame(0), clip.frame(4));
         let (c0, c4) = (centroid(f0), centroid(f4));
         let yaw: f32 = f0
@@ -282,14 +242,7 @@ fn f0_y(clip: &Clip, v: usize) -> f32 {
 
 #[test]
 fn bad_config_is_rejected_naming_the_field() {
-    let e = generate_one(
-        &SynthConfig {
-            frames: 1,
-            ..cfg(1)
-        },
-        0,
-    )
-    .unwrap_err();
+    let e = generate_one(&SynthConfig { frames: 1, ..cfg(1) }, 0).unwrap_err();
     assert_eq!(e.field, "frames");
     let e = generate(&SynthConfig {
         min_vertices: 900,

@@ -10,10 +10,7 @@ use burn::tensor::Bool;
 use burn::tensor::activation::gelu;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    TextBatch, TextEncoder, TextError, load_safetensors, load_tokenizer, pad_batch,
-    text_self_attention,
-};
+use super::{TextBatch, TextEncoder, TextError, load_safetensors, load_tokenizer, pad_batch, text_self_attention};
 
 /// Padding token of the BERT uncased vocabulary.
 pub const PAD: &str = "[PAD]";
@@ -61,11 +58,7 @@ impl BertConfig {
     /// Builds the module with random weights.
     pub fn init(&self, device: &Device) -> BertModel {
         let w = self.width;
-        let ln = || {
-            LayerNormConfig::new(w)
-                .with_epsilon(self.layer_norm_eps)
-                .init(device)
-        };
+        let ln = || LayerNormConfig::new(w).with_epsilon(self.layer_norm_eps).init(device);
         let lin = |i, o| LinearConfig::new(i, o).init(device);
         BertModel {
             embeddings: BertEmbeddings {
@@ -182,9 +175,7 @@ impl BertLayer {
         let out = &self.attention.output;
         let x = out.layer_norm.forward(out.dense.forward(ctx) + x);
         let h = gelu(self.intermediate.dense.forward(x.clone()));
-        self.output
-            .layer_norm
-            .forward(self.output.dense.forward(h) + x)
+        self.output.layer_norm.forward(self.output.dense.forward(h) + x)
     }
 }
 
@@ -252,10 +243,7 @@ impl TextEncoder for BertTextEncoder {
             &self.tokenizer_path,
         )?;
         let pad_mask = ids.pad_tensor(device);
-        let states = self
-            .model
-            .forward(ids.ids_tensor(device), pad_mask.clone())
-            .detach();
+        let states = self.model.forward(ids.ids_tensor(device), pad_mask.clone()).detach();
         Ok(TextBatch { states, pad_mask })
     }
 

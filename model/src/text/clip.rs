@@ -10,10 +10,7 @@ use burn::prelude::*;
 use burn::tensor::activation::sigmoid;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    TextBatch, TextEncoder, TextError, load_safetensors, load_tokenizer, pad_batch,
-    text_self_attention,
-};
+use super::{TextBatch, TextEncoder, TextError, load_safetensors, load_tokenizer, pad_batch, text_self_attention};
 
 /// End-of-text token of the CLIP BPE vocabulary; also the padding token (SD 1.5 tokenizer).
 pub const END_OF_TEXT: &str = "<|endoftext|>";
@@ -55,11 +52,7 @@ impl ClipTextConfig {
     /// Builds an uninitialised-weights module (random); load weights with [`ClipTextEncoder::load`].
     pub fn init(&self, device: &Device) -> ClipTextModel {
         let w = self.width;
-        let ln = || {
-            LayerNormConfig::new(w)
-                .with_epsilon(self.layer_norm_eps)
-                .init(device)
-        };
+        let ln = || LayerNormConfig::new(w).with_epsilon(self.layer_norm_eps).init(device);
         let layers = (0..self.layers)
             .map(|_| ClipEncoderLayer {
                 self_attn: ClipAttention {
@@ -176,8 +169,7 @@ impl ClipTextModel {
         let device = ids.device();
         let tm = &self.text_model;
         let pos = Tensor::<1, Int>::arange(0..l as i64, &device).unsqueeze_dim::<2>(0);
-        let mut x = tm.embeddings.token_embedding.forward(ids)
-            + tm.embeddings.position_embedding.forward(pos);
+        let mut x = tm.embeddings.token_embedding.forward(ids) + tm.embeddings.position_embedding.forward(pos);
         for layer in &tm.encoder.layers {
             x = layer.forward(x);
         }
@@ -197,19 +189,12 @@ pub struct ClipTextEncoder {
 impl ClipTextEncoder {
     /// Loads `weights` (HF `model.safetensors` of `CLIPTextModel` or `CLIPModel`; other towers are ignored) and
     /// `tokenizer` (HF `tokenizer.json`). Missing or misshaped tensors give an error naming the tensor.
-    pub fn load(
-        config: ClipTextConfig,
-        weights: &Path,
-        tokenizer: &Path,
-        device: &Device,
-    ) -> Result<Self, TextError> {
+    pub fn load(config: ClipTextConfig, weights: &Path, tokenizer: &Path, device: &Device) -> Result<Self, TextError> {
         let tok = load_tokenizer(tokenizer)?;
-        let pad_id = tok
-            .token_to_id(END_OF_TEXT)
-            .ok_or_else(|| TextError::Tokenizer {
-                path: tokenizer.to_path_buf(),
-                message: format!("no {END_OF_TEXT} token (CLIP pads with it)"),
-            })?;
+        let pad_id = tok.token_to_id(END_OF_TEXT).ok_or_else(|| TextError::Tokenizer {
+            path: tokenizer.to_path_buf(),
+            message: format!("no {END_OF_TEXT} token (CLIP pads with it)"),
+        })?;
         let mut model = config.init(device);
         load_safetensors(&mut model, weights, &[])?;
         Ok(Self {

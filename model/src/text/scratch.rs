@@ -5,9 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use burn::module::Param;
-use burn::nn::{
-    Embedding, EmbeddingConfig, Initializer, LayerNorm, LayerNormConfig, Linear, LinearConfig,
-};
+use burn::nn::{Embedding, EmbeddingConfig, Initializer, LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Bool;
 use burn::tensor::activation::gelu;
@@ -18,9 +16,7 @@ use tokenizers::normalizers::BertNormalizer;
 use tokenizers::pre_tokenizers::bert::BertPreTokenizer;
 use tokenizers::{AddedToken, Tokenizer};
 
-use super::{
-    PaddedIds, TextBatch, TextEncoder, TextError, load_tokenizer, pad_batch, text_self_attention,
-};
+use super::{PaddedIds, TextBatch, TextEncoder, TextError, load_tokenizer, pad_batch, text_self_attention};
 
 /// File name of the trained tokenizer inside its folder.
 pub const TOKENIZER_FILE: &str = "tokenizer.json";
@@ -45,12 +41,7 @@ impl ScratchTokenizer {
             path: source.clone(),
             message: e.to_string(),
         };
-        let mut tokenizer = Tokenizer::new(
-            WordPiece::builder()
-                .unk_token(UNK.to_string())
-                .build()
-                .map_err(err)?,
-        );
+        let mut tokenizer = Tokenizer::new(WordPiece::builder().unk_token(UNK.to_string()).build().map_err(err)?);
         tokenizer
             .with_normalizer(Some(BertNormalizer::default()))
             .map_err(err)?;
@@ -59,25 +50,18 @@ impl ScratchTokenizer {
             .vocab_size(vocab_size)
             .min_frequency(1)
             .show_progress(false)
-            .special_tokens(vec![
-                AddedToken::from(PAD, true),
-                AddedToken::from(UNK, true),
-            ])
+            .special_tokens(vec![AddedToken::from(PAD, true), AddedToken::from(UNK, true)])
             .build();
         let mut trainer = TrainerWrapper::WordPieceTrainer(trainer);
-        tokenizer
-            .train(&mut trainer, captions.iter())
-            .map_err(err)?;
+        tokenizer.train(&mut trainer, captions.iter()).map_err(err)?;
         Self::from_tokenizer(tokenizer, source)
     }
 
     fn from_tokenizer(tokenizer: Tokenizer, source: PathBuf) -> Result<Self, TextError> {
-        let pad_id = tokenizer
-            .token_to_id(PAD)
-            .ok_or_else(|| TextError::Tokenizer {
-                path: source.clone(),
-                message: format!("no {PAD} token in the vocabulary"),
-            })?;
+        let pad_id = tokenizer.token_to_id(PAD).ok_or_else(|| TextError::Tokenizer {
+            path: source.clone(),
+            message: format!("no {PAD} token in the vocabulary"),
+        })?;
         Ok(Self {
             tokenizer,
             pad_id,
@@ -88,12 +72,10 @@ impl ScratchTokenizer {
     /// Writes `dir/tokenizer.json`.
     pub fn save(&self, dir: &Path) -> Result<(), TextError> {
         let path = dir.join(TOKENIZER_FILE);
-        self.tokenizer
-            .save(&path, false)
-            .map_err(|e| TextError::Tokenizer {
-                path: path.clone(),
-                message: e.to_string(),
-            })
+        self.tokenizer.save(&path, false).map_err(|e| TextError::Tokenizer {
+            path: path.clone(),
+            message: e.to_string(),
+        })
     }
 
     /// Reads `dir/tokenizer.json`.
@@ -109,14 +91,7 @@ impl ScratchTokenizer {
 
     /// Token ids padded to `max_len` (no start/end tokens).
     pub fn pad_batch(&self, captions: &[String], max_len: usize) -> Result<PaddedIds, TextError> {
-        pad_batch(
-            &self.tokenizer,
-            captions,
-            max_len,
-            self.pad_id,
-            false,
-            &self.source,
-        )
+        pad_batch(&self.tokenizer, captions, max_len, self.pad_id, false, &self.source)
     }
 }
 
@@ -139,10 +114,7 @@ pub struct ScratchTextConfig {
 impl ScratchTextConfig {
     /// Builds the module (token and learned position embeddings N(0, 0.02²), pre-LN layers).
     pub fn init(&self, device: &Device) -> ScratchTextModel {
-        let emb_init = Initializer::Normal {
-            mean: 0.0,
-            std: 0.02,
-        };
+        let emb_init = Initializer::Normal { mean: 0.0, std: 0.02 };
         let w = self.width;
         ScratchTextModel {
             token_embedding: EmbeddingConfig::new(self.vocab_size, w)
@@ -185,10 +157,7 @@ impl ScratchLayer {
         let x = x + self
             .out
             .forward(text_self_attention(q, k, v, self.heads, Some(pad), false));
-        x.clone()
-            + self
-                .fc2
-                .forward(gelu(self.fc1.forward(self.norm2.forward(x))))
+        x.clone() + self.fc2.forward(gelu(self.fc1.forward(self.norm2.forward(x))))
     }
 }
 
@@ -210,11 +179,7 @@ impl ScratchTextModel {
     pub fn forward(&self, ids: Tensor<2, Int>, pad: Tensor<2, Bool>) -> Tensor<3> {
         let [b, l] = ids.dims();
         let [_, d] = self.position_embedding.lazy_shape().dims::<2>();
-        let pos = self
-            .position_embedding
-            .val()
-            .narrow(0, 0, l)
-            .unsqueeze_dim::<3>(0);
+        let pos = self.position_embedding.val().narrow(0, 0, l).unsqueeze_dim::<3>(0);
         let mut x = self.token_embedding.forward(ids) + pos;
         for layer in &self.layers {
             x = layer.forward(x, pad.clone());

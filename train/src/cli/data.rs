@@ -190,15 +190,20 @@ fn convert(a: ConvertArgs) -> anyhow::Result<ExitCode> {
 fn progress_bar(what: &str) -> ProgressBar {
     let bar = ProgressBar::new(0);
     bar.set_style(
-        ProgressStyle::with_template(&format!("{what} {{bar:40}} {{pos}}/{{len}} sources, {{per_sec}}, ETA {{eta}}"))
-            .expect("static progress template"),
+        ProgressStyle::with_template(&format!(
+            "{what} {{bar:40}} {{pos}}/{{len}} sources, {{per_sec}}, ETA {{eta}}"
+        ))
+        .expect("static progress template"),
     );
     bar
 }
 
 fn import(a: ImportArgs) -> anyhow::Result<ExitCode> {
     let opts = ImportOptions {
-        filter: VertexFilter { min: a.min_vertices, max: a.max_vertices },
+        filter: VertexFilter {
+            min: a.min_vertices,
+            max: a.max_vertices,
+        },
         frames: a.frames,
         stride: a.stride,
         weld: weld(a.weld),
@@ -212,7 +217,11 @@ fn import(a: ImportArgs) -> anyhow::Result<ExitCode> {
     let report = store::import_with_progress(&a.sources, &a.out, &opts, Some(&tick))?;
     bar.finish_and_clear();
     emit(&report.to_string())?;
-    if report.rejected.is_empty() { Ok(ExitCode::SUCCESS) } else { Ok(ExitCode::from(EXIT_REJECTED)) }
+    if report.rejected.is_empty() {
+        Ok(ExitCode::SUCCESS)
+    } else {
+        Ok(ExitCode::from(EXIT_REJECTED))
+    }
 }
 
 fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
@@ -223,7 +232,6 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
         frames: a.frames,
         min_vertices: a.min_vertices.unwrap_or(default.min_vertices),
         max_vertices: a.max_vertices.unwrap_or(default.max_vertices),
-        ..default
     };
     let bar = progress_bar("synth");
     let tick = |done: usize, total: usize| {
@@ -233,21 +241,30 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
     let report = store::write_synth_windows(&cfg, &a.out, a.p, a.window.unwrap_or(a.frames), a.stride, Some(&tick))?;
     bar.finish_and_clear();
     emit(&report.to_string())?;
-    if report.rejected.is_empty() { Ok(ExitCode::SUCCESS) } else { Ok(ExitCode::from(EXIT_REJECTED)) }
+    if report.rejected.is_empty() {
+        Ok(ExitCode::SUCCESS)
+    } else {
+        Ok(ExitCode::from(EXIT_REJECTED))
+    }
 }
 
 fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
     let clip = if a.path.is_dir() && a.path.join(store::CLIPS_FILE).exists() {
         let store = Store::open(&a.path)?;
         let i = match &a.clip {
-            Some(id) => store.position(id)?.with_context(|| format!("{}: no clip with id {id:?}", a.path.display()))?,
+            Some(id) => store
+                .position(id)?
+                .with_context(|| format!("{}: no clip with id {id:?}", a.path.display()))?,
             None if store.is_empty() => bail!("{}: the store holds no clip", a.path.display()),
             None => 0,
         };
         store.get(i)?.clip
     } else {
         if a.clip.is_some() {
-            bail!("--clip selects a clip inside a store folder; {} is a clip file", a.path.display());
+            bail!(
+                "--clip selects a clip inside a store folder; {} is a clip file",
+                a.path.display()
+            );
         }
         formats::read_clip(&a.path)?
     };
@@ -291,11 +308,21 @@ fn bench_clip(index: usize, frames: usize, n: usize) -> anyhow::Result<Clip> {
     let vertices = (0..frames)
         .flat_map(|f| {
             let (s, dx) = (1.0 + 0.02 * f as f32, 0.1 * f as f32);
-            base.iter().map(move |p| [p[0] * s + dx, p[1] * s, p[2] * s]).collect::<Vec<_>>()
+            base.iter()
+                .map(move |p| [p[0] * s + dx, p[1] * s, p[2] * s])
+                .collect::<Vec<_>>()
         })
         .collect();
     let faces = (0..n.saturating_sub(2) as u32).map(|i| [i, i + 1, i + 2]).collect();
-    Ok(Clip::new(format!("bench-{index}"), vertices, frames, n, faces, "a benchmark blob", format!("bench:{index}"))?)
+    Ok(Clip::new(
+        format!("bench-{index}"),
+        vertices,
+        frames,
+        n,
+        faces,
+        "a benchmark blob",
+        format!("bench:{index}"),
+    )?)
 }
 
 /// What the numpy reference printed.
@@ -327,14 +354,27 @@ fn run_reference(a: &BenchArgs, dir: &Path) -> anyhow::Result<Option<Reference>>
     let stderr = String::from_utf8_lossy(&out.stderr);
     if !out.status.success() {
         if stderr.contains("No module named 'numpy'") {
-            println!("reference: numpy is not installed for {}; reporting ours only", a.python.display());
+            println!(
+                "reference: numpy is not installed for {}; reporting ours only",
+                a.python.display()
+            );
             return Ok(None);
         }
-        bail!("{} {} failed ({}): {stderr}", a.python.display(), a.script.display(), out.status);
+        bail!(
+            "{} {} failed ({}): {stderr}",
+            a.python.display(),
+            a.script.display(),
+            out.status
+        );
     }
     let stdout = String::from_utf8_lossy(&out.stdout);
-    let line = stdout.lines().last().with_context(|| format!("{} printed nothing", a.script.display()))?;
-    Ok(Some(serde_json::from_str(line).with_context(|| format!("{}: unexpected output {line:?}", a.script.display()))?))
+    let line = stdout
+        .lines()
+        .last()
+        .with_context(|| format!("{} printed nothing", a.script.display()))?;
+    Ok(Some(serde_json::from_str(line).with_context(|| {
+        format!("{}: unexpected output {line:?}", a.script.display())
+    })?))
 }
 
 pub fn bench(a: BenchArgs) -> anyhow::Result<ExitCode> {
@@ -355,7 +395,10 @@ fn bench_in(a: &BenchArgs, dir: &Path) -> anyhow::Result<ExitCode> {
         formats::write_clip(&path, &bench_clip(i, a.frames, a.vertices)?)?;
         files.push(path);
     }
-    println!("bench data: {} clips × {} frames × {} vertices, P = {}", a.clips, a.frames, a.vertices, a.p);
+    println!(
+        "bench data: {} clips × {} frames × {} vertices, P = {}",
+        a.clips, a.frames, a.vertices, a.p
+    );
     if cfg!(debug_assertions) {
         println!(
             "note: debug build; run `cargo run --release -p any4d-train -- bench data` for representative numbers"
@@ -369,7 +412,10 @@ fn bench_in(a: &BenchArgs, dir: &Path) -> anyhow::Result<ExitCode> {
         for path in &files {
             let clip = formats::read_clip(path)?;
             let (clip, _norm) = preprocess::normalize(&clip);
-            checksum += farthest_point_sampling(clip.frame(0), a.p).iter().map(|&i| u64::from(i)).sum::<u64>();
+            checksum += farthest_point_sampling(clip.frame(0), a.p)
+                .iter()
+                .map(|&i| u64::from(i))
+                .sum::<u64>();
         }
         Ok((start.elapsed().as_secs_f64(), checksum))
     })?;
@@ -378,12 +424,21 @@ fn bench_in(a: &BenchArgs, dir: &Path) -> anyhow::Result<ExitCode> {
     // (b) the numpy reference on the same files.
     if let Some(reference) = run_reference(a, dir)? {
         let theirs = reference.clips as f64 / reference.seconds;
-        println!("numpy reference (1 core): {theirs:>7.2} clips/s ({:.3} s)", reference.seconds);
+        println!(
+            "numpy reference (1 core): {theirs:>7.2} clips/s ({:.3} s)",
+            reference.seconds
+        );
         println!("ratio ours / reference: {:.2}×", ours / theirs);
         let agree = reference.fps_checksum == checksum && reference.clips == a.clips;
-        println!("FPS indices agree (checksum {checksum}): {}", if agree { "yes" } else { "NO" });
+        println!(
+            "FPS indices agree (checksum {checksum}): {}",
+            if agree { "yes" } else { "NO" }
+        );
         if !agree {
-            bail!("the reference FPS checksum {} differs from ours {checksum}", reference.fps_checksum);
+            bail!(
+                "the reference FPS checksum {} differs from ours {checksum}",
+                reference.fps_checksum
+            );
         }
     }
     Ok(ExitCode::SUCCESS)

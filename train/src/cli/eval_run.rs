@@ -56,7 +56,11 @@ pub struct RunArgs {
     pub out: PathBuf,
     /// Methods, comma-separated: keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest,
     /// impute_until_0.98, impute_until_0.98_noisy1.
-    #[arg(long, value_delimiter = ',', default_value = "keyframe_rf,replacement_rf,lerp,static_nearest")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "keyframe_rf,replacement_rf,lerp,static_nearest"
+    )]
     pub methods: Vec<String>,
     /// Keyframe-conditioned RF run (ours; impute-until uses it too).
     #[arg(long)]
@@ -120,11 +124,15 @@ fn placement(s: &str) -> anyhow::Result<Placement> {
         return Ok(Placement::Random { k_extra_max: 3 });
     }
     if let Some(r) = s.strip_prefix("every_") {
-        let r: usize = r.parse().with_context(|| format!("--placement {s}: r must be a whole number"))?;
+        let r: usize = r
+            .parse()
+            .with_context(|| format!("--placement {s}: r must be a whole number"))?;
         return Ok(Placement::EveryR { r });
     }
     if let Some(p) = s.strip_prefix("bernoulli_") {
-        let p: f32 = p.parse().with_context(|| format!("--placement {s}: p must be a number in (0, 1)"))?;
+        let p: f32 = p
+            .parse()
+            .with_context(|| format!("--placement {s}: p must be a number in (0, 1)"))?;
         return Ok(Placement::Bernoulli { p });
     }
     bail!("--placement {s}: expected random, every_<r> or bernoulli_<p>")
@@ -151,11 +159,10 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         vae_b: args.vae_b.clone(),
     };
     let mut opts = RunOptions::new(protocol, args.data.clone(), args.out.clone());
-    let mut checkpoints = Vec::new();
-    if protocol == TableKind::Table5 {
+    let checkpoints = if protocol == TableKind::Table5 {
         let (vaes, ckpts) = build_reconstructors(&runs, tokens, &device)?;
         opts.vaes = vaes;
-        checkpoints = ckpts;
+        ckpts
     } else {
         let sampling = SamplingSetup {
             n_grid: args.n_grid,
@@ -167,8 +174,8 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         };
         let built = build_methods(&kinds, &runs, tokens, sampling, &device)?;
         opts.methods = built.methods;
-        checkpoints = built.checkpoints;
-    }
+        built.checkpoints
+    };
     opts.clips = args.clips;
     opts.seeds = args.seeds;
     opts.placement = placement(&args.placement)?;

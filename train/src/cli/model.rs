@@ -10,8 +10,7 @@ use any4d_model::dymesh_vae::DyMeshVaeConfig;
 use any4d_model::frame_vae::FrameVaeConfig;
 use any4d_model::mmdit::{KfMode, MmditConfig};
 use any4d_model::summary::{
-    StepTiming, TOTAL, format_report, param_report, time_dymesh_reconstruct, time_rf_step,
-    time_vae_reconstruct,
+    StepTiming, TOTAL, format_report, param_report, time_dymesh_reconstruct, time_rf_step, time_vae_reconstruct,
 };
 use anyhow::{Context, bail};
 use burn::prelude::Device;
@@ -92,10 +91,8 @@ pub enum ModelConfig {
 
 /// Reads the `[model]` table of a config file; errors name the file and field.
 pub fn load_model_config(path: &Path) -> anyhow::Result<ModelConfig> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    let table: toml::Table =
-        toml::from_str(&text).with_context(|| format!("{}: invalid TOML", path.display()))?;
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let table: toml::Table = toml::from_str(&text).with_context(|| format!("{}: invalid TOML", path.display()))?;
     let Some(model) = table.get("model") else {
         bail!("{}: no [model] table", path.display());
     };
@@ -109,13 +106,9 @@ pub fn load_model_config(path: &Path) -> anyhow::Result<ModelConfig> {
             .map_err(|msg| anyhow::anyhow!("{}: {msg}", path.display()))?;
         Ok(ModelConfig::Rf(cfg))
     } else if model_table.contains_key("frames") {
-        Ok(ModelConfig::DyMeshVae(
-            model.clone().try_into().with_context(ctx)?,
-        ))
+        Ok(ModelConfig::DyMeshVae(model.clone().try_into().with_context(ctx)?))
     } else {
-        Ok(ModelConfig::FrameVae(
-            model.clone().try_into().with_context(ctx)?,
-        ))
+        Ok(ModelConfig::FrameVae(model.clone().try_into().with_context(ctx)?))
     }
 }
 
@@ -201,14 +194,7 @@ fn total_params(rows: &[(String, usize)]) -> usize {
 }
 
 fn time_ours(args: &BenchArgs, sz: &BenchSizes, device: &Device) -> anyhow::Result<OurTimings> {
-    let rf = time_rf_step(
-        &sz.rf,
-        args.batch,
-        sz.tokens,
-        sz.text_len,
-        args.iters,
-        device,
-    );
+    let rf = time_rf_step(&sz.rf, args.batch, sz.tokens, sz.text_len, args.iters, device);
     let vae = time_vae_reconstruct(
         &sz.vae,
         args.batch,
@@ -219,15 +205,8 @@ fn time_ours(args: &BenchArgs, sz: &BenchSizes, device: &Device) -> anyhow::Resu
         device,
     )
     .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
-    let dymesh = time_dymesh_reconstruct(
-        &sz.dymesh,
-        args.batch,
-        sz.vertices,
-        sz.tokens,
-        args.iters,
-        device,
-    )
-    .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
+    let dymesh = time_dymesh_reconstruct(&sz.dymesh, args.batch, sz.vertices, sz.tokens, args.iters, device)
+        .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
     Ok(OurTimings {
         rf,
         rf_params: total_params(&param_report(&sz.rf.init(device))),
@@ -248,6 +227,8 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
     let sz = args.size.sizes();
+    // burn 0.22 deprecates ndarray; the design card keeps it as the second CPU backend.
+    #[allow(deprecated)]
     let device = match args.backend {
         CpuBackend::Flex => Device::flex(),
         CpuBackend::Ndarray => Device::ndarray(),
@@ -346,12 +327,7 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
     ];
     println!(
         "{:<32} {:>13} {:>16} {:>13} {:>12} {:>15}",
-        "network",
-        "ours ms/clip",
-        "PyTorch ms/clip",
-        "ours/PyTorch",
-        "params ours",
-        "params PyTorch"
+        "network", "ours ms/clip", "PyTorch ms/clip", "ours/PyTorch", "params ours", "params PyTorch"
     );
     for (name, ours_t, ours_p, theirs) in rows {
         let ours_ms = per_clip(ours_t);
@@ -393,11 +369,7 @@ struct TorchReference {
 
 /// Runs the PyTorch reference. The outer error is a failure to report (a crash, unreadable output); the inner
 /// `Err` says why the reference cannot run here (no Python, no torch, DIR is not an AnimateAnyMesh checkout).
-fn run_torch_reference(
-    args: &BenchArgs,
-    dir: &Path,
-    threads: usize,
-) -> anyhow::Result<Result<TorchReference, String>> {
+fn run_torch_reference(args: &BenchArgs, dir: &Path, threads: usize) -> anyhow::Result<Result<TorchReference, String>> {
     if !dir.join("networks").join("dymeshvae.py").is_file() {
         return Ok(Err(format!(
             "--torch-reference {}: networks/dymeshvae.py not found (not an AnimateAnyMesh checkout)",
@@ -405,10 +377,7 @@ fn run_torch_reference(
         )));
     }
     if !args.script.is_file() {
-        return Ok(Err(format!(
-            "--script {}: not found",
-            args.script.display()
-        )));
+        return Ok(Err(format!("--script {}: not found", args.script.display())));
     }
     let out = Command::new(&args.python)
         .arg(&args.script)
@@ -444,8 +413,8 @@ fn run_torch_reference(
         .lines()
         .last()
         .with_context(|| format!("{} printed nothing", args.script.display()))?;
-    let parsed: TorchReference = serde_json::from_str(line)
-        .with_context(|| format!("{}: unexpected output {line:?}", args.script.display()))?;
+    let parsed: TorchReference =
+        serde_json::from_str(line).with_context(|| format!("{}: unexpected output {line:?}", args.script.display()))?;
     Ok(Ok(parsed))
 }
 
@@ -504,8 +473,7 @@ echo"#,
 
     #[test]
     fn missing_torch_is_a_reason_not_an_error() {
-        let (_tmp, aam, script) =
-            setup("echo 'bench_torch_reference: torch is not installed' >&2\nexit 3\n");
+        let (_tmp, aam, script) = setup("echo 'bench_torch_reference: torch is not installed' >&2\nexit 3\n");
         let why = run_torch_reference(&args(&script), &aam, 1)
             .expect("runs")
             .err()
@@ -555,38 +523,23 @@ echo"#,
         .expect("script");
         for size in [BenchSize::Paper, BenchSize::Tiny] {
             let sz = size.sizes();
-            let start = script
-                .find(&format!("\"{}\": {{", size.name()))
-                .expect("size entry");
+            let start = script.find(&format!("\"{}\": {{", size.name())).expect("size entry");
             let entry = &script[start..];
             let rf = format!(
                 "\"rf\": {{\"width\": {}, \"blocks\": {}, \"heads\": {}, \"frames\": {}, \"channels\": {}, \
                  \"text_dim\": {}}}",
-                sz.rf.width,
-                sz.rf.blocks,
-                sz.rf.heads,
-                sz.rf.frames,
-                sz.rf.channels,
-                sz.rf.text_dim
+                sz.rf.width, sz.rf.blocks, sz.rf.heads, sz.rf.frames, sz.rf.channels, sz.rf.text_dim
             );
             let tokens = format!("\"tokens\": {},", sz.tokens);
             let text = format!("\"text_len\": {},", sz.text_len);
             let verts = format!("\"vertices\": {},", sz.vertices);
             let fw = format!(
                 "\"vae_framewise\": {{\"dim\": {}, \"heads\": {}, \"dim_head\": {}, \"blocks\": {}, \"latent\": {}}}",
-                sz.vae.width,
-                sz.vae.heads,
-                sz.vae.head_dim,
-                sz.vae.enc_blocks,
-                sz.vae.latent_channels
+                sz.vae.width, sz.vae.heads, sz.vae.head_dim, sz.vae.enc_blocks, sz.vae.latent_channels
             );
             let sw = format!(
                 "\"vae_sequencewise\": {{\"dim\": {}, \"heads\": {}, \"dim_head\": {}, \"blocks\": {}, \"latent\": {}}}",
-                sz.dymesh.width,
-                sz.dymesh.heads,
-                sz.dymesh.head_dim,
-                sz.dymesh.enc_blocks,
-                sz.dymesh.latent_channels
+                sz.dymesh.width, sz.dymesh.heads, sz.dymesh.head_dim, sz.dymesh.enc_blocks, sz.dymesh.latent_channels
             );
             let entry_end = entry.find("\n    },").expect("entry end");
             for needle in [rf, tokens, text, verts, fw, sw] {

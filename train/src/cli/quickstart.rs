@@ -22,12 +22,12 @@ pub struct QuickstartArgs {
     /// Largest vertex count of the clips (512..=4096; small is fast).
     #[arg(long, default_value_t = 768)]
     pub max_vertices: usize,
-    /// VAE optimiser steps [default: configs/vae/tiny.toml].
-    #[arg(long)]
-    pub vae_steps: Option<u64>,
-    /// Optimiser steps of each RF [default: configs/rf/tiny.toml].
-    #[arg(long)]
-    pub rf_steps: Option<u64>,
+    /// VAE optimiser steps (the quickstart's time budget; the tiny preset itself says 60).
+    #[arg(long, default_value_t = 80)]
+    pub vae_steps: u64,
+    /// Optimiser steps of each RF (the quickstart's time budget; the tiny preset itself says 60).
+    #[arg(long, default_value_t = 300)]
+    pub rf_steps: u64,
     /// Validation clips in the evaluation manifest.
     #[arg(long, default_value_t = 12)]
     pub eval_clips: usize,
@@ -44,8 +44,8 @@ pub fn run(args: QuickstartArgs) -> anyhow::Result<ExitCode> {
         clips: args.clips,
         seed: args.seed,
         max_vertices: args.max_vertices,
-        vae_steps: args.vae_steps,
-        rf_steps: args.rf_steps,
+        vae_steps: Some(args.vae_steps),
+        rf_steps: Some(args.rf_steps),
         eval_clips: args.eval_clips,
         n_grid: args.n_grid,
         progress: ProgressMode::Auto,
