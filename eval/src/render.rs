@@ -142,8 +142,15 @@ pub fn export_sequence(
     formats
         .iter()
         .map(|f| {
+            // Each format's own writer: a stem such as `impute_until_0.98` must not be read as an extension.
             let path = f.path(dir, stem);
-            any4d_data::formats::write_clip(&path, clip)?;
+            match f {
+                ExportFormat::Bin => any4d_data::formats::dymesh_bin::write_bin(&path, clip)?,
+                ExportFormat::ObjSeq => any4d_data::formats::obj::write_obj_seq(&path, clip)?,
+                ExportFormat::Glb => {
+                    any4d_data::formats::gltf::write_gltf(&path, clip, any4d_data::formats::gltf::DEFAULT_FPS)?
+                }
+            }
             Ok(path)
         })
         .collect()

@@ -324,3 +324,21 @@ fn timing_table_runs_for_a_training_free_method() {
         report.markdown
     );
 }
+
+/// A method label with a dot (`impute_until_0.98`) must not be read as a file extension when exporting.
+#[test]
+fn export_writes_every_format_for_dotted_stems() {
+    use any4d_eval::render::{ExportFormat, export_sequence};
+    let tmp = tempfile::tempdir().unwrap();
+    let tri: Vec<[f32; 3]> = (0..2)
+        .flat_map(|f| [[0.0, 0.0, f as f32], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+        .collect();
+    let clip = any4d_data::Clip::new("c", tri, 2, 3, vec![[0, 1, 2]], "cap", "test").unwrap();
+    let paths = export_sequence(&clip, tmp.path(), "item000_impute_until_0.98_k0", &ExportFormat::ALL).unwrap();
+    assert_eq!(paths.len(), 3);
+    for p in &paths {
+        assert!(p.exists(), "{} was not written", p.display());
+        let back = any4d_data::formats::read_clip(p).unwrap();
+        assert_eq!(back.vertices, clip.vertices, "{}", p.display());
+    }
+}
