@@ -301,8 +301,8 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
     }
     if cfg!(debug_assertions) {
         println!(
-            "note: dev-profile binary; with any4d-eval at opt-level 0 the k-d tree code (generic, instantiated in \
-             any4d-eval) runs unoptimised: use --release, or cargo --config 'profile.dev.package.any4d-eval.opt-level=3'"
+            "note: dev-profile binary (the workspace builds any4d-eval at opt-level 2 there); \
+             `cargo run --release -p any4d-train -- bench metrics` gives release numbers"
         );
     }
     Ok(ExitCode::SUCCESS)

@@ -101,6 +101,15 @@ pub struct RunArgs {
     /// Classifier-free guidance weight (SPEC §9 item 9: 1.0).
     #[arg(long, default_value_t = 1.0)]
     pub guidance: f64,
+    /// Table 4: vertex counts timed.
+    #[arg(long, value_delimiter = ',', default_value = "512,1024,2048,4096")]
+    pub timing_vertices: Vec<usize>,
+    /// Table 4: frame counts timed (16 = one window, 31 = the two-stage rollout).
+    #[arg(long, value_delimiter = ',', default_value = "16,31")]
+    pub timing_frames: Vec<usize>,
+    /// Table 4: timed repetitions after one warm-up (median reported).
+    #[arg(long, default_value_t = 10)]
+    pub timing_reps: usize,
     /// Compute backend.
     #[arg(long, value_enum, default_value_t = Backend::Flex)]
     pub backend: Backend,
@@ -185,6 +194,9 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         OverlapArg::Generated => OverlapSource::Generated,
     };
     opts.export_items = args.export;
+    opts.timing_vertices = args.timing_vertices;
+    opts.timing_frames = args.timing_frames;
+    opts.timing_reps = args.timing_reps;
     opts.progress = !args.no_progress;
     let uses_rf = kinds.iter().any(|k| k.needs_model());
     opts.header = TableHeader {
