@@ -6,16 +6,26 @@
 //! `scratch` one: its tokenizer is trained on the TRAIN captions at run start (`tokenizer.json` in the run folder)
 //! and its transformer is trained jointly with the MMDiT ([`RfModel`]). Run config: `configs/rf/*.toml`
 //! (`[model]`, `[rf]`, `[text]`, `[train]`, `[optim]`, `[device]`).
+//!
+//! Validation (issue 5 item 4): (R5) on the VAL split at every validation (`valid.csv`) and, every
+//! `rf.valid_sample_every` steps and at the end, a few VAL clips completed by the current network through the eval
+//! crate's [`RfSampler`] (SPEC §4.6) and scored with (E1)–(E3) of SPEC §6 (`samples.csv`, see
+//! [`RfObjective::validation_samples`]).
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
+use any4d_data::batch::PadTo;
 use any4d_data::keyframes::{KeyframeStrategy, sample_keyframes};
+use any4d_eval::learned::{LearnedModels, MeshCodec, MeshVae as CodecVae, RfSampler};
+use any4d_eval::methods::{KeyframeNoise, MethodKind, RfMethod, complete_and_score};
 use any4d_data::store::{Split, Store};
 use any4d_model::frame_vae::{self, FrameVae};
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mmdit::{KfMode, Mmdit, MmditConfig};
-use any4d_model::rectified_flow::{KeyframeLoss, RfBatch, RfLossOptions, TauSampler, rf_training_loss};
+use any4d_model::rectified_flow::{KeyframeLoss, RfBatch, RfLossOptions, SampleOptions, TauSampler, rf_training_loss};
 use any4d_model::text::scratch::{ScratchTextConfig, ScratchTextModel, ScratchTokenizer};
+use any4d_model::text::{TextBatch, TextEncoder, TextError};
 use burn::module::Module;
 use burn::prelude::{Device, Tensor, TensorData};
 use burn::tensor::Distribution;
@@ -29,12 +39,20 @@ use crate::config::{DeviceConfig, OptimConfig, TrainConfig, parse_strict, to_tom
 use crate::error::{Result, TrainError, io_err};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, StopFlag};
 use crate::progress::ProgressMode;
-use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder};
+use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, METRICS_FILE, RunFolder, SAMPLES_FILE};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 use crate::vae_loop::{MeshVae, load_clips, vae_batch};
 
 /// Names of the loss terms in `metrics.csv` / `valid.csv`: (R5) and the fraction of keyframe slots (m = 1).
 pub const RF_TERMS: [&str; 2] = ["rf", "kf_frac"];
+
+/// Columns of `samples.csv` after `step`: (E1) RMSE, (E2) Chamfer, (E3) centroid DTW of SPEC §6, means over the
+/// sampled VAL clips.
+pub const SAMPLE_TERMS: [&str; 3] = ["rmse", "chamfer", "dtw"];
+
+/// Keyframes of the validation samples: frames 0 and T − 1 and one interior frame (SPEC §6.1's protocol with
+/// K_x = 1), drawn once per clip from a fixed seed.
+pub const VALID_SAMPLE_KEYFRAMES: KeyframeStrategy = KeyframeStrategy::FirstLastPlus(1);
 
 /// How the keyframe set of a training sample is drawn (SPEC §4.5, §5.4, §8 X3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -89,6 +107,13 @@ pub struct RfSection {
     pub latent: LatentDraw,
     /// Frozen-VAE latents cached in memory or encoded per batch.
     pub latent_cache: LatentCache,
+    /// Validation sampling (issue 5 item 4) at every validation whose step is a multiple of this, and at the
+    /// last step; 0 = off. A multiple of `train.valid_every`.
+    pub valid_sample_every: u64,
+    /// VAL clips sampled (the first ones in store order, the same every time).
+    pub valid_sample_clips: usize,
+    /// Grid points over [0, 1] of the validation sampler (SPEC §4.6: 64, midpoint solver).
+    pub valid_sample_grid: usize,
 }
 
 /// Which caption encoder the RF trains with (SPEC §4.4).
@@ -169,6 +194,27 @@ impl RfRunConfig {
                 "rf.kf_sampler = \"scenemi\" keeps the first and last frames: needs model.frames ≥ 2, got {}",
                 cfg.model.frames
             )));
+        }
+        if rf.valid_sample_every > 0 {
+            if !rf.valid_sample_every.is_multiple_of(cfg.train.valid_every) {
+                return Err(bad(format!(
+                    "rf.valid_sample_every {} must be a multiple of train.valid_every {} (samples are drawn at \
+                     validations), or 0 for off",
+                    rf.valid_sample_every, cfg.train.valid_every
+                )));
+            }
+            if rf.valid_sample_clips == 0 {
+                return Err(bad("rf.valid_sample_clips must be positive when sampling is on".into()));
+            }
+            if rf.valid_sample_grid < 2 {
+                return Err(bad(format!(
+                    "rf.valid_sample_grid {} must be at least 2",
+                    rf.valid_sample_grid
+                )));
+            }
+            VALID_SAMPLE_KEYFRAMES
+                .check(cfg.model.frames)
+                .map_err(|e| bad(format!("rf.valid_sample_every > 0 needs model.frames ≥ 3: {e}")))?;
         }
         let t = &cfg.text;
         for (name, value) in [
@@ -433,11 +479,52 @@ struct SplitLatents {
 pub struct RfObjective {
     cfg: RfRunConfig,
     stats: LatentStats,
-    tokenizer: ScratchTokenizer,
+    tokenizer: Arc<ScratchTokenizer>,
     vae: FrameVae,
     store: Store,
     train: SplitLatents,
     valid: SplitLatents,
+    /// Where validation samples are logged ([`RfObjective::log_validation_samples`]).
+    samples_run: Option<RunFolder>,
+}
+
+/// Mean scores of one validation-sampling round (SPEC §6 (E1)–(E3), normalised frame of each clip's frame 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ValidSampleScores {
+    /// VAL clips sampled.
+    pub clips: usize,
+    /// (E1) vertex RMSE on the non-keyframes.
+    pub rmse: f64,
+    /// (E2) Chamfer distance.
+    pub chamfer: f64,
+    /// (E3) centroid-trajectory DTW.
+    pub dtw: f64,
+}
+
+/// The scratch caption encoder during training, as the eval crate's [`TextEncoder`]: the objective's tokenizer
+/// (shared, not copied) and the text transformer of the current network.
+struct TrainingText {
+    tokenizer: Arc<ScratchTokenizer>,
+    model: ScratchTextModel,
+    max_len: usize,
+    dim: usize,
+}
+
+impl TextEncoder for TrainingText {
+    fn encode(&self, captions: &[String], device: &Device) -> std::result::Result<TextBatch, TextError> {
+        let ids = self.tokenizer.pad_batch(captions, self.max_len)?;
+        let pad_mask = ids.pad_tensor(device);
+        let states = self.model.forward(ids.ids_tensor(device), pad_mask.clone());
+        Ok(TextBatch { states, pad_mask })
+    }
+
+    fn dim(&self) -> usize {
+        self.dim
+    }
+
+    fn max_len(&self) -> usize {
+        self.max_len
+    }
 }
 
 impl RfObjective {
@@ -471,12 +558,133 @@ impl RfObjective {
         Ok(RfObjective {
             cfg: cfg.clone(),
             stats: vae.stats,
-            tokenizer,
+            tokenizer: Arc::new(tokenizer),
             vae: frame_vae,
             store,
             train,
             valid,
+            samples_run: None,
         })
+    }
+
+    /// Turns on validation sampling into `run` when `rf.valid_sample_every` > 0: creates `samples.csv`
+    /// (`step, rmse, chamfer, dtw`) unless a resumed run already has it; from then on every validation at a
+    /// multiple of `rf.valid_sample_every` or at the last step appends a row of [`RfObjective::validation_samples`]
+    /// and a line to `log.txt`. With `valid_sample_every = 0` nothing is written.
+    pub fn log_validation_samples(&mut self, run: &RunFolder) -> Result<()> {
+        if self.cfg.rf.valid_sample_every == 0 {
+            return Ok(());
+        }
+        run.ensure_table(SAMPLES_FILE, &SAMPLE_TERMS)?;
+        self.samples_run = Some(run.clone());
+        Ok(())
+    }
+
+    /// Completes the first `rf.valid_sample_clips` VAL clips with `model` (inference mode, on the inference
+    /// `device`) and scores them: keyframes [`VALID_SAMPLE_KEYFRAMES`] from a fixed seed, the eval crate's
+    /// [`RfSampler`] on an `rf.valid_sample_grid`-point midpoint grid with CFG weight 1 (SPEC §4.6: (R3) for
+    /// `input_mask`, the replacement sampler (R7)–(R8) for `replace_noised` and `none`, (R9) with `rf.tau_star`
+    /// for `impute_until`), keyframes replaced by the ground truth, then (E1)–(E3) of SPEC §6 against the clip.
+    /// Every draw is seeded from `train.seed`, so the same network gives the same scores; the training RNG
+    /// streams are untouched (the loop reseeds the device before every step). `None` without VAL clips.
+    pub fn validation_samples(&self, model: &RfModel, device: &Device) -> Result<Option<ValidSampleScores>> {
+        let n = self.cfg.rf.valid_sample_clips.min(self.valid_len());
+        if n == 0 {
+            return Ok(None);
+        }
+        let fail = |e: &dyn std::fmt::Display| TrainError::Other(format!("validation samples: {e}"));
+        let cfg = &self.cfg;
+        let frames = cfg.model.frames;
+        VALID_SAMPLE_KEYFRAMES.check(frames).map_err(|e| fail(&e))?;
+        let codec = MeshCodec::new(
+            CodecVae::Frame(self.vae.clone()),
+            self.store.p(),
+            PadTo::BatchMax,
+            device.clone(),
+        )
+        .map_err(|e| fail(&e))?;
+        let text = TrainingText {
+            tokenizer: Arc::clone(&self.tokenizer),
+            model: model.text.clone(),
+            max_len: cfg.text.max_len,
+            dim: cfg.model.text_dim,
+        };
+        let models = LearnedModels::new(
+            Arc::new(codec),
+            model.mmdit.clone(),
+            cfg.model.clone(),
+            self.stats,
+            Box::new(text),
+        )
+        .map_err(|e| fail(&e))?;
+        let kind = match cfg.model.kf_mode {
+            KfMode::InputMask => MethodKind::KeyframeRf,
+            KfMode::ReplaceNoised | KfMode::None => MethodKind::ReplacementRf,
+            KfMode::ImputeUntil => MethodKind::ImputeUntil {
+                tau_star: cfg.rf.tau_star as f32,
+                keyframes: KeyframeNoise::Clean,
+            },
+        };
+        let mut options = SampleOptions::paper(cfg.model.kf_mode);
+        options.n_grid = cfg.rf.valid_sample_grid;
+        options.tau_star = cfg.rf.tau_star;
+        let sampler = RfSampler::for_method(kind, Arc::new(models), options, 1.0).map_err(|e| fail(&e))?;
+        let method = RfMethod::new(kind, sampler).map_err(|e| fail(&e))?;
+
+        // Seeds of their own (u64::MAX is the validation loss's): fixed keyframes and sampler noise per clip.
+        let seed = loop_common::step_seed(cfg.train.seed, u64::MAX - 1);
+        let mut key_rng = ChaCha8Rng::seed_from_u64(seed);
+        let mut sums = [0.0f64; 3];
+        for (i, &store_index) in self.valid.store_indices[..n].iter().enumerate() {
+            let clip = self.store.get(store_index).map_err(|e| fail(&e))?.clip;
+            let keyframes: Vec<usize> = sample_keyframes(&VALID_SAMPLE_KEYFRAMES, frames, &mut key_rng)
+                .iter()
+                .enumerate()
+                .filter_map(|(f, &k)| k.then_some(f))
+                .collect();
+            let clip_seed = seed.wrapping_add(i as u64);
+            device.seed(clip_seed); // only `ReplaceNoise::Fresh` draws from the device
+            let scored =
+                complete_and_score(&method, &clip, &keyframes, &clip.caption, clip_seed).map_err(|e| fail(&e))?;
+            let m = scored.metrics;
+            for (s, v) in sums.iter_mut().zip([m.rmse, m.chamfer, m.dtw]) {
+                *s += v / n as f64;
+            }
+        }
+        Ok(Some(ValidSampleScores {
+            clips: n,
+            rmse: sums[0],
+            chamfer: sums[1],
+            dtw: sums[2],
+        }))
+    }
+
+    /// At a validation: samples and logs when [`RfObjective::log_validation_samples`] is on and the step (the
+    /// last row of `metrics.csv`, which the loop appends before it validates) is a multiple of
+    /// `rf.valid_sample_every` or the last step.
+    fn sample_at_validation(&self, model: &RfModel, device: &Device) -> Result<()> {
+        let Some(run) = &self.samples_run else {
+            return Ok(());
+        };
+        let step = run.last_step(METRICS_FILE)?.ok_or_else(|| {
+            TrainError::Other(format!(
+                "validation samples: {} has no step row yet",
+                run.path(METRICS_FILE).display()
+            ))
+        })?;
+        let train = &self.cfg.train;
+        let last = train.duration.steps(self.train_len(), train.batch_size);
+        if !(step.is_multiple_of(self.cfg.rf.valid_sample_every) || step == last) {
+            return Ok(());
+        }
+        let Some(s) = self.validation_samples(model, device)? else {
+            return Ok(());
+        };
+        run.append_samples(step, &[s.rmse, s.chamfer, s.dtw])?;
+        run.log(&format!(
+            "step {step}: validation samples ({} clips, {}-point grid): rmse {:.4e}, chamfer {:.4e}, dtw {:.4e}",
+            s.clips, self.cfg.rf.valid_sample_grid, s.rmse, s.chamfer, s.dtw
+        ))
     }
 
     /// Number of VAL clips.
@@ -658,7 +866,8 @@ impl Objective for RfObjective {
         })
     }
 
-    /// (R5) on the VAL split with a fixed seed (same masks, ξ, ε and τ at every validation) and no text dropout.
+    /// (R5) on the VAL split with a fixed seed (same masks, ξ, ε and τ at every validation) and no text dropout;
+    /// then, when switched on, the validation samples of [`RfObjective::log_validation_samples`].
     fn validate(&self, model: &RfModel, device: &Device) -> Result<Option<Vec<f64>>> {
         let n = self.valid_len();
         if n == 0 {
@@ -679,6 +888,7 @@ impl Objective for RfObjective {
                 *s += w * v;
             }
         }
+        self.sample_at_validation(model, device)?;
         Ok(Some(sums.to_vec()))
     }
 }
@@ -815,7 +1025,8 @@ fn run_rf(
     resume: Option<PathBuf>,
 ) -> Result<Outcome> {
     let vocab = tokenizer.vocab_size();
-    let objective = RfObjective::new(cfg, &opts.data, vae, tokenizer, device)?;
+    let mut objective = RfObjective::new(cfg, &opts.data, vae, tokenizer, device)?;
+    objective.log_validation_samples(run)?;
     run.log(&format!(
         "RF {:?} on {} ({} train / {} val clips, latents {:?}: {:.1} MiB), VAE {} step {}, backend {}",
         cfg.model.kf_mode,

@@ -158,7 +158,7 @@ impl RunFolder {
         if is_header {
             return Ok(None);
         }
-        let field = last.split(',').next().unwrap_or_default();
+        let field = last.split_once(',').map_or(last, |(step, _)| step);
         field.parse::<u64>().map(Some).map_err(|e| TrainError::Checkpoint {
             path: p.clone(),
             reason: format!("last row `{last}`: step `{field}`: {e}"),
