@@ -278,13 +278,8 @@ impl MeshVaeBody {
         let q = self.query_norm.forward(self.query_proj.forward(e0));
         let k = self.token_norm_k.forward(s);
         let v = self.token_norm_v.forward(m);
-        let pooled = self
-            .query_attn
-            .forward(q, k, vec![v], None)
-            .into_iter()
-            .next()
-            .expect("one stream");
-        self.to_offsets.forward(pooled)
+        // to_offsets(query_attn(q, k, v)), with the value, output and offset projections multiplied first.
+        self.query_attn.forward_then(q, k, v, None, &self.to_offsets)
     }
 }
 

@@ -36,6 +36,32 @@ fn captions(list: &[&str]) -> Vec<String> {
 // scratch
 
 #[test]
+fn scratch_tokenizer_training_is_deterministic() {
+    // Many equal word counts: a trainer that breaks ties by hash order would give different files.
+    let corpus = captions(&[
+        "a thin worm twisting slowly to the left",
+        "a tall tube bending quickly to the right",
+        "a round blob jumping gently upward",
+        "a flat sheet waving steadily",
+    ]);
+    let dir_a = tempfile::tempdir().unwrap();
+    let dir_b = tempfile::tempdir().unwrap();
+    for _ in 0..4 {
+        ScratchTokenizer::train(&corpus, 64)
+            .unwrap()
+            .save(dir_a.path())
+            .unwrap();
+        ScratchTokenizer::train(&corpus, 64)
+            .unwrap()
+            .save(dir_b.path())
+            .unwrap();
+        let a = std::fs::read(dir_a.path().join("tokenizer.json")).unwrap();
+        let b = std::fs::read(dir_b.path().join("tokenizer.json")).unwrap();
+        assert_eq!(a, b, "two trainings on the same captions differ");
+    }
+}
+
+#[test]
 fn scratch_tokenizer_trains_saves_and_loads() {
     let corpus = captions(&[
         "a dog runs across the field",

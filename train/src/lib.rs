@@ -14,6 +14,7 @@ pub mod data_order;
 pub mod error;
 pub mod evaluate;
 pub mod loop_common;
+pub mod multi_device;
 pub mod plot;
 pub mod progress;
 pub mod quickstart;

@@ -17,9 +17,9 @@ use std::sync::Arc;
 
 use any4d_data::batch::PadTo;
 use any4d_data::keyframes::{KeyframeStrategy, sample_keyframes};
+use any4d_data::store::{Split, Store};
 use any4d_eval::learned::{LearnedModels, MeshCodec, MeshVae as CodecVae, RfSampler};
 use any4d_eval::methods::{KeyframeNoise, MethodKind, RfMethod, complete_and_score};
-use any4d_data::store::{Split, Store};
 use any4d_model::frame_vae::{self, FrameVae};
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mmdit::{KfMode, Mmdit, MmditConfig};

@@ -1,7 +1,9 @@
 //! The keyframe RF loop on a tiny frozen VAE (SPEC §4.5, §5.4; issue 5 item 1): a short run lowers (R5), keyframe
 //! masks follow the sampler (k ≤ k_max, k = 0 drawn; no keyframes for `none`/`replace_noised`), `impute_until`
-//! trains on noisy keyframes, resume is bitwise equal to straight training, `load_rf_run` round-trips, and
-//! mismatched configs or incomplete run folders give errors naming the field or file. One tiny VAE run on
+//! trains on noisy keyframes, resume is bitwise equal to straight training (validation sampling on), `load_rf_run`
+//! round-trips, validation sampling (issue 5 item 4) writes seeded `samples.csv` rows at its steps for every
+//! `kf_mode` without touching the training streams, and mismatched configs or incomplete run folders give errors
+//! naming the field or file. One tiny VAE run on
 //! procedural clips is shared by all tests.
 
 use std::path::{Path, PathBuf};
@@ -16,10 +18,10 @@ use any4d_train::config::Duration;
 use any4d_train::loop_common::{LoopSetup, Objective, Outcome, StopFlag, train};
 use any4d_train::progress::ProgressMode;
 use any4d_train::rf_loop::{
-    KfSampler, LatentCache, LatentDraw, RF_TERMS, RfModel, RfObjective, RfRunConfig, RfRunOptions, Subset, TextDropout,
-    draw_keyframe_mask, train_rf,
+    KfSampler, LatentCache, LatentDraw, RF_TERMS, RfModel, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS,
+    Subset, TextDropout, draw_keyframe_mask, train_rf,
 };
-use any4d_train::run_folder::{METRICS_FILE, RunFolder, VALID_FILE, read_table};
+use any4d_train::run_folder::{LOG_FILE, METRICS_FILE, RunFolder, SAMPLES_FILE, VALID_FILE, read_table};
 use any4d_train::runs::{LoadedVae, VAE_RUN_FILE, load_rf_run, load_vae_run};
 use any4d_train::vae_loop::{VaeRunConfig, VaeRunOptions, train_vae};
 use burn::module::{Module, ModuleVisitor, Param};
@@ -83,7 +85,7 @@ fn fixture() -> &'static Fixture {
     })
 }
 
-/// configs/rf/tiny.toml sized for the fixture: T = 4, k_max = 3, `steps` steps of 4 clips.
+/// configs/rf/tiny.toml sized for the fixture: T = 4, k_max = 3, `steps` steps of 4 clips, no validation samples.
 fn tiny_rf(steps: u64) -> RfRunConfig {
     let mut cfg = RfRunConfig::load(&root().join("configs/rf/tiny.toml")).expect("configs/rf/tiny.toml");
     cfg.model.frames = 4;
@@ -93,6 +95,17 @@ fn tiny_rf(steps: u64) -> RfRunConfig {
     cfg.train.micro_batch = 4;
     cfg.train.checkpoint_every = steps;
     cfg.train.valid_every = steps;
+    cfg.rf.valid_sample_every = 0;
+    cfg
+}
+
+/// [`tiny_rf`] with validation samples of 2 VAL clips on a 4-point grid every `every` steps.
+fn sampling_rf(steps: u64, every: u64) -> RfRunConfig {
+    let mut cfg = tiny_rf(steps);
+    cfg.train.valid_every = every;
+    cfg.rf.valid_sample_every = every;
+    cfg.rf.valid_sample_clips = 2;
+    cfg.rf.valid_sample_grid = 4;
     cfg
 }
 
@@ -145,15 +158,30 @@ fn params(m: &RfModel) -> Vec<f32> {
     c.0
 }
 
+/// A folder with one tokenizer trained on the fixture's TRAIN captions, made once per test process: WordPiece
+/// training does not always give the same vocabulary size (175 or 176 here), so objectives that must agree share it.
+fn tokenizer_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let f = fixture();
+        let store = any4d_data::store::Store::open(&f.store).unwrap();
+        let captions: Vec<String> = store
+            .indices(any4d_data::store::Split::Train)
+            .into_iter()
+            .map(|i| store.get(i).unwrap().clip.caption)
+            .collect();
+        let vocab_size = tiny_rf(1).text.vocab_size;
+        let tokenizer = ScratchTokenizer::train(&captions, vocab_size).unwrap();
+        let dir = f.dir.join("tokenizer");
+        std::fs::create_dir_all(&dir).unwrap();
+        tokenizer.save(&dir).unwrap();
+        dir
+    })
+}
+
 fn make_objective(cfg: &RfRunConfig, vae: &LoadedVae, dev: &Device) -> (RfObjective, usize) {
     let f = fixture();
-    let store = any4d_data::store::Store::open(&f.store).unwrap();
-    let captions: Vec<String> = store
-        .indices(any4d_data::store::Split::Train)
-        .into_iter()
-        .map(|i| store.get(i).unwrap().clip.caption)
-        .collect();
-    let tokenizer = ScratchTokenizer::train(&captions, cfg.text.vocab_size).unwrap();
+    let tokenizer = ScratchTokenizer::load(tokenizer_dir()).unwrap();
     let vocab = tokenizer.vocab_size();
     (RfObjective::new(cfg, &f.store, vae, tokenizer, dev).unwrap(), vocab)
 }
@@ -383,9 +411,9 @@ fn tiny_rf_resume_is_bitwise_equal_to_straight_training() {
     let n = 2;
     let inference = inference_device();
     let vae = load_vae_run(&fixture().vae_run, &inference).unwrap();
-    let cfg = tiny_rf(2 * n);
-    let (objective, vocab) = make_objective(&cfg, &vae, &inference);
-    let go = |run: &RunFolder, steps: u64, resume: Option<PathBuf>| {
+    // Validation and sampling after every step: they must not disturb the training streams.
+    let cfg = sampling_rf(2 * n, 1);
+    let go = |objective: &RfObjective, vocab: usize, run: &RunFolder, steps: u64, resume: Option<PathBuf>| {
         let mut cfg = cfg.clone();
         cfg.train.duration = Duration::Steps(steps);
         let dev = inference.clone().autodiff();
@@ -400,22 +428,133 @@ fn tiny_rf_resume_is_bitwise_equal_to_straight_training() {
             progress: ProgressMode::Quiet,
             resume,
         };
-        train(&objective, model, setup).unwrap()
+        train(objective, model, setup).unwrap()
+    };
+    let sampling_objective = |run: &RunFolder| {
+        let (mut objective, vocab) = make_objective(&cfg, &vae, &inference);
+        objective.log_validation_samples(run).unwrap();
+        (objective, vocab)
     };
     let runs = fixture().dir.join("resume-runs");
     let straight_run = RunFolder::create(&runs, "straight", "", &RF_TERMS).unwrap();
-    let (straight, _) = go(&straight_run, 2 * n, None);
+    let (objective, vocab) = sampling_objective(&straight_run);
+    let (straight, _) = go(&objective, vocab, &straight_run, 2 * n, None);
     let split_run = RunFolder::create(&runs, "split", "", &RF_TERMS).unwrap();
-    let (_, first) = go(&split_run, n, None);
+    let (objective, vocab) = sampling_objective(&split_run);
+    let (_, first) = go(&objective, vocab, &split_run, n, None);
     let Outcome::Finished { checkpoint, .. } = first else {
         panic!("{first:?}")
     };
-    let (resumed, _) = go(&split_run, 2 * n, Some(checkpoint));
+    let (resumed, _) = go(&objective, vocab, &split_run, 2 * n, Some(checkpoint));
     assert_eq!(
         params(&straight),
         params(&resumed),
         "resumed RF differs from straight training"
     );
+    let straight_samples = read_table(&straight_run.path(SAMPLES_FILE)).unwrap();
+    let steps: Vec<u64> = straight_samples.rows.iter().map(|r| r.0).collect();
+    assert_eq!(steps, (1..=2 * n).collect::<Vec<_>>());
+    assert_eq!(
+        straight_samples,
+        read_table(&split_run.path(SAMPLES_FILE)).unwrap(),
+        "resumed run sampled different scores"
+    );
+    // The same run without sampling trains the same weights: sampling leaves the training streams alone.
+    let plain_run = RunFolder::create(&runs, "plain", "", &RF_TERMS).unwrap();
+    let (objective, vocab) = make_objective(&cfg, &vae, &inference);
+    let (plain, _) = go(&objective, vocab, &plain_run, 2 * n, None);
+    assert_eq!(
+        params(&straight),
+        params(&plain),
+        "validation sampling changed training"
+    );
+    assert!(!plain_run.path(SAMPLES_FILE).exists());
+}
+
+#[test]
+fn validation_samples_are_logged_at_their_steps_and_seeded() {
+    let _g = serial();
+    // 3 steps, validations at 2 and 3 (the end): samples at both.
+    let cfg = sampling_rf(3, 2);
+    let (run, outcome) = train_rf(&cfg, &rf_opts("samples")).unwrap();
+    assert!(matches!(outcome, Outcome::Finished { steps: 3, .. }), "{outcome:?}");
+    let table = read_table(&run.path(SAMPLES_FILE)).unwrap();
+    let mut header = vec!["step"];
+    header.extend(SAMPLE_TERMS);
+    assert_eq!(table.header, header);
+    assert_eq!(table.rows.iter().map(|r| r.0).collect::<Vec<_>>(), [2, 3]);
+    for (step, values) in &table.rows {
+        assert!(
+            values.iter().all(|v| v.is_finite() && *v >= 0.0),
+            "step {step}: {values:?}"
+        );
+        // An untrained RF does not reproduce the non-keyframes.
+        assert!(values[0] > 0.0, "step {step}: zero RMSE");
+    }
+    let log = std::fs::read_to_string(run.path(LOG_FILE)).unwrap();
+    assert_eq!(
+        log.matches("validation samples (2 clips, 4-point grid)").count(),
+        2,
+        "{log}"
+    );
+
+    // The final checkpoint (with the run's own tokenizer) reproduces the last row: the scores are seeded.
+    let dev = inference_device();
+    let loaded = load_rf_run(run.root(), &dev).unwrap();
+    let vae = loaded.load_vae(&dev).unwrap();
+    let tokenizer = ScratchTokenizer::load(run.root()).unwrap();
+    let objective = RfObjective::new(&cfg, &fixture().store, &vae, tokenizer, &dev).unwrap();
+    let scores = objective
+        .validation_samples(&loaded.model, &dev)
+        .unwrap()
+        .expect("the fixture store has VAL clips");
+    assert_eq!(scores.clips, 2);
+    let logged = &table.rows[1].1;
+    for (name, (got, want)) in SAMPLE_TERMS
+        .iter()
+        .zip([scores.rmse, scores.chamfer, scores.dtw].iter().zip(logged))
+    {
+        assert!(
+            (got - want).abs() <= 1e-5 * want.abs().max(1e-6),
+            "{name}: {got} vs logged {want}"
+        );
+    }
+
+    // Sampling off: no samples.csv, no log line.
+    let mut off = cfg.clone();
+    off.rf.valid_sample_every = 0;
+    let (run, _) = train_rf(&off, &rf_opts("no-samples")).unwrap();
+    assert!(!run.path(SAMPLES_FILE).exists(), "sampling off wrote samples.csv");
+    let log = std::fs::read_to_string(run.path(LOG_FILE)).unwrap();
+    assert!(!log.contains("validation samples"), "{log}");
+}
+
+#[test]
+fn validation_samples_run_for_every_kf_mode() {
+    let _g = serial();
+    let dev = inference_device();
+    let vae = load_vae_run(&fixture().vae_run, &dev).unwrap();
+    for mode in [
+        KfMode::InputMask,
+        KfMode::ReplaceNoised,
+        KfMode::None,
+        KfMode::ImputeUntil,
+    ] {
+        let mut cfg = sampling_rf(1, 1);
+        cfg.model.kf_mode = mode;
+        cfg.rf.valid_sample_clips = 5; // more than the 3 VAL clips: all of them
+        let (objective, vocab) = make_objective(&cfg, &vae, &dev);
+        dev.seed(1);
+        let model = cfg.model_config(vocab).init(&dev);
+        let a = objective.validation_samples(&model, &dev).unwrap().expect("VAL clips");
+        assert_eq!(a.clips, 3, "{mode:?}");
+        assert!(
+            [a.rmse, a.chamfer, a.dtw].iter().all(|v| v.is_finite() && *v >= 0.0) && a.rmse > 0.0,
+            "{mode:?}: {a:?}"
+        );
+        let b = objective.validation_samples(&model, &dev).unwrap().expect("VAL clips");
+        assert_eq!(a, b, "{mode:?}: not seeded");
+    }
 }
 
 #[test]
@@ -468,4 +607,24 @@ fn copy_dir(from: &Path, to: &Path) {
             std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
         }
     }
+}
+
+#[test]
+fn validation_sampling_keys_are_checked() {
+    let path = root().join("configs/rf/tiny.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let parse = |t: &str| RfRunConfig::parse(t, &path).map(|_| ()).map_err(|e| e.to_string());
+    parse(&text).unwrap();
+    let err = parse(&text.replacen("valid_sample_every = 20", "valid_sample_every = 30", 1)).unwrap_err();
+    assert!(
+        err.contains("tiny.toml") && err.contains("rf.valid_sample_every 30") && err.contains("train.valid_every 20"),
+        "{err}"
+    );
+    parse(&text.replacen("valid_sample_every = 20", "valid_sample_every = 0", 1)).unwrap();
+    let err = parse(&text.replacen("valid_sample_grid = 8", "valid_sample_grid = 1", 1)).unwrap_err();
+    assert!(err.contains("rf.valid_sample_grid 1"), "{err}");
+    let err = parse(&text.replacen("valid_sample_clips = 2", "valid_sample_clips = 0", 1)).unwrap_err();
+    assert!(err.contains("rf.valid_sample_clips"), "{err}");
+    let err = parse(&text.replacen("valid_sample_clips = 2\n", "", 1)).unwrap_err();
+    assert!(err.contains("valid_sample_clips"), "missing key accepted: {err}");
 }

@@ -1,6 +1,7 @@
-//! The `scratch` text encoder (SPEC §4.4): a WordPiece tokenizer trained on the dataset's captions with the
-//! `tokenizers` crate (saved as `tokenizer.json` in the run folder) and a small pre-LN transformer trained jointly
-//! with the rectified flow. An empty caption has no tokens: all padding, zero states (unconditional).
+//! The `scratch` text encoder (SPEC §4.4): a word-level tokenizer trained on the dataset's captions with the
+//! `tokenizers` crate (saved as `tokenizer.json` in the run folder; its word-level trainer orders equal counts
+//! alphabetically, so training is deterministic — the WordPiece trainer is not) and a small pre-LN transformer
+//! trained jointly with the rectified flow. An empty caption has no tokens: all padding, zero states (unconditional).
 
 use std::path::{Path, PathBuf};
 
@@ -11,7 +12,7 @@ use burn::tensor::Bool;
 use burn::tensor::activation::gelu;
 use serde::{Deserialize, Serialize};
 use tokenizers::models::TrainerWrapper;
-use tokenizers::models::wordpiece::{WordPiece, WordPieceTrainer};
+use tokenizers::models::wordlevel::{WordLevel, WordLevelTrainer};
 use tokenizers::normalizers::BertNormalizer;
 use tokenizers::pre_tokenizers::bert::BertPreTokenizer;
 use tokenizers::{AddedToken, Tokenizer};
@@ -25,7 +26,7 @@ pub const PAD: &str = "[PAD]";
 /// Unknown-word token (id 1).
 pub const UNK: &str = "[UNK]";
 
-/// WordPiece tokenizer trained on captions.
+/// Word-level tokenizer trained on captions.
 pub struct ScratchTokenizer {
     tokenizer: Tokenizer,
     pad_id: u32,
@@ -33,7 +34,7 @@ pub struct ScratchTokenizer {
 }
 
 impl ScratchTokenizer {
-    /// Trains a lower-casing WordPiece tokenizer on the captions (vocabulary at most `vocab_size`, special tokens
+    /// Trains a lower-casing word-level tokenizer (deterministic for the same captions) on the captions (vocabulary at most `vocab_size`, special tokens
     /// `[PAD]` = 0 and `[UNK]` = 1).
     pub fn train(captions: &[String], vocab_size: usize) -> Result<Self, TextError> {
         let source = PathBuf::from("<captions>");
@@ -41,18 +42,22 @@ impl ScratchTokenizer {
             path: source.clone(),
             message: e.to_string(),
         };
-        let mut tokenizer = Tokenizer::new(WordPiece::builder().unk_token(UNK.to_string()).build().map_err(err)?);
+        let mut tokenizer = Tokenizer::new(WordLevel::builder().unk_token(UNK.to_string()).build().map_err(err)?);
         tokenizer
             .with_normalizer(Some(BertNormalizer::default()))
             .map_err(err)?;
         tokenizer.with_pre_tokenizer(Some(BertPreTokenizer));
-        let trainer = WordPieceTrainer::builder()
+        let trainer = WordLevelTrainer::builder()
             .vocab_size(vocab_size)
             .min_frequency(1)
             .show_progress(false)
             .special_tokens(vec![AddedToken::from(PAD, true), AddedToken::from(UNK, true)])
-            .build();
-        let mut trainer = TrainerWrapper::WordPieceTrainer(trainer);
+            .build()
+            .map_err(|e| TextError::Tokenizer {
+                path: source.clone(),
+                message: e.to_string(),
+            })?;
+        let mut trainer = TrainerWrapper::WordLevelTrainer(trainer);
         tokenizer.train(&mut trainer, captions.iter()).map_err(err)?;
         Self::from_tokenizer(tokenizer, source)
     }

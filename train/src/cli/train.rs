@@ -10,6 +10,7 @@ use clap::{Args, Subcommand};
 use crate::backend::Backend;
 use crate::config::Duration;
 use crate::loop_common::{Outcome, StopFlag};
+use crate::multi_device::{DeviceSpec, resume_vae_data_parallel, train_vae_data_parallel};
 use crate::progress::ProgressMode;
 use crate::rf_loop::{RfRunConfig, RfRunOptions, resume_rf, train_rf};
 use crate::run_folder::{METRICS_FILE, read_table};
@@ -40,6 +41,10 @@ pub struct VaeArgs {
     /// Override `[device] backend`.
     #[arg(long, value_enum)]
     backend: Option<Backend>,
+    /// Train data-parallel over these devices, comma-separated `BACKEND[:INDEX]` (`cuda:0,cuda:1`,
+    /// `flex,flex`); the first holds the model and the optimiser. Replaces `[device] backend`.
+    #[arg(long, conflicts_with = "backend")]
+    devices: Option<String>,
     /// Folder of run folders.
     #[arg(long, default_value = "runs")]
     runs_dir: PathBuf,
@@ -131,14 +136,21 @@ fn vae(args: VaeArgs) -> anyhow::Result<ExitCode> {
         progress: ProgressMode::Auto,
         stop,
     };
+    let devices = args.devices.as_deref().map(DeviceSpec::parse_list).transpose()?;
     let outcome = match (args.resume, args.config) {
-        (Some(run_dir), _) => resume_vae(&run_dir, args.backend, &opts)?,
+        (Some(run_dir), _) => match &devices {
+            Some(d) => resume_vae_data_parallel(&run_dir, &opts, d)?,
+            None => resume_vae(&run_dir, args.backend, &opts)?,
+        },
         (None, Some(config)) => {
             let mut cfg = VaeRunConfig::load(&config)?;
             if let Some(b) = args.backend {
                 cfg.device.backend = b;
             }
-            let (run, outcome) = train_vae(&cfg, &opts)?;
+            let (run, outcome) = match &devices {
+                Some(d) => train_vae_data_parallel(&cfg, &opts, d)?,
+                None => train_vae(&cfg, &opts)?,
+            };
             println!("run folder: {}", run.root().display());
             outcome
         }

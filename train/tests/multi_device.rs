@@ -1,0 +1,247 @@
+//! Data-parallel training (issue 5 item 6, `any4d_train::multi_device`): on a deterministic toy regression,
+//! two CPU worker devices give the parameters of the single-device loop with the same global batch (within
+//! float-summation tolerance); a tiny VAE trains over `flex,flex` with finite losses; `--devices` parsing
+//! rejects bad entries with a message naming them.
+
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard};
+
+use any4d_data::store::write_synth_with;
+use any4d_data::synth::SynthConfig;
+use any4d_train::Result;
+use any4d_train::backend::{Backend, Precision, device};
+use any4d_train::config::{Duration, OptimConfig, TrainConfig};
+use any4d_train::loop_common::{LoopSetup, Losses, Objective, Outcome, StopFlag, train};
+use any4d_train::multi_device::{DeviceSpec, train_data_parallel, train_vae_data_parallel};
+use any4d_train::progress::ProgressMode;
+use any4d_train::run_folder::{METRICS_FILE, RunFolder, read_table};
+use any4d_train::vae_loop::{LATENT_STATS_FILE, VaeRunConfig, VaeRunOptions};
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::nn::{Linear, LinearConfig, Relu};
+use burn::prelude::{Device, Tensor, TensorData};
+use rand_chacha::ChaCha8Rng;
+
+/// burn's CPU RNG seed is process-wide: tests that train run one at a time.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+fn serial() -> MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+#[derive(Module, Debug)]
+struct Mlp {
+    fc1: Linear,
+    fc2: Linear,
+    act: Relu,
+}
+
+impl Mlp {
+    fn new(device: &Device) -> Self {
+        device.seed(1);
+        Mlp {
+            fc1: LinearConfig::new(4, 16).init(device),
+            fc2: LinearConfig::new(16, 1).init(device),
+            act: Relu::new(),
+        }
+    }
+    fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+        self.fc2.forward(self.act.forward(self.fc1.forward(x)))
+    }
+}
+
+/// y = Σx / 2 on 32 fixed examples, no randomness: both loops must see the same data and gradients.
+struct Toy {
+    xs: Vec<[f32; 4]>,
+}
+
+impl Toy {
+    fn new() -> Self {
+        let xs = (0..32).map(|i| {
+            let f = i as f32;
+            [(f * 0.37).sin(), (f * 0.71).cos(), (f * 0.13).sin(), (f * 1.3).cos()]
+        });
+        Toy { xs: xs.collect() }
+    }
+}
+
+impl Objective for Toy {
+    type Model = Mlp;
+    fn terms(&self) -> Vec<String> {
+        vec!["mse".into()]
+    }
+    fn train_len(&self) -> usize {
+        self.xs.len()
+    }
+    fn loss(&self, model: &Mlp, idx: &[usize], _rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
+        let flat: Vec<f32> = idx.iter().flat_map(|&i| self.xs[i]).collect();
+        let x = Tensor::<2>::from_data(TensorData::new(flat, [idx.len(), 4]), device);
+        let y = x.clone().sum_dim(1).div_scalar(2.0);
+        let mse = (model.forward(x) - y).square().mean();
+        Ok(Losses {
+            total: mse.clone(),
+            terms: vec![mse],
+        })
+    }
+    fn validate(&self, _model: &Mlp, _device: &Device) -> Result<Option<Vec<f64>>> {
+        Ok(None)
+    }
+}
+
+fn cfgs(steps: u64) -> (TrainConfig, OptimConfig) {
+    let train = TrainConfig {
+        seed: 666,
+        duration: Duration::Steps(steps),
+        batch_size: 8,
+        micro_batch: 2,
+        checkpoint_every: 100,
+        keep_last: 1,
+        valid_every: 100,
+        progress_every_secs: 5.0,
+    };
+    let optim = OptimConfig {
+        lr: 1e-2,
+        beta1: 0.9,
+        beta2: 0.99,
+        weight_decay: 0.01,
+        eps: 1e-8,
+        grad_clip: 1.0,
+    };
+    (train, optim)
+}
+
+fn params(m: &Mlp) -> Vec<f32> {
+    struct Collect(Vec<f32>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            self.0
+                .extend(p.val().into_data().convert::<f32>().try_to_vec::<f32>().unwrap());
+        }
+    }
+    let mut c = Collect(Vec::new());
+    m.visit(&mut c);
+    c.0
+}
+
+fn setup<'a>(run: &'a RunFolder, train: &'a TrainConfig, optim: &'a OptimConfig, dev: &Device) -> LoopSetup<'a> {
+    LoopSetup {
+        run,
+        train,
+        optim,
+        device: dev.clone(),
+        stop: StopFlag::new(),
+        progress: ProgressMode::Quiet,
+        resume: None,
+    }
+}
+
+/// Single device vs `workers` (autodiff devices): max |Δθ| after `steps` steps and the data-parallel losses.
+fn compare(workers: &[Device], steps: u64) -> (f32, Vec<f64>) {
+    let dir = tempfile::tempdir().unwrap();
+    let toy = Toy::new();
+    let (train_cfg, optim_cfg) = cfgs(steps);
+    let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
+    let run1 = RunFolder::create(dir.path(), "one", "# toy\n", &["mse"]).unwrap();
+    let (one, _) = train(&toy, Mlp::new(&dev), setup(&run1, &train_cfg, &optim_cfg, &dev)).unwrap();
+    let run2 = RunFolder::create(dir.path(), "many", "# toy\n", &["mse"]).unwrap();
+    let (many, outcome) = train_data_parallel(
+        &toy,
+        Mlp::new(&dev),
+        setup(&run2, &train_cfg, &optim_cfg, &dev),
+        workers,
+    )
+    .unwrap();
+    assert!(
+        matches!(outcome, Outcome::Finished { steps: s, .. } if s == steps),
+        "{outcome:?}"
+    );
+    let (a, b) = (params(&one), params(&many));
+    assert_eq!(a.len(), b.len());
+    let diff = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max);
+    (diff, column(&run2, "loss"))
+}
+
+/// One column of `metrics.csv`, by name.
+fn column(run: &RunFolder, name: &str) -> Vec<f64> {
+    let table = read_table(&run.path(METRICS_FILE)).unwrap();
+    // `header` starts with `step`, which `rows` keep apart.
+    let i = table.header.iter().position(|c| c == name).unwrap() - 1;
+    table.rows.iter().map(|(_, r)| r[i]).collect()
+}
+
+#[test]
+fn two_cpu_workers_match_one_device_with_the_same_global_batch() {
+    let _g = serial();
+    let flex = device(Backend::Flex, Precision::F32).unwrap().autodiff();
+    let (diff, losses) = compare(&[flex.clone(), flex], 10);
+    eprintln!("flex,flex: max |Δθ| = {diff:e}, losses {losses:?}");
+    assert!(diff < 1e-5, "max parameter difference {diff}");
+    assert!(losses.iter().all(|l| l.is_finite()), "{losses:?}");
+    assert!(losses.last().unwrap() < &losses[0], "loss did not fall: {losses:?}");
+}
+
+#[test]
+fn flex_and_ndarray_as_two_devices_match_one_device() {
+    let _g = serial();
+    let flex = device(Backend::Flex, Precision::F32).unwrap().autodiff();
+    let nd = device(Backend::Ndarray, Precision::F32).unwrap().autodiff();
+    let (diff, _) = compare(&[flex, nd], 5);
+    eprintln!("flex,ndarray: max |Δθ| = {diff:e}");
+    assert!(diff < 1e-4, "max parameter difference {diff}");
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+#[test]
+fn tiny_vae_trains_over_two_cpu_devices() {
+    let _g = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("store");
+    let synth = SynthConfig {
+        clips: 10,
+        seed: 1,
+        frames: 4,
+        min_vertices: 256,
+        max_vertices: 512,
+    };
+    write_synth_with(&synth, &store, 32, None).expect("synthetic store");
+    let mut cfg = VaeRunConfig::load(&root().join("configs/vae/tiny.toml")).expect("configs/vae/tiny.toml");
+    cfg.train.duration = Duration::Steps(4);
+    cfg.train.batch_size = 4;
+    cfg.train.micro_batch = 2;
+    cfg.train.checkpoint_every = 4;
+    cfg.train.valid_every = 4;
+    let opts = VaeRunOptions {
+        data: store,
+        runs_dir: dir.path().join("runs"),
+        name: "vae".into(),
+        progress: ProgressMode::Quiet,
+        stop: StopFlag::new(),
+    };
+    let specs = DeviceSpec::parse_list("flex,flex").unwrap();
+    let (run, outcome) = train_vae_data_parallel(&cfg, &opts, &specs).expect("data-parallel VAE run");
+    assert!(matches!(outcome, Outcome::Finished { steps: 4, .. }), "{outcome:?}");
+    for col in ["rec", "kl", "loss"] {
+        let values = column(&run, col);
+        assert_eq!(values.len(), 4, "{col}");
+        assert!(values.iter().all(|v| v.is_finite()), "{col} not finite: {values:?}");
+    }
+    assert!(run.path(LATENT_STATS_FILE).is_file(), "no latent statistics written");
+}
+
+#[test]
+fn device_lists_parse_and_bad_entries_are_named() {
+    let specs = DeviceSpec::parse_list("flex, ndarray").unwrap();
+    assert_eq!(specs.len(), 2);
+    assert_eq!(specs[1].backend, Backend::Ndarray);
+    let cuda = DeviceSpec::parse("cuda:3").unwrap();
+    assert_eq!((cuda.backend, cuda.index), (Backend::Cuda, 3));
+    let e = DeviceSpec::parse_list("flex,tpu").unwrap_err().to_string();
+    assert!(e.contains("`tpu`"), "{e}");
+    let e = DeviceSpec::parse("flex:1").unwrap_err().to_string();
+    assert!(e.contains("one device"), "{e}");
+    let e = DeviceSpec::parse("cuda:x").unwrap_err().to_string();
+    assert!(e.contains("`x`"), "{e}");
+    assert!(DeviceSpec::parse_list(",").is_err());
+}
