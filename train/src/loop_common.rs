@@ -102,18 +102,122 @@ pub struct LoopSetup<'a> {
     pub resume: Option<PathBuf>,
 }
 
-/// Trains `model` with `objective` until the configured duration, a stop request or a non-finite value.
-/// Returns the trained model and how the run ended. Checkpoints go to `run/checkpoints/`.
+/// Trains `model` with `objective` on `setup.device` until the configured duration, a stop request or a
+/// non-finite value. Returns the trained model and how the run ended. Checkpoints go to `run/checkpoints/`.
 pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>) -> Result<(O::Model, Outcome)> {
+    let one = OneDevice(setup.device.clone());
+    run_steps(objective, model, setup, &one)
+}
+
+/// How one step's gradients are computed from its micro-batches: the only part of the loop that differs
+/// between one device ([`OneDevice`]) and several ([`crate::multi_device`]).
+pub(crate) trait StepGradients<O: Objective> {
+    /// The autodiff devices; the first holds the model, the optimiser state and validation. Each is reseeded
+    /// from (seed, step) before every step.
+    fn devices(&self) -> &[Device];
+
+    /// Runs the step's `cfg.accumulation()` micro-batches (taking their indices from `state.order` and host
+    /// randomness from `state.rng`), records each one's losses in `losses` and returns the gradients of the
+    /// batch-weighted total on the first device.
+    fn gradients(
+        &self,
+        objective: &O,
+        model: &O::Model,
+        state: &mut TrainState,
+        cfg: &TrainConfig,
+        losses: &mut StepLosses<'_>,
+    ) -> Result<GradientsParams>;
+}
+
+/// The single-device step: micro-batches one after another, gradients accumulated in place.
+struct OneDevice(Device);
+
+impl<O: Objective> StepGradients<O> for OneDevice {
+    fn devices(&self) -> &[Device] {
+        std::slice::from_ref(&self.0)
+    }
+
+    fn gradients(
+        &self,
+        objective: &O,
+        model: &O::Model,
+        state: &mut TrainState,
+        cfg: &TrainConfig,
+        losses: &mut StepLosses<'_>,
+    ) -> Result<GradientsParams> {
+        let mut accum = GradientsAccumulator::<O::Model>::new();
+        for _ in 0..cfg.accumulation() {
+            let idx = state.order.take(cfg.micro_batch);
+            let out = objective.loss(model, &idx, &mut state.rng, &self.0)?;
+            losses.check_count(out.terms.len())?;
+            let weight = idx.len() as f64 / cfg.batch_size as f64;
+            let terms: Vec<f64> = out.terms.into_iter().map(scalar).collect();
+            let scaled = out.total.mul_scalar(weight);
+            losses.record(weight, &terms, scalar(scaled.clone()))?;
+            accum.accumulate(model, GradientsParams::from_grads(scaled.backward(), model));
+        }
+        Ok(accum.grads())
+    }
+}
+
+/// The losses of one step's micro-batches: batch-weighted sums, each value checked by the NaN/Inf guard.
+pub(crate) struct StepLosses<'a> {
+    step: u64,
+    names: &'a [String],
+    last_good: &'a Option<PathBuf>,
+    /// Σ weight·term per term, then Σ weight·total.
+    sums: Vec<f64>,
+}
+
+impl StepLosses<'_> {
+    /// An error unless the objective returned one value per declared term.
+    pub(crate) fn check_count(&self, n: usize) -> Result<()> {
+        if n == self.names.len() {
+            Ok(())
+        } else {
+            Err(TrainError::Other(format!(
+                "objective returned {n} loss terms, declared {}",
+                self.names.len()
+            )))
+        }
+    }
+
+    /// Adds one micro-batch: its unweighted `terms`, its `weight` (share of the global batch) and its
+    /// weighted total `scaled_total`.
+    pub(crate) fn record(&mut self, weight: f64, terms: &[f64], scaled_total: f64) -> Result<()> {
+        self.check_count(terms.len())?;
+        let n = self.names.len();
+        for (i, &v) in terms.iter().enumerate() {
+            guard(v, self.step, &format!("loss term `{}`", self.names[i]), self.last_good)?;
+            self.sums[i] += weight * v;
+        }
+        guard(scaled_total, self.step, "loss", self.last_good)?;
+        self.sums[n] += scaled_total;
+        Ok(())
+    }
+}
+
+/// The step loop shared by [`train`] and [`crate::multi_device::train_data_parallel`]; `stepper` computes
+/// each step's gradients, `setup.device` is not used.
+pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
+    objective: &O,
+    model: O::Model,
+    setup: LoopSetup<'_>,
+    stepper: &S,
+) -> Result<(O::Model, Outcome)> {
     let LoopSetup {
         run,
         train: cfg,
         optim: optim_cfg,
-        device,
+        device: _,
         stop,
         progress,
         resume,
     } = setup;
+    let devices = stepper.devices();
+    let Some(main) = devices.first() else {
+        return Err(TrainError::Other("training needs at least one device".into()));
+    };
     let ckpt_dir = run.path(CHECKPOINTS_DIR);
     let len = objective.train_len();
     if len == 0 {
@@ -145,8 +249,12 @@ pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>)
             ),
         });
     }
+    let spread = match devices.len() {
+        1 => String::new(),
+        n => format!(" over {n} devices {devices:?}"),
+    };
     run.log(&format!(
-        "training {} → {total_steps} steps, batch {} = {} × {} micro-batches, {len} examples",
+        "training {} → {total_steps} steps, batch {} = {} × {} micro-batches{spread}, {len} examples",
         state.step,
         cfg.batch_size,
         cfg.accumulation(),
@@ -159,7 +267,8 @@ pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>)
         total_steps,
         std::time::Duration::from_secs_f64(cfg.progress_every_secs),
     );
-    let n_terms = objective.terms().len();
+    let names = objective.terms();
+    let n_terms = names.len();
 
     while state.step < total_steps {
         if stop.is_set() {
@@ -181,33 +290,18 @@ pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>)
         }
         let step = state.step + 1;
         let t0 = Instant::now();
-        device.seed(step_seed(cfg.seed, step));
-        let mut accum = GradientsAccumulator::<O::Model>::new();
-        let mut sums = vec![0.0f64; n_terms + 1];
-        for _ in 0..cfg.accumulation() {
-            let idx = state.order.take(cfg.micro_batch);
-            let losses = objective.loss(&model, &idx, &mut state.rng, &device)?;
-            if losses.terms.len() != n_terms {
-                return Err(TrainError::Other(format!(
-                    "objective returned {} loss terms, declared {n_terms}",
-                    losses.terms.len()
-                )));
-            }
-            let weight = idx.len() as f64 / cfg.batch_size as f64;
-            let names = objective.terms();
-            for (i, t) in losses.terms.iter().enumerate() {
-                let v = scalar(t.clone());
-                guard(v, step, &format!("loss term `{}`", names[i]), &last_ckpt)?;
-                sums[i] += weight * v;
-            }
-            let scaled = losses.total.mul_scalar(weight);
-            let v = scalar(scaled.clone());
-            guard(v, step, "loss", &last_ckpt)?;
-            sums[n_terms] += v;
-            let grads = GradientsParams::from_grads(scaled.backward(), &model);
-            accum.accumulate(&model, grads);
+        for d in devices {
+            d.seed(step_seed(cfg.seed, step));
         }
-        let (grads, grad_norm) = clip_global_norm(&model, accum.grads(), optim_cfg.grad_clip);
+        let mut losses = StepLosses {
+            step,
+            names: &names,
+            last_good: &last_ckpt,
+            sums: vec![0.0f64; n_terms + 1],
+        };
+        let grads = stepper.gradients(objective, &model, &mut state, cfg, &mut losses)?;
+        let sums = losses.sums;
+        let (grads, grad_norm) = clip_global_norm(&model, grads, optim_cfg.grad_clip);
         guard(grad_norm, step, "gradient norm", &last_ckpt)?;
         model = optim.step(optim_cfg.lr, model, grads);
         state.step = step;
@@ -220,9 +314,11 @@ pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>)
 
         let mut new_best = false;
         if (step.is_multiple_of(cfg.valid_every) || step == total_steps)
-            && let Some(values) = objective.validate(&model.clone().valid(), &device.clone().without_autodiff())?
+            && let Some(values) = objective.validate(&model.clone().valid(), &main.clone().without_autodiff())?
         {
-            let loss = *values.last().expect("validate returns the total last");
+            let Some(&loss) = values.last() else {
+                return Err(TrainError::Other("validate returned no values".into()));
+            };
             run.append_valid(step, &values)?;
             bar.println(&format!("step {step}: validation loss {loss:.4e}"));
             if state.best_valid.is_none_or(|(_, b)| loss < b) {

@@ -6,11 +6,10 @@
 //! the main device. Same global batch, same micro-batches, same checkpoints and exact resume as one device.
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use any4d_data::store::{Split, Store};
 use burn::module::Module;
-use burn::optim::{GradientsAccumulator, GradientsParams, ModuleOptimizer};
+use burn::optim::{GradientsAccumulator, GradientsParams};
 use burn::prelude::Device;
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -18,12 +17,9 @@ use rand_chacha::ChaCha8Rng;
 use crate::backend::{self, Backend, Precision};
 use crate::checkpoint::{self, TrainState};
 use crate::config::TrainConfig;
-use crate::data_order::DataOrder;
 use crate::error::{Result, TrainError};
-use crate::loop_common::{LoopSetup, Objective, Outcome, clip_global_norm, scalar, step_seed};
-use crate::plot;
-use crate::progress::Progress;
-use crate::run_folder::{CHECKPOINTS_DIR, METRICS_FILE, PLOT_FILE, RunFolder, VALID_FILE, write_atomic};
+use crate::loop_common::{LoopSetup, Objective, Outcome, StepGradients, StepLosses, run_steps, scalar};
+use crate::run_folder::{CHECKPOINTS_DIR, RunFolder, write_atomic};
 use crate::vae_loop::{
     LATENT_STATS_FILE, MeshVae, StoredLatentStats, VaeModelConfig, VaeObjective, VaeRunConfig, VaeRunOptions,
     latent_stats,
@@ -115,95 +111,39 @@ pub fn train_data_parallel<O>(
 where
     O: Objective + Sync,
 {
-    let LoopSetup {
-        run,
-        train: cfg,
-        optim: optim_cfg,
-        device: _,
-        stop,
-        progress,
-        resume,
-    } = setup;
-    let main = devices
-        .first()
-        .ok_or_else(|| TrainError::Other("data-parallel training needs at least one device".into()))?
-        .clone();
-    let model = model.fork(&main);
-    let ckpt_dir = run.path(CHECKPOINTS_DIR);
-    let len = objective.train_len();
-    if len == 0 {
-        return Err(TrainError::Other("the training set is empty".into()));
-    }
-    let total_steps = cfg.duration.steps(len, cfg.batch_size);
-    let (mut model, mut optim, mut state) = match &resume {
-        Some(ckpt) => {
-            let (m, o, s) = checkpoint::load(ckpt, model, optim_cfg.init())?;
-            run.log(&format!("resumed from {} at step {}", ckpt.display(), s.step))?;
-            (m, o, s)
-        }
-        None => {
-            let state = TrainState {
-                step: 0,
-                rng: ChaCha8Rng::seed_from_u64(cfg.seed),
-                order: DataOrder::new(cfg.seed, len),
-                best_valid: None,
-            };
-            (model, optim_cfg.init(), state)
-        }
+    let Some(main) = devices.first() else {
+        return Err(TrainError::Other(
+            "data-parallel training needs at least one device".into(),
+        ));
     };
-    if state.order.len != len {
-        return Err(TrainError::Checkpoint {
-            path: resume.clone().unwrap_or_default(),
-            reason: format!(
-                "saved with {} training examples, the data now has {len}",
-                state.order.len
-            ),
-        });
-    }
-    run.log(&format!(
-        "training {} → {total_steps} steps, batch {} = {} × {} micro-batches over {} devices {:?}, {len} examples",
-        state.step,
-        cfg.batch_size,
-        cfg.accumulation(),
-        cfg.micro_batch,
-        devices.len(),
-        devices
-    ))?;
-    let mut last_ckpt = checkpoint::latest(&ckpt_dir)?;
-    let mut bar = Progress::new(
-        progress,
-        state.step,
-        total_steps,
-        std::time::Duration::from_secs_f64(cfg.progress_every_secs),
-    );
-    let names = objective.terms();
-    let n_terms = names.len();
+    let model = model.fork(main);
+    run_steps(objective, model, setup, &DataParallel(devices))
+}
 
-    while state.step < total_steps {
-        if stop.is_set() {
-            let ckpt = save(&ckpt_dir, &model, &optim, &state, cfg)?;
-            run.log(&format!(
-                "stopped by request after step {}; checkpoint {}",
-                state.step,
-                ckpt.display()
-            ))?;
-            bar.finish();
-            finish_plot(run)?;
-            return Ok((
-                model,
-                Outcome::Interrupted {
-                    step: state.step,
-                    checkpoint: ckpt,
-                },
+/// The data-parallel step: burn-train's `OptimMainDevice` (fork → backward on each device → gradients to the
+/// main device → `GradientsAccumulator`).
+struct DataParallel<'a>(&'a [Device]);
+
+impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
+    fn devices(&self) -> &[Device] {
+        self.0
+    }
+
+    fn gradients(
+        &self,
+        objective: &O,
+        model: &O::Model,
+        state: &mut TrainState,
+        cfg: &TrainConfig,
+        losses: &mut StepLosses<'_>,
+    ) -> Result<GradientsParams> {
+        let devices = self.0;
+        let Some(main) = devices.first() else {
+            return Err(TrainError::Other(
+                "data-parallel training needs at least one device".into(),
             ));
-        }
-        let step = state.step + 1;
-        let t0 = Instant::now();
-        for d in devices {
-            d.seed(step_seed(cfg.seed, step));
-        }
+        };
         let mut accum = GradientsAccumulator::<O::Model>::new();
-        let mut sums = vec![0.0f64; n_terms + 1];
         let mut left = cfg.accumulation();
         while left > 0 {
             let round = left.min(devices.len());
@@ -221,10 +161,10 @@ where
                     .map(|((idx, mut rng), dev)| {
                         let worker_model = model.clone().fork(dev);
                         s.spawn(move || -> Result<MicroResult> {
-                            let losses = objective.loss(&worker_model, &idx, &mut rng, dev)?;
+                            let out = objective.loss(&worker_model, &idx, &mut rng, dev)?;
                             let weight = idx.len() as f64 / cfg.batch_size as f64;
-                            let terms: Vec<f64> = losses.terms.into_iter().map(scalar).collect();
-                            let scaled = losses.total.mul_scalar(weight);
+                            let terms: Vec<f64> = out.terms.into_iter().map(scalar).collect();
+                            let scaled = out.total.mul_scalar(weight);
                             let total = scalar(scaled.clone());
                             let grads = GradientsParams::from_grads(scaled.backward(), &worker_model);
                             Ok(MicroResult {
@@ -250,65 +190,13 @@ where
             });
             for r in results {
                 let r = r?;
-                if r.terms.len() != n_terms {
-                    return Err(TrainError::Other(format!(
-                        "objective returned {} loss terms, declared {n_terms}",
-                        r.terms.len()
-                    )));
-                }
-                for (i, v) in r.terms.iter().enumerate() {
-                    guard(*v, step, &format!("loss term `{}`", names[i]), &last_ckpt)?;
-                    sums[i] += r.weight * v;
-                }
-                guard(r.total, step, "loss", &last_ckpt)?;
-                sums[n_terms] += r.total;
+                losses.record(r.weight, &r.terms, r.total)?;
                 // burn-train's OptimMainDevice: gradients to the main device, summed there.
-                accum.accumulate(&model, r.grads.to_device(&main, &model));
+                accum.accumulate(model, r.grads.to_device(main, model));
             }
         }
-        let (grads, grad_norm) = clip_global_norm(&model, accum.grads(), optim_cfg.grad_clip);
-        guard(grad_norm, step, "gradient norm", &last_ckpt)?;
-        model = optim.step(optim_cfg.lr, model, grads);
-        state.step = step;
-
-        let secs = t0.elapsed().as_secs_f64();
-        let mut row = sums.clone();
-        row.extend([optim_cfg.lr, grad_norm, 1.0 / secs, cfg.batch_size as f64 / secs]);
-        run.append_metrics(step, &row)?;
-        bar.step(step, sums[n_terms], secs);
-
-        let mut new_best = false;
-        if (step.is_multiple_of(cfg.valid_every) || step == total_steps)
-            && let Some(values) = objective.validate(&model.clone().valid(), &main.clone().without_autodiff())?
-        {
-            let Some(&loss) = values.last() else {
-                return Err(TrainError::Other("validate returned no values".into()));
-            };
-            run.append_valid(step, &values)?;
-            bar.println(&format!("step {step}: validation loss {loss:.4e}"));
-            if state.best_valid.is_none_or(|(_, b)| loss < b) {
-                state.best_valid = Some((step, loss));
-                new_best = true;
-            }
-        }
-        if step % cfg.checkpoint_every == 0 || step == total_steps || new_best {
-            last_ckpt = Some(save(&ckpt_dir, &model, &optim, &state, cfg)?);
-        }
+        Ok(accum.grads())
     }
-    bar.finish();
-    let ckpt = match last_ckpt {
-        Some(c) if c.ends_with(checkpoint::step_dir_name(state.step)) => c,
-        _ => save(&ckpt_dir, &model, &optim, &state, cfg)?,
-    };
-    run.log(&format!("finished {} steps; checkpoint {}", state.step, ckpt.display()))?;
-    finish_plot(run)?;
-    Ok((
-        model,
-        Outcome::Finished {
-            steps: state.step,
-            checkpoint: ckpt,
-        },
-    ))
 }
 
 struct MicroResult {
@@ -325,35 +213,6 @@ fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
         s.clone()
     } else {
         "unknown panic".into()
-    }
-}
-
-fn save<M: Module + Clone>(
-    dir: &Path,
-    model: &M,
-    optim: &ModuleOptimizer,
-    state: &TrainState,
-    cfg: &TrainConfig,
-) -> Result<PathBuf> {
-    let path = checkpoint::save(dir, model, optim, state)?;
-    checkpoint::prune(dir, cfg.keep_last, state.best_valid.map(|(s, _)| s))?;
-    Ok(path)
-}
-
-fn finish_plot(run: &RunFolder) -> Result<()> {
-    plot::plot_run(&run.path(METRICS_FILE), &run.path(VALID_FILE), &run.path(PLOT_FILE))
-}
-
-fn guard(value: f64, step: u64, what: &str, last_good: &Option<PathBuf>) -> Result<()> {
-    if value.is_finite() {
-        Ok(())
-    } else {
-        Err(TrainError::NonFinite {
-            step,
-            what: what.to_string(),
-            value,
-            last_good: last_good.clone(),
-        })
     }
 }
 
