@@ -17,7 +17,7 @@ pub enum EvalCmd {
     /// Score a predicted clip against its ground truth: RMSE, Chamfer, DTW, jerk, … (SPEC §6.2).
     Metrics(MetricsArgs),
     /// Run one paper table's protocol: per-clip parquet, Markdown/CSV summary, strips and plots.
-    Run(super::eval_run::RunArgs),
+    Run(Box<super::eval_run::RunArgs>),
     /// Redraw the strips and the RMSE-vs-K_x plot of an earlier `eval run`.
     Render(super::eval_run::RenderArgs),
 }
@@ -63,7 +63,7 @@ pub struct MetricsArgs {
 pub fn run(cmd: EvalCmd) -> anyhow::Result<ExitCode> {
     match cmd {
         EvalCmd::Metrics(args) => metrics(args),
-        EvalCmd::Run(args) => super::eval_run::run(args),
+        EvalCmd::Run(args) => super::eval_run::run(*args),
         EvalCmd::Render(args) => super::eval_run::render(args),
     }
 }
