@@ -14,7 +14,7 @@ use any4d_data::preprocess::{edges_from_faces, pad_vertices};
 use any4d_data::rng::{Rng, rng};
 use any4d_data::{Clip, DataError};
 use any4d_model::dymesh_vae::DyMeshVae;
-use any4d_model::frame_vae::{EdgeList, FrameVae, VaeEncoding};
+use any4d_model::frame_vae::{EdgeList, FrameVae, MeshVaeModel, VaeEncoding};
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mmdit::{KfMode, Mmdit, MmditConfig, replace_keyframes};
 use any4d_model::rectified_flow::{Conditioning, SampleOptions, sample_mmdit};

@@ -6,8 +6,7 @@
 use burn::prelude::*;
 
 use crate::frame_vae::{
-    EdgeList, MeshVaeBody, MeshVaeBodyConfig, PadKeys, Posterior, VaeBatch, VaeEncoding, VaeLoss, kl_loss,
-    reconstruction_loss, sample,
+    EdgeList, MeshVaeBody, MeshVaeBodyConfig, MeshVaeModel, PadKeys, Posterior, VaeBatch, VaeEncoding,
 };
 use crate::point_embed::{OffsetEmbed, OffsetEmbedConfig};
 
@@ -111,14 +110,16 @@ pub struct DyMeshVae {
 }
 
 impl DyMeshVae {
-    /// Per-vertex shape features E₀ (point embedding + neighbour attention).
+    /// Whole-clip reconstruction (see [`MeshVaeModel::reconstruct`]); the encoding has one latent group.
     ///
     /// # Shapes
-    /// - `reference`: `[B, N, 3]` → `[B, N, D]`
-    pub fn encode_shape(&self, reference: Tensor<3>, edges: &EdgeList) -> Tensor<3> {
-        self.body.encode_shape(reference, edges)
+    /// - returns `[B, T, N, 3]` and the encoding (`mu`/`logvar` `[B, 1, P, C]`)
+    pub fn reconstruct(&self, batch: &VaeBatch, posterior: Posterior) -> (Tensor<4>, VaeEncoding) {
+        MeshVaeModel::reconstruct(self, batch, posterior)
     }
+}
 
+impl MeshVaeModel for DyMeshVae {
     /// Encodes the whole clip's trajectories.
     ///
     /// # Shapes
@@ -127,7 +128,7 @@ impl DyMeshVae {
     ///
     /// # Panics
     /// If T differs from the configured `frames` (the trajectory embedding's width depends on it).
-    pub fn encode(
+    fn encode(
         &self,
         reference: Tensor<3>,
         frames: Tensor<4>,
@@ -151,20 +152,12 @@ impl DyMeshVae {
         VaeEncoding { e0, z0, mu, logvar }
     }
 
-    /// Reparameterised sample z = μ + σ·ξ.
-    ///
-    /// # Shapes
-    /// - `mu`, `logvar`: `[B, 1, P, C]` → `[B, 1, P, C]`
-    pub fn sample(&self, mu: Tensor<4>, logvar: Tensor<4>) -> Tensor<4> {
-        sample(mu, logvar)
-    }
-
     /// Decodes all frames: x̂_{t,v} = x̄_{0,v} + o_{t,v}, the T offsets read from one 3T-wide head.
     ///
     /// # Shapes
     /// - `e0`: `[B, N, D]`, `reference`: `[B, N, 3]`, `z0`: `[B, P, C]`, `z`: `[B, 1, P, C]`
     /// - returns `[B, T, N, 3]`
-    pub fn decode(&self, e0: Tensor<3>, reference: Tensor<3>, z0: Tensor<3>, z: Tensor<4>) -> Tensor<4> {
+    fn decode(&self, e0: Tensor<3>, reference: Tensor<3>, z0: Tensor<3>, z: Tensor<4>) -> Tensor<4> {
         let [b, n, _] = reference.dims();
         let offsets = self
             .body
@@ -174,28 +167,11 @@ impl DyMeshVae {
         reference.unsqueeze_dim(1) + offsets
     }
 
-    /// Encodes and decodes a batch; returns the reconstruction `[B, T, N, 3]` and the encoding.
-    pub fn reconstruct(&self, batch: &VaeBatch, posterior: Posterior) -> (Tensor<4>, VaeEncoding) {
-        let enc = self.encode(
-            batch.reference.clone(),
-            batch.frames.clone(),
-            batch.vmask.clone(),
-            batch.fps.clone(),
-            &batch.edges,
-        );
-        let z = match posterior {
-            Posterior::Sample => self.sample(enc.mu.clone(), enc.logvar.clone()),
-            Posterior::Mean => enc.mu.clone(),
-        };
-        let recon = self.decode(enc.e0.clone(), batch.reference.clone(), enc.z0.clone(), z);
-        (recon, enc)
+    fn kl_weight(&self) -> f64 {
+        self.kl_weight
     }
 
-    /// Training loss (V1)–(V3) with a posterior sample.
-    pub fn loss(&self, batch: &VaeBatch) -> VaeLoss {
-        let (recon, enc) = self.reconstruct(batch, Posterior::Sample);
-        let rec = reconstruction_loss(recon, batch.frames.clone(), batch.vmask.clone()); // (V1)
-        let kl = kl_loss(enc.mu, enc.logvar); // (V2)
-        VaeLoss::new(rec, kl, self.kl_weight) // (V3)
+    fn body(&self) -> &MeshVaeBody {
+        &self.body
     }
 }

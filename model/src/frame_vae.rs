@@ -389,6 +389,95 @@ pub struct VaeBatch {
     pub edges: EdgeList,
 }
 
+/// The interface both mesh VAEs share (frame-wise [`FrameVae`], sequence-wise
+/// [`crate::dymesh_vae::DyMeshVae`]): each supplies its body, encoder, decoder and KL weight β; the shape
+/// features, posterior sample, reconstruction and (V1)–(V3) loss are written once here. G is the latent
+/// group axis: T frame-wise, 1 sequence-wise.
+pub trait MeshVaeModel: Module + Clone {
+    /// Encodes the clip against the reference mesh.
+    ///
+    /// # Shapes
+    /// - `reference`: `[B, N, 3]`, `frames`: `[B, T, N, 3]`, `vmask`: `[B, N]`, `fps`: `[B, P]`
+    /// - returns `e0` `[B, N, D]`, `z0` `[B, P, C]`, `mu`/`logvar` `[B, G, P, C]`
+    fn encode(
+        &self,
+        reference: Tensor<3>,
+        frames: Tensor<4>,
+        vmask: Tensor<2, Bool>,
+        fps: Tensor<2, Int>,
+        edges: &EdgeList,
+    ) -> VaeEncoding;
+
+    /// Decodes every frame: x̂_{t,v} = x̄_{0,v} + o_{t,v} (SPEC §3.2 "Output"). Padded rows get values too; the
+    /// loss and metrics ignore them.
+    ///
+    /// # Shapes
+    /// - `e0`: `[B, N, D]`, `reference`: `[B, N, 3]`, `z0`: `[B, P, C]`, `z`: `[B, G, P, C]`
+    /// - returns `[B, T, N, 3]`
+    fn decode(&self, e0: Tensor<3>, reference: Tensor<3>, z0: Tensor<3>, z: Tensor<4>) -> Tensor<4>;
+
+    /// β of (V3).
+    fn kl_weight(&self) -> f64;
+
+    /// The encoder/decoder body both VAEs share.
+    fn body(&self) -> &MeshVaeBody;
+
+    /// Per-vertex shape features E₀ (point embedding + neighbour attention).
+    ///
+    /// # Shapes
+    /// - `reference`: `[B, N, 3]` → `[B, N, D]`
+    fn encode_shape(&self, reference: Tensor<3>, edges: &EdgeList) -> Tensor<3> {
+        self.body().encode_shape(reference, edges)
+    }
+
+    /// Reparameterised sample z = μ + σ·ξ.
+    ///
+    /// # Shapes
+    /// - `mu`, `logvar`: `[B, G, P, C]` → `[B, G, P, C]`
+    fn sample(&self, mu: Tensor<4>, logvar: Tensor<4>) -> Tensor<4> {
+        sample(mu, logvar)
+    }
+
+    /// [`Self::encode`] of a whole batch.
+    ///
+    /// # Shapes
+    /// - returns `e0` `[B, N, D]`, `z0` `[B, P, C]`, `mu`/`logvar` `[B, G, P, C]`
+    fn encode_vae_batch(&self, batch: &VaeBatch) -> VaeEncoding {
+        self.encode(
+            batch.reference.clone(),
+            batch.frames.clone(),
+            batch.vmask.clone(),
+            batch.fps.clone(),
+            &batch.edges,
+        )
+    }
+
+    /// Encodes and decodes a batch; returns the reconstruction and the encoding.
+    ///
+    /// # Shapes
+    /// - returns `[B, T, N, 3]` and the [`Self::encode`] outputs
+    fn reconstruct(&self, batch: &VaeBatch, posterior: Posterior) -> (Tensor<4>, VaeEncoding) {
+        let enc = self.encode_vae_batch(batch);
+        let z = match posterior {
+            Posterior::Sample => self.sample(enc.mu.clone(), enc.logvar.clone()),
+            Posterior::Mean => enc.mu.clone(),
+        };
+        let recon = self.decode(enc.e0.clone(), batch.reference.clone(), enc.z0.clone(), z);
+        (recon, enc)
+    }
+
+    /// Training loss (V1)–(V3) with a posterior sample.
+    ///
+    /// # Shapes
+    /// - every term `[1]`
+    fn loss(&self, batch: &VaeBatch) -> VaeLoss {
+        let (recon, enc) = self.reconstruct(batch, Posterior::Sample);
+        let rec = reconstruction_loss(recon, batch.frames.clone(), batch.vmask.clone()); // (V1)
+        let kl = kl_loss(enc.mu, enc.logvar); // (V2)
+        VaeLoss::new(rec, kl, self.kl_weight()) // (V3)
+    }
+}
+
 /// Configuration of the frame-wise mesh VAE (SPEC §3.2, §3.5; paper values are the defaults).
 #[derive(Config, Debug)]
 pub struct FrameVaeConfig {
@@ -483,20 +572,22 @@ pub struct FrameVae {
 }
 
 impl FrameVae {
-    /// Per-vertex shape features E₀ (point embedding + neighbour attention).
+    /// Encodes and decodes a batch (see [`MeshVaeModel::reconstruct`]).
     ///
     /// # Shapes
-    /// - `reference`: `[B, N, 3]` → `[B, N, D]`
-    pub fn encode_shape(&self, reference: Tensor<3>, edges: &EdgeList) -> Tensor<3> {
-        self.body.encode_shape(reference, edges)
+    /// - returns `[B, T, N, 3]` and the encoding (`mu`/`logvar` `[B, T, P, C]`)
+    pub fn reconstruct(&self, batch: &VaeBatch, posterior: Posterior) -> (Tensor<4>, VaeEncoding) {
+        MeshVaeModel::reconstruct(self, batch, posterior)
     }
+}
 
+impl MeshVaeModel for FrameVae {
     /// Encodes every frame against the reference mesh.
     ///
     /// # Shapes
     /// - `reference`: `[B, N, 3]`, `frames`: `[B, T, N, 3]`, `vmask`: `[B, N]`, `fps`: `[B, P]`
     /// - returns `e0` `[B, N, D]`, `z0` `[B, P, C]`, `mu`/`logvar` `[B, T, P, C]`
-    pub fn encode(
+    fn encode(
         &self,
         reference: Tensor<3>,
         frames: Tensor<4>,
@@ -512,48 +603,23 @@ impl FrameVae {
         VaeEncoding { e0, z0, mu, logvar }
     }
 
-    /// Reparameterised sample z = μ + σ·ξ.
-    ///
-    /// # Shapes
-    /// - `mu`, `logvar`: `[B, T, P, C]` → `[B, T, P, C]`
-    pub fn sample(&self, mu: Tensor<4>, logvar: Tensor<4>) -> Tensor<4> {
-        sample(mu, logvar)
-    }
-
     /// Decodes every frame: x̂_{f,v} = x̄_{0,v} + o_{f,v} (SPEC §3.2 "Output"). Padded rows get values too; the
     /// loss and metrics ignore them.
     ///
     /// # Shapes
     /// - `e0`: `[B, N, D]`, `reference`: `[B, N, 3]`, `z0`: `[B, P, C]`, `z`: `[B, T, P, C]`
     /// - returns `[B, T, N, 3]`
-    pub fn decode(&self, e0: Tensor<3>, reference: Tensor<3>, z0: Tensor<3>, z: Tensor<4>) -> Tensor<4> {
+    fn decode(&self, e0: Tensor<3>, reference: Tensor<3>, z0: Tensor<3>, z: Tensor<4>) -> Tensor<4> {
         let offsets = self.body.decode_offsets(e0, z0, z);
         reference.unsqueeze_dim(1) + offsets
     }
 
-    /// Encodes and decodes a batch; returns the reconstruction `[B, T, N, 3]` and the encoding.
-    pub fn reconstruct(&self, batch: &VaeBatch, posterior: Posterior) -> (Tensor<4>, VaeEncoding) {
-        let enc = self.encode(
-            batch.reference.clone(),
-            batch.frames.clone(),
-            batch.vmask.clone(),
-            batch.fps.clone(),
-            &batch.edges,
-        );
-        let z = match posterior {
-            Posterior::Sample => self.sample(enc.mu.clone(), enc.logvar.clone()),
-            Posterior::Mean => enc.mu.clone(),
-        };
-        let recon = self.decode(enc.e0.clone(), batch.reference.clone(), enc.z0.clone(), z);
-        (recon, enc)
+    fn kl_weight(&self) -> f64 {
+        self.kl_weight
     }
 
-    /// Training loss (V1)–(V3) with a posterior sample.
-    pub fn loss(&self, batch: &VaeBatch) -> VaeLoss {
-        let (recon, enc) = self.reconstruct(batch, Posterior::Sample);
-        let rec = reconstruction_loss(recon, batch.frames.clone(), batch.vmask.clone()); // (V1)
-        let kl = kl_loss(enc.mu, enc.logvar); // (V2)
-        VaeLoss::new(rec, kl, self.kl_weight) // (V3)
+    fn body(&self) -> &MeshVaeBody {
+        &self.body
     }
 }
 

@@ -6,7 +6,7 @@ use std::sync::{Mutex, MutexGuard};
 
 use any4d_model::attention::{EdgeList, NeighbourAttentionConfig};
 use any4d_model::dymesh_vae::{DyMeshVae, DyMeshVaeConfig};
-use any4d_model::frame_vae::{FrameVae, FrameVaeConfig, PadKeys, VaeBatch, VaeEncoding, VaeLoss};
+use any4d_model::frame_vae::{FrameVae, FrameVaeConfig, MeshVaeModel, PadKeys, VaeBatch, VaeEncoding, VaeLoss};
 use burn::grad_clipping::GradientClippingConfig;
 use burn::module::{ModuleMapper, ModuleVisitor, Param};
 use burn::optim::{AdamWConfig, GradientsParams};

@@ -7,10 +7,9 @@ use std::path::{Path, PathBuf};
 
 use any4d_data::batch::{ClipBatch, ClipBatcher, PadTo};
 use any4d_data::store::{Split, Store, StoredClip};
-use any4d_model::dymesh_vae::{DyMeshVae, DyMeshVaeConfig};
-use any4d_model::frame_vae::{EdgeList, FrameVae, FrameVaeConfig, VaeBatch, VaeEncoding, VaeLoss};
+use any4d_model::dymesh_vae::DyMeshVaeConfig;
+use any4d_model::frame_vae::{EdgeList, FrameVaeConfig, MeshVaeModel, VaeBatch, VaeEncoding, VaeLoss};
 use any4d_model::latent_stats::{LatentStats, LatentStatsAccumulator};
-use burn::module::Module;
 use burn::prelude::{Device, Tensor};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -122,43 +121,20 @@ impl VaeRunConfig {
     }
 }
 
-/// The two VAEs behind one interface (both share the body and the (V1)–(V3) loss).
-pub trait MeshVae: Module + Clone {
+/// The train loops' view of a mesh VAE: [`MeshVaeModel`] under the names the loops use; every model-crate VAE
+/// has it.
+pub trait MeshVae: MeshVaeModel {
     /// (V1)–(V3) with a posterior sample.
-    fn vae_loss(&self, batch: &VaeBatch) -> VaeLoss;
+    fn vae_loss(&self, batch: &VaeBatch) -> VaeLoss {
+        self.loss(batch)
+    }
     /// Encoder outputs.
-    fn vae_encode(&self, batch: &VaeBatch) -> VaeEncoding;
-}
-
-impl MeshVae for FrameVae {
-    fn vae_loss(&self, batch: &VaeBatch) -> VaeLoss {
-        self.loss(batch)
-    }
-    fn vae_encode(&self, b: &VaeBatch) -> VaeEncoding {
-        self.encode(
-            b.reference.clone(),
-            b.frames.clone(),
-            b.vmask.clone(),
-            b.fps.clone(),
-            &b.edges,
-        )
+    fn vae_encode(&self, batch: &VaeBatch) -> VaeEncoding {
+        self.encode_vae_batch(batch)
     }
 }
 
-impl MeshVae for DyMeshVae {
-    fn vae_loss(&self, batch: &VaeBatch) -> VaeLoss {
-        self.loss(batch)
-    }
-    fn vae_encode(&self, b: &VaeBatch) -> VaeEncoding {
-        self.encode(
-            b.reference.clone(),
-            b.frames.clone(),
-            b.vmask.clone(),
-            b.fps.clone(),
-            &b.edges,
-        )
-    }
-}
+impl<V: MeshVaeModel> MeshVae for V {}
 
 /// Reads clips `indices` of `store` and stacks them (padded to the batch's largest N_v).
 pub fn load_clips(store: &Store, indices: &[usize], device: &Device) -> Result<(ClipBatch, Vec<StoredClip>)> {
