@@ -42,76 +42,21 @@ impl TableKind {
     /// The metric columns of the table: (record key, header, scale).
     pub fn columns(&self) -> &'static [MetricColumn] {
         const SHORT: &[MetricColumn] = &[
-            MetricColumn {
-                key: "rmse",
-                header: "RMSE ×100",
-                scale: 100.0,
-            },
-            MetricColumn {
-                key: "chamfer",
-                header: "Chamfer ×100",
-                scale: 100.0,
-            },
-            MetricColumn {
-                key: "dtw",
-                header: "DTW ×100",
-                scale: 100.0,
-            },
-            MetricColumn {
-                key: "mae_elem",
-                header: "MAE ×100",
-                scale: 100.0,
-            },
-            MetricColumn {
-                key: "jerk_ratio",
-                header: "jerk / GT",
-                scale: 1.0,
-            },
-            MetricColumn {
-                key: "energy_ratio",
-                header: "motion / GT",
-                scale: 1.0,
-            },
+            col("rmse", "RMSE ×100", 100.0),
+            col("chamfer", "Chamfer ×100", 100.0),
+            col("dtw", "DTW ×100", 100.0),
+            col("mae_elem", "MAE ×100", 100.0),
+            col("jerk_ratio", "jerk / GT", 1.0),
+            col("energy_ratio", "motion / GT", 1.0),
         ];
         const LONG: &[MetricColumn] = &[
-            MetricColumn {
-                key: "rmse",
-                header: "RMSE ×100",
-                scale: 100.0,
-            },
-            MetricColumn {
-                key: "chamfer",
-                header: "Chamfer ×100",
-                scale: 100.0,
-            },
-            MetricColumn {
-                key: "dtw",
-                header: "DTW ×100",
-                scale: 100.0,
-            },
-            MetricColumn {
-                key: "jerk_ratio",
-                header: "jerk / GT",
-                scale: 1.0,
-            },
-            MetricColumn {
-                key: "seam_jerk_ratio",
-                header: "seam jerk / GT",
-                scale: 1.0,
-            },
+            col("rmse", "RMSE ×100", 100.0),
+            col("chamfer", "Chamfer ×100", 100.0),
+            col("dtw", "DTW ×100", 100.0),
+            col("jerk_ratio", "jerk / GT", 1.0),
+            col("seam_jerk_ratio", "seam jerk / GT", 1.0),
         ];
-        const VAE: &[MetricColumn] = &[
-            MetricColumn {
-                key: "rmse",
-                header: "RMSE",
-                scale: 1.0,
-            },
-            MetricColumn {
-                key: "chamfer",
-                header: "Chamfer",
-                scale: 1.0,
-            },
-        ];
+        const VAE: &[MetricColumn] = &[col("rmse", "RMSE", 1.0), col("chamfer", "Chamfer", 1.0)];
         match self {
             TableKind::Table1 => SHORT,
             TableKind::Table2 => LONG,
@@ -130,6 +75,11 @@ pub struct MetricColumn {
     pub header: &'static str,
     /// Multiplier applied when printing (100 where the paper scales).
     pub scale: f64,
+}
+
+/// A metric column: record key, header, scale (100 where the paper prints × 100).
+const fn col(key: &'static str, header: &'static str, scale: f64) -> MetricColumn {
+    MetricColumn { key, header, scale }
 }
 
 /// The metrics of one (method, keyframe set, seed, clip) generation.
