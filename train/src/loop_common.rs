@@ -45,9 +45,9 @@ pub trait Objective {
     /// from the device RNG, which the loop reseeds from (seed, step) before every step.
     fn loss(&self, model: &Self::Model, indices: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses>;
 
-    /// Mean validation terms followed by the total, computed with `model` (inference mode) on `device`;
-    /// `None` when there is no validation set.
-    fn validate(&self, model: &Self::Model, device: &Device) -> Result<Option<Vec<f64>>>;
+    /// Mean validation terms followed by the total, computed with `model` (inference mode) on `device` after
+    /// optimiser step `step`; `None` when there is no validation set.
+    fn validate(&self, model: &Self::Model, device: &Device, step: u64) -> Result<Option<Vec<f64>>>;
 }
 
 /// Set by Ctrl-C (or a test); the loop checks it before every step, saves a checkpoint and returns.
@@ -314,7 +314,7 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
 
         let mut new_best = false;
         if (step.is_multiple_of(cfg.valid_every) || step == total_steps)
-            && let Some(values) = objective.validate(&model.clone().valid(), &main.clone().without_autodiff())?
+            && let Some(values) = objective.validate(&model.clone().valid(), &main.clone().without_autodiff(), step)?
         {
             let Some(&loss) = values.last() else {
                 return Err(TrainError::Other("validate returned no values".into()));

@@ -39,7 +39,7 @@ use crate::config::{DeviceConfig, OptimConfig, TrainConfig, parse_strict, to_tom
 use crate::error::{Result, TrainError, io_err};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, StopFlag};
 use crate::progress::ProgressMode;
-use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, METRICS_FILE, RunFolder, SAMPLES_FILE};
+use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder, SAMPLES_FILE};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 use crate::vae_loop::{MeshVae, load_clips, vae_batch};
 
@@ -659,19 +659,12 @@ impl RfObjective {
         }))
     }
 
-    /// At a validation: samples and logs when [`RfObjective::log_validation_samples`] is on and the step (the
-    /// last row of `metrics.csv`, which the loop appends before it validates) is a multiple of
-    /// `rf.valid_sample_every` or the last step.
-    fn sample_at_validation(&self, model: &RfModel, device: &Device) -> Result<()> {
+    /// At the validation after `step`: samples and logs when [`RfObjective::log_validation_samples`] is on and
+    /// `step` is a multiple of `rf.valid_sample_every` or the last step.
+    fn sample_at_validation(&self, model: &RfModel, device: &Device, step: u64) -> Result<()> {
         let Some(run) = &self.samples_run else {
             return Ok(());
         };
-        let step = run.last_step(METRICS_FILE)?.ok_or_else(|| {
-            TrainError::Other(format!(
-                "validation samples: {} has no step row yet",
-                run.path(METRICS_FILE).display()
-            ))
-        })?;
         let train = &self.cfg.train;
         let last = train.duration.steps(self.train_len(), train.batch_size);
         if !(step.is_multiple_of(self.cfg.rf.valid_sample_every) || step == last) {
@@ -868,7 +861,7 @@ impl Objective for RfObjective {
 
     /// (R5) on the VAL split with a fixed seed (same masks, ξ, ε and τ at every validation) and no text dropout;
     /// then, when switched on, the validation samples of [`RfObjective::log_validation_samples`].
-    fn validate(&self, model: &RfModel, device: &Device) -> Result<Option<Vec<f64>>> {
+    fn validate(&self, model: &RfModel, device: &Device, step: u64) -> Result<Option<Vec<f64>>> {
         let n = self.valid_len();
         if n == 0 {
             return Ok(None);
@@ -888,7 +881,7 @@ impl Objective for RfObjective {
                 *s += w * v;
             }
         }
-        self.sample_at_validation(model, device)?;
+        self.sample_at_validation(model, device, step)?;
         Ok(Some(sums.to_vec()))
     }
 }

@@ -137,34 +137,6 @@ impl RunFolder {
         self.append(SAMPLES_FILE, &csv_row(step, values))
     }
 
-    /// The step of the last row of the CSV table `file` (`None` when it holds only its header). Reads only the
-    /// end of the file, so it stays cheap on a long run's `metrics.csv`.
-    pub fn last_step(&self, file: &str) -> Result<Option<u64>> {
-        use std::io::{Read, Seek, SeekFrom};
-        const TAIL: u64 = 64 * 1024;
-        let p = self.path(file);
-        let mut f = File::open(&p).map_err(io_err("open", &p))?;
-        let len = f.metadata().map_err(io_err("stat", &p))?.len();
-        let start = len.saturating_sub(TAIL);
-        f.seek(SeekFrom::Start(start)).map_err(io_err("seek in", &p))?;
-        let mut tail = Vec::new();
-        f.read_to_end(&mut tail).map_err(io_err("read", &p))?;
-        let tail = String::from_utf8_lossy(&tail);
-        let mut lines = tail.lines().filter(|l| !l.trim().is_empty());
-        let Some(last) = lines.next_back() else {
-            return Ok(None);
-        };
-        let is_header = start == 0 && lines.next().is_none();
-        if is_header {
-            return Ok(None);
-        }
-        let field = last.split_once(',').map_or(last, |(step, _)| step);
-        field.parse::<u64>().map(Some).map_err(|e| TrainError::Checkpoint {
-            path: p.clone(),
-            reason: format!("last row `{last}`: step `{field}`: {e}"),
-        })
-    }
-
     fn append(&self, file: &str, text: &str) -> Result<()> {
         let p = self.path(file);
         let mut f = OpenOptions::new()
@@ -268,14 +240,9 @@ mod tests {
     }
 
     #[test]
-    fn last_step_reads_the_final_row_and_samples_table_is_created_once() {
+    fn samples_table_is_created_once() {
         let dir = tempfile::tempdir().unwrap();
         let a = RunFolder::create(dir.path(), "r", "", &["x"]).unwrap();
-        assert_eq!(a.last_step(METRICS_FILE).unwrap(), None);
-        for s in [1, 2, 17] {
-            a.append_metrics(s, &[0.0; 6]).unwrap();
-        }
-        assert_eq!(a.last_step(METRICS_FILE).unwrap(), Some(17));
         assert!(!a.path(SAMPLES_FILE).exists());
         a.ensure_table(SAMPLES_FILE, &["rmse", "chamfer", "dtw"]).unwrap();
         a.append_samples(5, &[0.5, 0.25, 0.125]).unwrap();
@@ -283,9 +250,6 @@ mod tests {
         let t = read_table(&a.path(SAMPLES_FILE)).unwrap();
         assert_eq!(t.header, ["step", "rmse", "chamfer", "dtw"]);
         assert_eq!(t.rows, vec![(5, vec![0.5, 0.25, 0.125])]);
-        std::fs::write(a.path(VALID_FILE), "step,loss\nseven,1\n").unwrap();
-        let err = a.last_step(VALID_FILE).unwrap_err().to_string();
-        assert!(err.contains("valid.csv") && err.contains("seven"), "{err}");
     }
 
     #[test]

@@ -211,7 +211,7 @@ impl<V: MeshVae> Objective for VaeObjective<V> {
         })
     }
 
-    fn validate(&self, model: &V, device: &Device) -> Result<Option<Vec<f64>>> {
+    fn validate(&self, model: &V, device: &Device, _step: u64) -> Result<Option<Vec<f64>>> {
         if self.valid.is_empty() {
             return Ok(None);
         }

@@ -100,7 +100,7 @@ impl Objective for Toy {
             terms: vec![mse],
         })
     }
-    fn validate(&self, model: &Mlp, device: &Device) -> Result<Option<Vec<f64>>> {
+    fn validate(&self, model: &Mlp, device: &Device, _step: u64) -> Result<Option<Vec<f64>>> {
         let flat: Vec<f32> = self.xs[32..].iter().flatten().copied().collect();
         let x = Tensor::<2>::from_data(TensorData::new(flat, [8, 4]), device);
         let y = x.clone().sum_dim(1).div_scalar(2.0);

@@ -82,7 +82,7 @@ impl Objective for Toy {
             terms: vec![mse],
         })
     }
-    fn validate(&self, _model: &Mlp, _device: &Device) -> Result<Option<Vec<f64>>> {
+    fn validate(&self, _model: &Mlp, _device: &Device, _step: u64) -> Result<Option<Vec<f64>>> {
         Ok(None)
     }
 }

@@ -224,7 +224,7 @@ fn load_rf_run_round_trips_the_trained_run() {
     assert_eq!(tokenizer.vocab_size(), loaded.tokenizer.vocab_size());
     let objective = RfObjective::new(cfg, &fixture().store, &vae, tokenizer, &dev).unwrap();
     let values = objective
-        .validate(&loaded.model, &dev)
+        .validate(&loaded.model, &dev, loaded.step)
         .unwrap()
         .expect("the fixture store has VAL clips");
     let table = read_table(&run.join(VALID_FILE)).unwrap();
