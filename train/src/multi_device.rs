@@ -1,9 +1,15 @@
 //! Data-parallel training on several devices of one machine (issue 5 item 6): the shared loop of
-//! [`crate::loop_common`] with each step's micro-batches spread over the devices, using burn-train 0.22.1's own
-//! multi-device mechanism (`MultiDeviceOptim::OptimMainDevice`): every worker forks the model onto its device
-//! (`Module::fork`), runs forward/backward there, the gradients move to the main device
-//! (`GradientsParams::to_device`) and burn's `GradientsAccumulator` sums them; the optimiser steps once on
-//! the main device. Same global batch, same micro-batches, same checkpoints and exact resume as one device.
+//! [`crate::loop_common`] with each step's micro-batches spread over the devices, using burn 0.22.1's own
+//! multi-device mechanisms, chosen by [`Strategy`]:
+//! - main-device (burn-train's `MultiDeviceOptim::OptimMainDevice`): every worker forks the model onto its device
+//!   (`Module::fork`), runs forward/backward there, the gradients move to the main device
+//!   (`GradientsParams::to_device`) and burn's `GradientsAccumulator` sums them;
+//! - DDP (burn-train's `ExecutionStrategy::ddp`): the forked replicas are marked distributed
+//!   (`burn::train::ModuleSharder`) under a `DistributedContext`, and burn all-reduces each gradient (NCCL on cuda)
+//!   inside the backward pass.
+//!
+//! Either way the optimiser steps once on the main device and the replicas are forked from it again next step.
+//! Same global batch, same micro-batches, same checkpoints and exact resume as one device.
 
 use std::path::{Path, PathBuf};
 
@@ -11,6 +17,8 @@ use any4d_data::store::{Split, Store};
 use burn::module::Module;
 use burn::optim::{GradientsAccumulator, GradientsParams};
 use burn::prelude::Device;
+use burn::tensor::distributed::{DistributedConfig, DistributedContext, ReduceOperation};
+use burn::train::ModuleSharder;
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -95,18 +103,80 @@ fn indexed_gpu(backend: Backend, index: usize) -> Result<Device> {
     }
 }
 
+/// How the devices of `--devices` combine one step's gradients (`--strategy`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[value(rename_all = "kebab-case")]
+pub enum Strategy {
+    /// `ddp` when every device is a distinct cuda device, `main-device` otherwise.
+    Auto,
+    /// burn-train's `MultiDeviceOptim::OptimMainDevice`: each device's gradients are copied to the first device
+    /// and summed there (`GradientsParams::to_device` + `GradientsAccumulator`). Any backend, any mix.
+    MainDevice,
+    /// burn-train's DDP: parameters are marked distributed (`burn::train::ModuleSharder`) and burn all-reduces
+    /// (sums) every gradient across the devices during the backward pass (`burn::tensor::distributed`, NCCL on
+    /// cuda). burn 0.22.1 implements the collective only on cuda; `flex`, `ndarray` and `vulkan` refuse it.
+    Ddp,
+}
+
+/// `--devices` with `--strategy`: which devices, and how they share a step.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Parallel {
+    /// The devices; the first holds the model, the optimiser state and validation.
+    pub devices: Vec<DeviceSpec>,
+    /// The resolved strategy (never [`Strategy::Auto`]).
+    pub strategy: Strategy,
+}
+
+impl Parallel {
+    /// Parses `--devices` and resolves `strategy`; an error names what burn 0.22.1 cannot do (DDP off cuda,
+    /// one device listed twice under DDP).
+    pub fn parse(devices: &str, strategy: Strategy) -> Result<Self> {
+        let devices = DeviceSpec::parse_list(devices)?;
+        let all_cuda = devices.iter().all(|d| d.backend == Backend::Cuda);
+        let mut indices: Vec<usize> = devices.iter().map(|d| d.index).collect();
+        indices.sort_unstable();
+        indices.dedup();
+        let distinct = indices.len() == devices.len();
+        let strategy = match strategy {
+            Strategy::Auto if all_cuda && distinct && devices.len() > 1 => Strategy::Ddp,
+            Strategy::Auto => Strategy::MainDevice,
+            Strategy::Ddp if !all_cuda => {
+                return Err(TrainError::Other(
+                    "--strategy ddp needs cuda devices: burn 0.22.1 implements the gradient all-reduce (NCCL) only \
+                     on cuda; flex, ndarray and vulkan have no collective operations (use --strategy main-device)"
+                        .into(),
+                ));
+            }
+            Strategy::Ddp if !distinct => {
+                return Err(TrainError::Other(
+                    "--strategy ddp: each cuda device may be listed once (NCCL runs one rank per GPU)".into(),
+                ));
+            }
+            other => other,
+        };
+        Ok(Parallel { devices, strategy })
+    }
+
+    /// The plain (non-autodiff) burn devices at `precision`.
+    pub fn plain_devices(&self, precision: Precision) -> Result<Vec<Device>> {
+        self.devices.iter().map(|d| d.device(precision)).collect()
+    }
+}
+
 /// [`loop_common::train`](crate::loop_common::train) data-parallel over `devices` (autodiff devices; the
 /// first is the main device, where the model, the optimiser state and validation live; `setup.device` is
-/// ignored). Each step's `accumulation()` micro-batches go to the devices in rounds of `devices.len()`, each
-/// worker on its own thread. The objective's `rng` argument is a per-micro-batch generator seeded from the
-/// run's generator, so a run is reproducible and resumes exactly for a given device count; in-model device
-/// noise is reseeded per step on every device, but listing one device twice shares its generator between
-/// threads (ordering then varies).
+/// ignored) with `strategy` (resolved: [`Strategy::MainDevice`] or [`Strategy::Ddp`]). Each step's
+/// `accumulation()` micro-batches go to the devices in rounds of `devices.len()`, each worker on its own
+/// thread; under DDP every round must use every device, so the accumulation must be a multiple of the device
+/// count. The objective's `rng` argument is a per-micro-batch generator seeded from the run's generator, so a
+/// run is reproducible and resumes exactly for a given device count; in-model device noise is reseeded per step
+/// on every device, but listing one device twice shares its generator between threads (ordering then varies).
 pub fn train_data_parallel<O>(
     objective: &O,
     model: O::Model,
     setup: LoopSetup<'_>,
     devices: &[Device],
+    strategy: Strategy,
 ) -> Result<(O::Model, Outcome)>
 where
     O: Objective + Sync,
@@ -117,16 +187,42 @@ where
         ));
     };
     let model = model.fork(main);
-    run_steps(objective, model, setup, &DataParallel(devices))
+    match strategy {
+        Strategy::Ddp => {
+            let accumulation = setup.train.accumulation();
+            if !accumulation.is_multiple_of(devices.len()) {
+                return Err(TrainError::Other(format!(
+                    "--strategy ddp: batch_size / micro_batch = {accumulation} micro-batches per step is not a \
+                     multiple of the {} devices (every device takes part in every all-reduce)",
+                    devices.len()
+                )));
+            }
+            // Anchors burn's gradient-sync server for the whole run; dropping it tears the server down.
+            let _context = DistributedContext::init(
+                devices.to_vec(),
+                DistributedConfig {
+                    all_reduce_op: ReduceOperation::Sum,
+                },
+            );
+            run_steps(objective, model, setup, &DataParallel { devices, ddp: true })
+        }
+        Strategy::Auto | Strategy::MainDevice => {
+            run_steps(objective, model, setup, &DataParallel { devices, ddp: false })
+        }
+    }
 }
 
-/// The data-parallel step: burn-train's `OptimMainDevice` (fork → backward on each device → gradients to the
-/// main device → `GradientsAccumulator`).
-struct DataParallel<'a>(&'a [Device]);
+/// The data-parallel step. Main-device (`ddp` false): fork → backward on each device → gradients to the main
+/// device → `GradientsAccumulator`. DDP (`ddp` true): fork → shard → backward on each device, during which
+/// burn sums each gradient over the devices, so the main device's gradients already hold the round's total.
+struct DataParallel<'a> {
+    devices: &'a [Device],
+    ddp: bool,
+}
 
 impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
     fn devices(&self) -> &[Device] {
-        self.0
+        self.devices
     }
 
     fn gradients(
@@ -137,7 +233,7 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
         cfg: &TrainConfig,
         losses: &mut StepLosses<'_>,
     ) -> Result<GradientsParams> {
-        let devices = self.0;
+        let devices = self.devices;
         let Some(main) = devices.first() else {
             return Err(TrainError::Other(
                 "data-parallel training needs at least one device".into(),
@@ -158,15 +254,22 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
                 let handles: Vec<_> = jobs
                     .into_iter()
                     .zip(devices)
-                    .map(|((idx, mut rng), dev)| {
-                        let worker_model = model.clone().fork(dev);
+                    .enumerate()
+                    .map(|(worker, ((idx, mut rng), dev))| {
+                        let mut worker_model = model.clone().fork(dev);
+                        if self.ddp {
+                            worker_model = worker_model.map(&mut ModuleSharder);
+                        }
+                        let keep_grads = !self.ddp || worker == 0;
                         s.spawn(move || -> Result<MicroResult> {
                             let out = objective.loss(&worker_model, &idx, &mut rng, dev)?;
                             let weight = idx.len() as f64 / cfg.batch_size as f64;
                             let terms: Vec<f64> = out.terms.into_iter().map(scalar).collect();
                             let scaled = out.total.mul_scalar(weight);
                             let total = scalar(scaled.clone());
-                            let grads = GradientsParams::from_grads(scaled.backward(), &worker_model);
+                            // Under DDP the backward pass blocks until every device has reached it.
+                            let grads = scaled.backward();
+                            let grads = keep_grads.then(|| GradientsParams::from_grads(grads, &worker_model));
                             Ok(MicroResult {
                                 weight,
                                 terms,
@@ -191,8 +294,11 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
             for r in results {
                 let r = r?;
                 losses.record(r.weight, &r.terms, r.total)?;
-                // burn-train's OptimMainDevice: gradients to the main device, summed there.
-                accum.accumulate(model, r.grads.to_device(main, model));
+                if let Some(grads) = r.grads {
+                    // Main-device: burn-train's OptimMainDevice, gradients to the main device, summed there.
+                    // DDP: only the main device's (already all-reduced) gradients arrive here.
+                    accum.accumulate(model, grads.to_device(main, model));
+                }
             }
         }
         Ok(accum.grads())
@@ -203,7 +309,8 @@ struct MicroResult {
     weight: f64,
     terms: Vec<f64>,
     total: f64,
-    grads: GradientsParams,
+    /// `None` for the secondary DDP workers, whose gradients equal the main device's after the all-reduce.
+    grads: Option<GradientsParams>,
 }
 
 fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
@@ -216,37 +323,32 @@ fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
     }
 }
 
-/// Starts a new VAE run with `cfg`, data-parallel over `devices` (`--devices`); returns the run folder and
-/// the outcome. A finished run writes `latent_stats.json` (SPEC §3.4) as the single-device path does.
+/// Starts a new VAE run with `cfg`, data-parallel as `parallel` says (`--devices`, `--strategy`); returns the
+/// run folder and the outcome. A finished run writes `latent_stats.json` (SPEC §3.4) as the single-device path
+/// does.
 pub fn train_vae_data_parallel(
     cfg: &VaeRunConfig,
     opts: &VaeRunOptions,
-    devices: &[DeviceSpec],
+    parallel: &Parallel,
 ) -> Result<(RunFolder, Outcome)> {
-    let plain = devices
-        .iter()
-        .map(|d| d.device(cfg.device.precision))
-        .collect::<Result<Vec<_>>>()?;
+    let plain = parallel.plain_devices(cfg.device.precision)?;
     Store::open(&opts.data).map_err(|e| TrainError::Other(format!("{}: {e}", opts.data.display())))?;
     let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &["rec", "kl"])?;
-    let outcome = run_vae(cfg, &run, opts, plain, None)?;
+    let outcome = run_vae(cfg, &run, opts, plain, parallel.strategy, None)?;
     Ok((run, outcome))
 }
 
-/// Continues the VAE run in `run_dir` from its newest checkpoint, data-parallel over `devices` (config from
+/// Continues the VAE run in `run_dir` from its newest checkpoint, data-parallel as `parallel` says (config from
 /// the run folder; `[device] precision` applies to every device).
-pub fn resume_vae_data_parallel(run_dir: &Path, opts: &VaeRunOptions, devices: &[DeviceSpec]) -> Result<Outcome> {
+pub fn resume_vae_data_parallel(run_dir: &Path, opts: &VaeRunOptions, parallel: &Parallel) -> Result<Outcome> {
     let run = RunFolder::open(run_dir)?;
     let cfg = VaeRunConfig::parse(&run.config_text()?, &run.path(crate::run_folder::CONFIG_FILE))?;
-    let plain = devices
-        .iter()
-        .map(|d| d.device(cfg.device.precision))
-        .collect::<Result<Vec<_>>>()?;
+    let plain = parallel.plain_devices(cfg.device.precision)?;
     let ckpt = checkpoint::latest(&run.path(CHECKPOINTS_DIR))?.ok_or_else(|| TrainError::Checkpoint {
         path: run_dir.to_path_buf(),
         reason: "no complete checkpoint to resume".into(),
     })?;
-    run_vae(&cfg, &run, opts, plain, Some(ckpt))
+    run_vae(&cfg, &run, opts, plain, parallel.strategy, Some(ckpt))
 }
 
 fn run_vae(
@@ -254,6 +356,7 @@ fn run_vae(
     run: &RunFolder,
     opts: &VaeRunOptions,
     plain: Vec<Device>,
+    strategy: Strategy,
     resume: Option<PathBuf>,
 ) -> Result<Outcome> {
     let ad: Vec<Device> = plain.into_iter().map(|d| d.autodiff()).collect();
@@ -264,8 +367,8 @@ fn run_vae(
     };
     main.seed(cfg.train.seed);
     match &cfg.model {
-        VaeModelConfig::Framewise(m) => fit_vae(m.init(main), cfg, run, opts, &ad, resume),
-        VaeModelConfig::Sequencewise(m) => fit_vae(m.init(main), cfg, run, opts, &ad, resume),
+        VaeModelConfig::Framewise(m) => fit_vae(m.init(main), cfg, run, opts, &ad, strategy, resume),
+        VaeModelConfig::Sequencewise(m) => fit_vae(m.init(main), cfg, run, opts, &ad, strategy, resume),
     }
 }
 
@@ -275,6 +378,7 @@ fn fit_vae<V: MeshVae>(
     run: &RunFolder,
     opts: &VaeRunOptions,
     devices: &[Device],
+    strategy: Strategy,
     resume: Option<PathBuf>,
 ) -> Result<Outcome>
 where
@@ -282,7 +386,7 @@ where
 {
     let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch)?;
     run.log(&format!(
-        "VAE {:?} on {}, data-parallel over {} devices",
+        "VAE {:?} on {}, data-parallel over {} devices ({strategy:?})",
         cfg.vae.kind,
         opts.data.display(),
         devices.len()
@@ -296,7 +400,7 @@ where
         progress: opts.progress,
         resume,
     };
-    let (model, outcome) = train_data_parallel(&objective, model, setup, devices)?;
+    let (model, outcome) = train_data_parallel(&objective, model, setup, devices, strategy)?;
     if let Outcome::Finished { steps, .. } = &outcome {
         let inference = devices[0].clone().without_autodiff();
         inference.seed(cfg.train.seed);

@@ -148,6 +148,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         name: name.into(),
         progress: opts.progress,
         stop: opts.stop.clone(),
+        parallel: None,
     };
     stage("3/5 training the tiny keyframe-conditioned RF (ours)".into());
     let (rf_run, outcome) = train_rf(&rf_cfg, &rf_opts("rf"))?;

@@ -38,6 +38,7 @@ use crate::backend;
 use crate::config::{DeviceConfig, OptimConfig, TrainConfig, parse_strict, to_toml};
 use crate::error::{Result, TrainError, io_err};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, StopFlag};
+use crate::multi_device::{Parallel, train_data_parallel};
 use crate::progress::ProgressMode;
 use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder, SAMPLES_FILE};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
@@ -904,6 +905,20 @@ pub struct RfRunOptions {
     pub progress: ProgressMode,
     /// Ctrl-C flag.
     pub stop: StopFlag,
+    /// Data-parallel devices (`--devices`, `--strategy`); `None` trains on `[device] backend`.
+    pub parallel: Option<Parallel>,
+}
+
+/// The plain devices a run trains on: `opts.parallel`'s, or the one of `[device] backend`. Fails before a run
+/// folder is claimed when a backend is not in this binary.
+fn run_devices(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<Vec<Device>> {
+    match &opts.parallel {
+        Some(p) => p.plain_devices(cfg.device.precision),
+        None => {
+            backend::check(cfg.device.backend, cfg.device.precision)?;
+            Ok(vec![backend::device(cfg.device.backend, cfg.device.precision)?])
+        }
+    }
 }
 
 fn open_store(data: &Path) -> Result<Store> {
@@ -941,10 +956,9 @@ pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Ou
         .as_deref()
         .ok_or_else(|| TrainError::Other("a new RF run needs the VAE run folder (--vae RUN)".into()))?;
     // Fail before claiming a run folder when the backend, the store or the VAE run is unusable.
-    backend::check(cfg.device.backend, cfg.device.precision)?;
-    let device = backend::device(cfg.device.backend, cfg.device.precision)?;
+    let devices = run_devices(cfg, opts)?;
     let store = open_store(&opts.data)?;
-    let vae = runs::load_vae_run(vae_dir, &device)?;
+    let vae = runs::load_vae_run(vae_dir, &devices[0])?;
     check_compatible(cfg, &store, &vae)?;
     let captions = train_captions(&store)?;
     let tokenizer =
@@ -960,7 +974,7 @@ pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Ou
         captions.len(),
         tokenizer.vocab_size()
     ))?;
-    let outcome = run_rf(cfg, &run, opts, &vae, tokenizer, &device, None)?;
+    let outcome = run_rf(cfg, &run, opts, &vae, tokenizer, &devices, None)?;
     Ok((run, outcome))
 }
 
@@ -988,11 +1002,10 @@ pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRun
             )));
         }
     }
-    backend::check(cfg.device.backend, cfg.device.precision)?;
-    let device = backend::device(cfg.device.backend, cfg.device.precision)?;
-    let vae = record.load(&device)?;
+    let devices = run_devices(&cfg, opts)?;
+    let vae = record.load(&devices[0])?;
     let tokenizer = ScratchTokenizer::load(run_dir).map_err(|e| TrainError::Other(e.to_string()))?;
-    run_rf(&cfg, &run, opts, &vae, tokenizer, &device, Some(ckpt))
+    run_rf(&cfg, &run, opts, &vae, tokenizer, &devices, Some(ckpt))
 }
 
 fn train_captions(store: &Store) -> Result<Vec<String>> {
@@ -1014,11 +1027,11 @@ fn run_rf(
     opts: &RfRunOptions,
     vae: &LoadedVae,
     tokenizer: ScratchTokenizer,
-    device: &Device,
+    devices: &[Device],
     resume: Option<PathBuf>,
 ) -> Result<Outcome> {
     let vocab = tokenizer.vocab_size();
-    let mut objective = RfObjective::new(cfg, &opts.data, vae, tokenizer, device)?;
+    let mut objective = RfObjective::new(cfg, &opts.data, vae, tokenizer, &devices[0])?;
     objective.log_validation_samples(run)?;
     run.log(&format!(
         "RF {:?} on {} ({} train / {} val clips, latents {:?}: {:.1} MiB), VAE {} step {}, backend {}",
@@ -1032,18 +1045,24 @@ fn run_rf(
         vae.step,
         cfg.device.backend
     ))?;
-    let ad = device.clone().autodiff();
-    ad.seed(cfg.train.seed);
-    let model = cfg.model_config(vocab).init(&ad);
+    let ad: Vec<Device> = devices.iter().map(|d| d.clone().autodiff()).collect();
+    ad[0].seed(cfg.train.seed);
+    let model = cfg.model_config(vocab).init(&ad[0]);
     let setup = LoopSetup {
         run,
         train: &cfg.train,
         optim: &cfg.optim,
-        device: ad,
+        device: ad[0].clone(),
         stop: opts.stop.clone(),
         progress: opts.progress,
         resume,
     };
-    let (_, outcome) = loop_common::train(&objective, model, setup)?;
+    let (_, outcome) = match &opts.parallel {
+        Some(p) => {
+            run.log(&format!("data-parallel over {} devices ({:?})", ad.len(), p.strategy))?;
+            train_data_parallel(&objective, model, setup, &ad, p.strategy)?
+        }
+        None => loop_common::train(&objective, model, setup)?,
+    };
     Ok(outcome)
 }

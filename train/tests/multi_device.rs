@@ -12,7 +12,7 @@ use any4d_train::Result;
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::{Duration, OptimConfig, TrainConfig};
 use any4d_train::loop_common::{LoopSetup, Losses, Objective, Outcome, StopFlag, train};
-use any4d_train::multi_device::{DeviceSpec, train_data_parallel, train_vae_data_parallel};
+use any4d_train::multi_device::{DeviceSpec, Parallel, Strategy, train_data_parallel, train_vae_data_parallel};
 use any4d_train::progress::ProgressMode;
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, read_table};
 use any4d_train::vae_loop::{LATENT_STATS_FILE, VaeRunConfig, VaeRunOptions};
@@ -148,6 +148,7 @@ fn compare(workers: &[Device], steps: u64) -> (f32, Vec<f64>) {
         Mlp::new(&dev),
         setup(&run2, &train_cfg, &optim_cfg, &dev),
         workers,
+        Strategy::MainDevice,
     )
     .unwrap();
     assert!(
@@ -219,8 +220,9 @@ fn tiny_vae_trains_over_two_cpu_devices() {
         progress: ProgressMode::Quiet,
         stop: StopFlag::new(),
     };
-    let specs = DeviceSpec::parse_list("flex,flex").unwrap();
-    let (run, outcome) = train_vae_data_parallel(&cfg, &opts, &specs).expect("data-parallel VAE run");
+    let parallel = Parallel::parse("flex,flex", Strategy::Auto).unwrap();
+    assert_eq!(parallel.strategy, Strategy::MainDevice);
+    let (run, outcome) = train_vae_data_parallel(&cfg, &opts, &parallel).expect("data-parallel VAE run");
     assert!(matches!(outcome, Outcome::Finished { steps: 4, .. }), "{outcome:?}");
     for col in ["rec", "kl", "loss"] {
         let values = column(&run, col);
@@ -244,4 +246,51 @@ fn device_lists_parse_and_bad_entries_are_named() {
     let e = DeviceSpec::parse("cuda:x").unwrap_err().to_string();
     assert!(e.contains("`x`"), "{e}");
     assert!(DeviceSpec::parse_list(",").is_err());
+}
+
+#[test]
+fn strategies_resolve_and_ddp_is_refused_where_burn_has_no_all_reduce() {
+    let resolve = |d: &str, s: Strategy| Parallel::parse(d, s).map(|p| p.strategy);
+    assert_eq!(resolve("cuda:0,cuda:1", Strategy::Auto).unwrap(), Strategy::Ddp);
+    assert_eq!(
+        resolve("cuda:0,cuda:1", Strategy::MainDevice).unwrap(),
+        Strategy::MainDevice
+    );
+    assert_eq!(resolve("cuda:0", Strategy::Auto).unwrap(), Strategy::MainDevice);
+    assert_eq!(resolve("cuda:0,cuda:0", Strategy::Auto).unwrap(), Strategy::MainDevice);
+    assert_eq!(resolve("flex,flex", Strategy::Auto).unwrap(), Strategy::MainDevice);
+    for devices in ["flex,flex", "vulkan:0,vulkan:1", "cuda:0,flex"] {
+        let e = resolve(devices, Strategy::Ddp).unwrap_err().to_string();
+        assert!(
+            e.contains("needs cuda devices") && e.contains("main-device"),
+            "{devices}: {e}"
+        );
+    }
+    let e = resolve("cuda:1,cuda:1", Strategy::Ddp).unwrap_err().to_string();
+    assert!(e.contains("listed once"), "{e}");
+}
+
+#[test]
+fn cli_refuses_ddp_on_cpu_devices_before_creating_a_run_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let runs = dir.path().join("runs");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_any4d"))
+        .args(["train", "vae", "--config"])
+        .arg(root().join("configs/vae/tiny.toml"))
+        .args([
+            "--data",
+            "no-store-needed",
+            "--devices",
+            "flex,flex",
+            "--strategy",
+            "ddp",
+            "--runs-dir",
+        ])
+        .arg(&runs)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "ddp on flex succeeded: {stderr}");
+    assert!(stderr.contains("--strategy ddp needs cuda devices"), "{stderr}");
+    assert!(!runs.exists(), "a run folder was created for a run that cannot start");
 }

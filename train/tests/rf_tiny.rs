@@ -16,10 +16,11 @@ use any4d_model::text::scratch::ScratchTokenizer;
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::Duration;
 use any4d_train::loop_common::{LoopSetup, Objective, Outcome, StopFlag, train};
+use any4d_train::multi_device::{Parallel, Strategy};
 use any4d_train::progress::ProgressMode;
 use any4d_train::rf_loop::{
     KfSampler, LatentCache, LatentDraw, RF_TERMS, RfModel, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS,
-    Subset, TextDropout, draw_keyframe_mask, train_rf,
+    Subset, TextDropout, draw_keyframe_mask, resume_rf, train_rf,
 };
 use any4d_train::run_folder::{LOG_FILE, METRICS_FILE, RunFolder, SAMPLES_FILE, VALID_FILE, read_table};
 use any4d_train::runs::{LoadedVae, VAE_RUN_FILE, load_rf_run, load_vae_run};
@@ -118,6 +119,7 @@ fn rf_opts(name: &str) -> RfRunOptions {
         name: name.into(),
         progress: ProgressMode::Quiet,
         stop: StopFlag::new(),
+        parallel: None,
     }
 }
 
@@ -627,4 +629,24 @@ fn validation_sampling_keys_are_checked() {
     assert!(err.contains("rf.valid_sample_clips"), "{err}");
     let err = parse(&text.replacen("valid_sample_clips = 2\n", "", 1)).unwrap_err();
     assert!(err.contains("valid_sample_clips"), "missing key accepted: {err}");
+}
+
+#[test]
+fn tiny_rf_trains_and_resumes_over_two_cpu_devices() {
+    let _g = serial();
+    let mut cfg = tiny_rf(3);
+    cfg.train.micro_batch = 2;
+    cfg.train.checkpoint_every = 1;
+    let mut opts = rf_opts("parallel");
+    opts.parallel = Some(Parallel::parse("flex,flex", Strategy::Auto).unwrap());
+    let (run, outcome) = train_rf(&cfg, &opts).expect("data-parallel RF run");
+    assert!(matches!(outcome, Outcome::Finished { steps: 3, .. }), "{outcome:?}");
+    let log = std::fs::read_to_string(run.path(LOG_FILE)).unwrap();
+    assert!(log.contains("data-parallel over 2 devices (MainDevice)"), "{log}");
+    let t = read_table(&run.path(METRICS_FILE)).unwrap();
+    assert_eq!(t.rows.len(), 3);
+    assert!(t.rows.iter().all(|r| r.1.iter().all(|v| v.is_finite())), "{t:?}");
+    // Resuming a finished run over the devices is a no-op that still loads the checkpoint and the VAE.
+    let again = resume_rf(run.root(), None, &opts).expect("resume over two devices");
+    assert!(matches!(again, Outcome::Finished { steps: 3, .. }), "{again:?}");
 }

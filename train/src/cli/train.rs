@@ -10,7 +10,7 @@ use clap::{Args, Subcommand};
 use crate::backend::Backend;
 use crate::config::Duration;
 use crate::loop_common::{Outcome, StopFlag};
-use crate::multi_device::{DeviceSpec, resume_vae_data_parallel, train_vae_data_parallel};
+use crate::multi_device::{Parallel, Strategy, resume_vae_data_parallel, train_vae_data_parallel};
 use crate::progress::ProgressMode;
 use crate::rf_loop::{RfRunConfig, RfRunOptions, resume_rf, train_rf};
 use crate::run_folder::{METRICS_FILE, read_table};
@@ -41,13 +41,34 @@ pub struct VaeArgs {
     /// Override `[device] backend`.
     #[arg(long, value_enum)]
     backend: Option<Backend>,
+    #[command(flatten)]
+    parallel: ParallelArgs,
+    /// Folder of run folders.
+    #[arg(long, default_value = "runs")]
+    runs_dir: PathBuf,
+}
+
+/// `--devices` and `--strategy`, shared by `train vae` and `train rf`.
+#[derive(Args, Debug)]
+pub struct ParallelArgs {
     /// Train data-parallel over these devices, comma-separated `BACKEND[:INDEX]` (`cuda:0,cuda:1`,
     /// `flex,flex`); the first holds the model and the optimiser. Replaces `[device] backend`.
     #[arg(long, conflicts_with = "backend")]
     devices: Option<String>,
-    /// Folder of run folders.
-    #[arg(long, default_value = "runs")]
-    runs_dir: PathBuf,
+    /// How the devices combine gradients: `ddp` (burn's all-reduce, NCCL; cuda only), `main-device` (gradients
+    /// copied to the first device), `auto` (ddp on distinct cuda devices, main-device otherwise).
+    #[arg(long, value_enum, default_value = "auto", requires = "devices")]
+    strategy: Strategy,
+}
+
+impl ParallelArgs {
+    fn parse(&self) -> anyhow::Result<Option<Parallel>> {
+        Ok(self
+            .devices
+            .as_deref()
+            .map(|d| Parallel::parse(d, self.strategy))
+            .transpose()?)
+    }
 }
 
 #[derive(Args, Debug)]
@@ -71,6 +92,8 @@ pub struct RfArgs {
     /// Override `[device] backend`.
     #[arg(long, value_enum)]
     backend: Option<Backend>,
+    #[command(flatten)]
+    parallel: ParallelArgs,
     /// Folder of run folders.
     #[arg(long, default_value = "runs")]
     runs_dir: PathBuf,
@@ -109,6 +132,7 @@ fn rf(args: RfArgs) -> anyhow::Result<ExitCode> {
         name: args.run,
         progress: ProgressMode::Auto,
         stop,
+        parallel: args.parallel.parse()?,
     };
     let outcome = match (args.resume, args.config) {
         (Some(run_dir), _) => resume_rf(&run_dir, args.backend, &opts)?,
@@ -136,7 +160,7 @@ fn vae(args: VaeArgs) -> anyhow::Result<ExitCode> {
         progress: ProgressMode::Auto,
         stop,
     };
-    let devices = args.devices.as_deref().map(DeviceSpec::parse_list).transpose()?;
+    let devices = args.parallel.parse()?;
     let outcome = match (args.resume, args.config) {
         (Some(run_dir), _) => match &devices {
             Some(d) => resume_vae_data_parallel(&run_dir, &opts, d)?,
