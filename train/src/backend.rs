@@ -74,8 +74,7 @@ impl fmt::Display for Backend {
 ///
 /// Precision must be configured before the first tensor exists on the device, so call this once, at start-up.
 pub fn device(backend: Backend, precision: Precision) -> Result<Device, BackendError> {
-    #[allow(unused_mut)] // mutated only by the cuda branch
-    let mut device = base_device(backend)?;
+    let device = base_device(backend)?;
     match precision {
         Precision::F32 => Ok(device),
         Precision::Bf16 => bf16_device(backend, device),
@@ -118,7 +117,9 @@ fn base_device(backend: Backend) -> Result<Device, BackendError> {
     }
 }
 
-fn bf16_device(backend: Backend, #[allow(unused_mut)] mut device: Device) -> Result<Device, BackendError> {
+/// bf16 parameters and activations on cuda (`Device::configure`, before any tensor exists on the device). The
+/// call is backend-generic, so this compiles (and is type-checked) in every build; only cuda is offered.
+fn bf16_device(backend: Backend, mut device: Device) -> Result<Device, BackendError> {
     if backend != Backend::Cuda {
         return Err(BackendError::Precision {
             backend,
@@ -126,26 +127,14 @@ fn bf16_device(backend: Backend, #[allow(unused_mut)] mut device: Device) -> Res
             reason: "bf16 training is offered on cuda only".into(),
         });
     }
-    #[cfg(feature = "cuda")]
-    {
-        use burn::tensor::FloatDType;
-        device
-            .configure(FloatDType::BF16)
-            .map_err(|err| BackendError::Precision {
-                backend,
-                precision: Precision::Bf16,
-                reason: format!("{err:?}"),
-            })?;
-        Ok(device)
-    }
-    #[cfg(not(feature = "cuda"))]
-    {
-        let _ = device;
-        Err(BackendError::NotCompiled {
+    device
+        .configure(burn::tensor::FloatDType::BF16)
+        .map_err(|err| BackendError::Precision {
             backend,
-            feature: "cuda",
-        })
-    }
+            precision: Precision::Bf16,
+            reason: format!("{err:?}"),
+        })?;
+    Ok(device)
 }
 
 #[cfg(test)]

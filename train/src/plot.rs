@@ -1,5 +1,6 @@
-//! Loss-curve PNG of a run (issue 5 item 3): every `metrics.csv` loss column and the validation loss against the
-//! step, on a log₁₀ y axis, drawn with the evaluation crate's plotter (`any4d_eval::plot`, no system fonts).
+//! Loss-curve PNG of a run (issue 5 item 3): every `metrics.csv` loss column (diagnostics such as the RF's
+//! keyframe fraction left out) and the validation loss against the step, on a log₁₀ y axis, drawn with the
+//! evaluation crate's plotter (`any4d_eval::plot`, no system fonts).
 
 use std::path::Path;
 
@@ -7,6 +8,9 @@ use any4d_eval::plot::{Series, line_plot};
 
 use crate::error::{Result, TrainError};
 use crate::run_folder::{METRIC_TAIL, read_table};
+
+/// `metrics.csv` term columns that are diagnostics, not losses: not drawn.
+const NOT_LOSSES: [&str; 1] = [crate::rf_loop::KF_FRAC_TERM];
 
 /// Points (step, log₁₀ value); non-positive and non-finite values cannot sit on a log axis and are skipped.
 fn log_points(points: impl Iterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
@@ -18,10 +22,22 @@ fn log_points(points: impl Iterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
 
 /// Reads `metrics.csv` (and `valid.csv` when it has rows) and writes the plot to `out` (atomically).
 pub fn plot_run(metrics: &Path, valid: &Path, out: &Path) -> Result<()> {
+    let series = loss_series(metrics, valid)?;
+    if series.is_empty() {
+        return Ok(());
+    }
+    line_plot("LOSS CURVES", "STEP", "LOG10 LOSS", &series, out).map_err(|e| TrainError::Other(e.to_string()))
+}
+
+/// The curves of [`plot_run`]: each loss column, then `valid`; empty curves dropped.
+fn loss_series(metrics: &Path, valid: &Path) -> Result<Vec<Series>> {
     let table = read_table(metrics)?;
     let n_loss_cols = table.header.len().saturating_sub(1 + METRIC_TAIL.len() - 1);
     let mut series = Vec::new();
     for col in 0..n_loss_cols {
+        if NOT_LOSSES.contains(&table.header[col + 1].as_str()) {
+            continue;
+        }
         series.push(Series {
             label: table.header[col + 1].clone(),
             points: log_points(table.rows.iter().map(|(s, v)| (*s as f64, v[col]))),
@@ -41,8 +57,28 @@ pub fn plot_run(metrics: &Path, valid: &Path, out: &Path) -> Result<()> {
         });
     }
     series.retain(|s| !s.points.is_empty());
-    if series.is_empty() {
-        return Ok(());
+    Ok(series)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::run_folder::{METRICS_FILE, RunFolder, VALID_FILE};
+
+    #[test]
+    fn rf_curves_leave_the_keyframe_fraction_out() {
+        let dir = tempfile::tempdir().unwrap();
+        let run = RunFolder::create(dir.path(), "rf", "", &crate::rf_loop::RF_TERMS).unwrap();
+        for step in 1..=3 {
+            // rf, kf_frac, loss, then lr, grad-norm, steps/s, samples/s.
+            run.append_metrics(step, &[0.5, 0.25, 0.5, 1e-4, 1.0, 2.0, 8.0])
+                .unwrap();
+        }
+        let labels: Vec<String> = loss_series(&run.path(METRICS_FILE), &run.path(VALID_FILE))
+            .unwrap()
+            .into_iter()
+            .map(|s| s.label)
+            .collect();
+        assert_eq!(labels, ["rf", "loss"]);
     }
-    line_plot("LOSS CURVES", "STEP", "LOG10 LOSS", &series, out).map_err(|e| TrainError::Other(e.to_string()))
 }

@@ -45,7 +45,10 @@ use crate::runs::{self, LoadedVae, VaeRunRecord};
 use crate::vae_loop::{MeshVae, load_clips, vae_batch};
 
 /// Names of the loss terms in `metrics.csv` / `valid.csv`: (R5) and the fraction of keyframe slots (m = 1).
-pub const RF_TERMS: [&str; 2] = ["rf", "kf_frac"];
+pub const RF_TERMS: [&str; 2] = ["rf", KF_FRAC_TERM];
+
+/// The RF's diagnostic `metrics.csv` column: the fraction of latent frames that are keyframes (not a loss).
+pub const KF_FRAC_TERM: &str = "kf_frac";
 
 /// Columns of `samples.csv` after `step`: (E1) RMSE, (E2) Chamfer, (E3) centroid DTW of SPEC §6, means over the
 /// sampled VAL clips.
