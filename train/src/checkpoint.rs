@@ -1,7 +1,8 @@
 //! Checkpoints (STYLE.md §9, issue 5 item 2): `checkpoints/step_N/{model.bpk, optim.bpk, state.json}` with the
 //! model, the optimiser state, the step, the host RNG and the data-order position. A checkpoint is written into
 //! `checkpoints/.tmp_step_N/` and renamed into place, so a killed run leaves only complete checkpoints. Old
-//! checkpoints are pruned to the last few plus the best validation.
+//! checkpoints are pruned to the last few plus the best validation: renamed to `.del_step_N/` first, then
+//! deleted, so a run killed while deleting never leaves a `step_N/` that lacks its model.
 
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -147,14 +148,64 @@ pub fn load<M: Module>(ckpt: &Path, model: M, optim: ModuleOptimizer) -> Result<
     Ok((model, optim, state))
 }
 
-/// Deletes checkpoints under `dir` except the newest `keep_last` and the one at `best_step`.
+/// Deletes checkpoints under `dir` except the newest `keep_last` and the one at `best_step`, and what a run
+/// killed during an earlier prune left behind (`.del_step_N/`).
 pub fn prune(dir: &Path, keep_last: usize, best_step: Option<u64>) -> Result<()> {
     let all = list(dir)?;
     let cut = all.len().saturating_sub(keep_last);
     for (step, path) in &all[..cut] {
         if Some(*step) != best_step {
-            fs::remove_dir_all(path).map_err(io_err("prune old checkpoint", path))?;
+            let doomed = dir.join(format!("{DELETING_PREFIX}{}", step_dir_name(*step)));
+            // Atomic: from here on the checkpoint is no longer listed, however far the deletion gets.
+            fs::rename(path, &doomed).map_err(io_err("prune old checkpoint", path))?;
+        }
+    }
+    for entry in fs::read_dir(dir).map_err(io_err("list", dir))? {
+        let path = entry.map_err(io_err("list", dir))?.path();
+        let ours = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.starts_with(DELETING_PREFIX));
+        if ours {
+            fs::remove_dir_all(&path).map_err(io_err("delete pruned checkpoint", &path))?;
         }
     }
     Ok(())
+}
+
+/// Name prefix of a checkpoint folder being deleted by [`prune`].
+const DELETING_PREFIX: &str = ".del_";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prune_keeps_last_and_best_and_clears_a_killed_prune() {
+        let dir = tempfile::tempdir().unwrap();
+        for step in 1..=4u64 {
+            let d = dir.path().join(step_dir_name(step));
+            fs::create_dir_all(&d).unwrap();
+            fs::write(d.join(MODEL_FILE), b"m").unwrap();
+            fs::write(d.join(STATE_FILE), b"{}").unwrap();
+        }
+        // What a run killed in the middle of deleting step 0 leaves: renamed, half deleted.
+        let killed = dir.path().join(".del_step_0");
+        fs::create_dir_all(&killed).unwrap();
+        fs::write(killed.join(STATE_FILE), b"{}").unwrap();
+        assert_eq!(
+            list(dir.path()).unwrap().len(),
+            4,
+            "a folder being deleted is not a checkpoint"
+        );
+        prune(dir.path(), 2, Some(1)).unwrap();
+        let steps: Vec<u64> = list(dir.path()).unwrap().into_iter().map(|(s, _)| s).collect();
+        assert_eq!(steps, [1, 3, 4]);
+        let mut left: Vec<String> = fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["step_1", "step_3", "step_4"]);
+    }
 }
