@@ -11,6 +11,7 @@ use std::time::Instant;
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{GradientsAccumulator, GradientsParams, ModuleOptimizer};
 use burn::prelude::{Device, Tensor};
+use burn::tensor::Gradients;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -148,16 +149,47 @@ impl<O: Objective> StepGradients<O> for OneDevice {
         let mut accum = GradientsAccumulator::<O::Model>::new();
         for _ in 0..cfg.accumulation() {
             let idx = state.order.take(cfg.micro_batch);
-            let out = objective.loss(model, &idx, &mut state.rng, &self.0)?;
-            losses.check_count(out.terms.len())?;
-            let weight = idx.len() as f64 / cfg.batch_size as f64;
-            let terms: Vec<f64> = out.terms.into_iter().map(scalar).collect();
-            let scaled = out.total.mul_scalar(weight);
-            losses.record(weight, &terms, scalar(scaled.clone()))?;
-            accum.accumulate(model, GradientsParams::from_grads(scaled.backward(), model));
+            let micro = micro_batch(objective, model, &idx, &mut state.rng, &self.0, cfg)?;
+            losses.record(micro.weight, &micro.terms, micro.total)?;
+            accum.accumulate(model, GradientsParams::from_grads(micro.grads, model));
         }
         Ok(accum.grads())
     }
+}
+
+/// What one micro-batch contributes to a step.
+pub(crate) struct MicroBatch {
+    /// Its share of the global batch (micro-batch size / batch size).
+    pub weight: f64,
+    /// The unweighted loss terms.
+    pub terms: Vec<f64>,
+    /// The weighted total (`weight · total`), the value that was differentiated.
+    pub total: f64,
+    /// Gradients of the weighted total.
+    pub grads: Gradients,
+}
+
+/// Loss and backward pass of the training examples `idx` on `device` (the one place where a micro-batch's loss is
+/// weighted by its share of the global batch).
+pub(crate) fn micro_batch<O: Objective>(
+    objective: &O,
+    model: &O::Model,
+    idx: &[usize],
+    rng: &mut ChaCha8Rng,
+    device: &Device,
+    cfg: &TrainConfig,
+) -> Result<MicroBatch> {
+    let out = objective.loss(model, idx, rng, device)?;
+    let weight = idx.len() as f64 / cfg.batch_size as f64;
+    let terms: Vec<f64> = out.terms.into_iter().map(scalar).collect();
+    let scaled = out.total.mul_scalar(weight);
+    let total = scalar(scaled.clone());
+    Ok(MicroBatch {
+        weight,
+        terms,
+        total,
+        grads: scaled.backward(),
+    })
 }
 
 /// The losses of one step's micro-batches: batch-weighted sums, each value checked by the NaN/Inf guard.

@@ -26,7 +26,7 @@ use crate::backend::{self, Backend, Precision};
 use crate::checkpoint::{self, TrainState};
 use crate::config::TrainConfig;
 use crate::error::{Result, TrainError};
-use crate::loop_common::{LoopSetup, Objective, Outcome, StepGradients, StepLosses, run_steps, scalar};
+use crate::loop_common::{LoopSetup, Objective, Outcome, StepGradients, StepLosses, micro_batch, run_steps};
 use crate::run_folder::{CHECKPOINTS_DIR, RunFolder, write_atomic};
 use crate::vae_loop::{
     LATENT_STATS_FILE, MeshVae, StoredLatentStats, VaeModelConfig, VaeObjective, VaeRunConfig, VaeRunOptions,
@@ -171,6 +171,8 @@ impl Parallel {
 /// count. The objective's `rng` argument is a per-micro-batch generator seeded from the run's generator, so a
 /// run is reproducible and resumes exactly for a given device count; in-model device noise is reseeded per step
 /// on every device, but listing one device twice shares its generator between threads (ordering then varies).
+/// Under DDP a worker that fails before its backward pass leaves the others waiting in burn's all-reduce, which
+/// has no timeout in 0.22.1: such a run must be killed and resumed from its last checkpoint.
 pub fn train_data_parallel<O>(
     objective: &O,
     model: O::Model,
@@ -250,7 +252,7 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
                     (idx, ChaCha8Rng::seed_from_u64(state.rng.next_u64()))
                 })
                 .collect();
-            let results: Vec<Result<MicroResult>> = std::thread::scope(|s| {
+            let results: Vec<Result<WorkerResult>> = std::thread::scope(|s| {
                 let handles: Vec<_> = jobs
                     .into_iter()
                     .zip(devices)
@@ -261,21 +263,11 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
                             worker_model = worker_model.map(&mut ModuleSharder);
                         }
                         let keep_grads = !self.ddp || worker == 0;
-                        s.spawn(move || -> Result<MicroResult> {
-                            let out = objective.loss(&worker_model, &idx, &mut rng, dev)?;
-                            let weight = idx.len() as f64 / cfg.batch_size as f64;
-                            let terms: Vec<f64> = out.terms.into_iter().map(scalar).collect();
-                            let scaled = out.total.mul_scalar(weight);
-                            let total = scalar(scaled.clone());
-                            // Under DDP the backward pass blocks until every device has reached it.
-                            let grads = scaled.backward();
-                            let grads = keep_grads.then(|| GradientsParams::from_grads(grads, &worker_model));
-                            Ok(MicroResult {
-                                weight,
-                                terms,
-                                total,
-                                grads,
-                            })
+                        s.spawn(move || -> Result<WorkerResult> {
+                            // Under DDP the backward pass inside blocks until every device has reached it.
+                            let m = micro_batch(objective, &worker_model, &idx, &mut rng, dev, cfg)?;
+                            let grads = keep_grads.then(|| GradientsParams::from_grads(m.grads, &worker_model));
+                            Ok((m.weight, m.terms, m.total, grads))
                         })
                     })
                     .collect();
@@ -292,9 +284,9 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
                     .collect()
             });
             for r in results {
-                let r = r?;
-                losses.record(r.weight, &r.terms, r.total)?;
-                if let Some(grads) = r.grads {
+                let (weight, terms, total, grads) = r?;
+                losses.record(weight, &terms, total)?;
+                if let Some(grads) = grads {
                     // Main-device: burn-train's OptimMainDevice, gradients to the main device, summed there.
                     // DDP: only the main device's (already all-reduced) gradients arrive here.
                     accum.accumulate(model, grads.to_device(main, model));
@@ -305,13 +297,9 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
     }
 }
 
-struct MicroResult {
-    weight: f64,
-    terms: Vec<f64>,
-    total: f64,
-    /// `None` for the secondary DDP workers, whose gradients equal the main device's after the all-reduce.
-    grads: Option<GradientsParams>,
-}
+/// A worker's micro-batch: weight, terms and weighted total (see [`micro_batch`]) and its gradients as
+/// parameters; `None` for the secondary DDP workers, whose gradients equal the main device's after the all-reduce.
+type WorkerResult = (f64, Vec<f64>, f64, Option<GradientsParams>);
 
 fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
     if let Some(s) = p.downcast_ref::<&str>() {
