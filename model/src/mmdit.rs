@@ -166,6 +166,75 @@ impl MmditConfig {
     }
 }
 
+/// Analytic model FLOPs of one pass of a network for one sample (multiply and add count as two), split into
+/// matrix products with weights and attention. See [`MmditConfig::forward_flops`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FlopCount {
+    /// Σ 2·in·out over every Linear application (once per token it acts on, or once per sample).
+    pub linear: u64,
+    /// Σ 2·2·L_q·L_k·W over the attention layers (QKᵀ and the weighted sum of V, all heads).
+    pub attention: u64,
+}
+
+impl FlopCount {
+    /// FLOPs of the forward pass.
+    pub fn forward(self) -> u64 {
+        self.linear + self.attention
+    }
+
+    /// FLOPs of a training step (forward + backward): 3 × forward, the backward pass computing gradients with
+    /// respect to both the activations and the weights of every product.
+    pub fn training_step(self) -> u64 {
+        3 * self.forward()
+    }
+}
+
+impl std::ops::Add for FlopCount {
+    type Output = FlopCount;
+
+    fn add(self, other: FlopCount) -> FlopCount {
+        FlopCount {
+            linear: self.linear + other.linear,
+            attention: self.attention + other.attention,
+        }
+    }
+}
+
+impl MmditConfig {
+    /// Model FLOPs of one forward pass of [`Mmdit::forward`] for one sample with P = `tokens` motion tokens and
+    /// L = `text_len` text tokens, joint sequence S = P + L, width W, B blocks:
+    ///
+    /// ```text
+    /// linear    = 2·[ P·in_channels·W + L·text_dim·W + P·W·out_channels      input, text, output projections
+    ///               + 2·TIME_FREQS·4W + 4W·W                               timestep MLP (once per sample)
+    ///               + B·( 2·W·6W                                           adaLN of both streams (per sample)
+    ///                   + S·(3W² + W² + 4W² + 4W²) ) ]                     qkv, proj, fc1, fc2 on all S tokens
+    /// attention = B · 2·2·S²·W                                             QKᵀ and softmax·V, all heads
+    /// ```
+    ///
+    /// Biases, LayerNorms, activations, the softmax, adaLN modulation and residuals are not counted (each is
+    /// O(S·W) against O(S·W²)). A training step is [`FlopCount::training_step`] = 3 × forward. The text encoder
+    /// that feeds `text` is not included.
+    pub fn forward_flops(&self, tokens: usize, text_len: usize) -> FlopCount {
+        let [p, l, s, w] = [tokens, text_len, tokens + text_len, self.width].map(|x| x as u64);
+        let [blocks, d_in, d_out, d_txt, freqs] = [
+            self.blocks,
+            self.in_channels(),
+            self.out_channels(),
+            self.text_dim,
+            TIME_FREQS,
+        ]
+        .map(|x| x as u64);
+        let projections = p * d_in * w + l * d_txt * w + p * w * d_out;
+        let time = 2 * freqs * 4 * w + 4 * w * w;
+        let per_block = 2 * w * 6 * w + s * (3 * w * w + w * w + 4 * w * w + 4 * w * w);
+        FlopCount {
+            linear: 2 * (projections + time + blocks * per_block),
+            attention: blocks * 2 * 2 * s * s * w,
+        }
+    }
+}
+
 /// Initialisation of one Linear layer (AAM code, SPEC §4.3).
 #[derive(Clone, Copy)]
 enum LinearInit {
@@ -496,5 +565,80 @@ impl Mmdit {
     /// Input channels this network was built for.
     pub fn in_channels(&self) -> usize {
         self.in_channels
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use burn::module::{ModuleVisitor, Param};
+
+    use super::*;
+
+    /// 2 × Σ (weight-matrix size × the number of times the layer is applied per sample), read from the module's
+    /// own 2-D parameters: motion-only layers act on P tokens, the text projection on L, the shared block
+    /// layers on S = P + L, the timestep MLP and adaLN once per sample. An unknown 2-D parameter fails the test,
+    /// so a Linear added to the network without updating [`MmditConfig::forward_flops`] is caught.
+    struct LinearFlops {
+        path: Vec<String>,
+        tokens: u64,
+        text_len: u64,
+        flops: u64,
+    }
+
+    impl ModuleVisitor for LinearFlops {
+        fn enter_module(&mut self, name: &str, _container_type: &str) {
+            self.path.push(name.to_string());
+        }
+
+        fn exit_module(&mut self, _name: &str, _container_type: &str) {
+            self.path.pop();
+        }
+
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            if D != 2 {
+                return;
+            }
+            let layer = self.path.iter().rev().nth(1).map_or("", String::as_str);
+            let applications = match (self.path[0].as_str(), layer) {
+                ("input_proj" | "output_proj", _) => self.tokens,
+                ("text_proj", _) => self.text_len,
+                ("time", _) | ("blocks", "ada_motion" | "ada_text") => 1,
+                ("blocks", "qkv" | "proj" | "fc1" | "fc2") => self.tokens + self.text_len,
+                _ => panic!("2-D parameter {} has no FLOP rule", self.path.join(".")),
+            };
+            self.flops += 2 * param.lazy_shape().num_elements() as u64 * applications;
+        }
+    }
+
+    #[test]
+    fn linear_flops_match_the_weights_of_the_initialised_module() {
+        let device = Device::flex();
+        let mut other = MmditConfig::tiny();
+        (other.kf_mode, other.text_dim, other.blocks, other.width) = (KfMode::None, 12, 3, 24);
+        for (cfg, tokens, text_len) in [(MmditConfig::tiny(), 7, 3), (other, 5, 11)] {
+            let mut visitor = LinearFlops {
+                path: Vec::new(),
+                tokens,
+                text_len,
+                flops: 0,
+            };
+            cfg.init(&device).visit(&mut visitor);
+            let counted = cfg.forward_flops(tokens as usize, text_len as usize);
+            assert_eq!(counted.linear, visitor.flops, "{cfg:?}");
+        }
+    }
+
+    #[test]
+    fn attention_flops_are_quadratic_in_the_joint_sequence_and_training_is_three_passes() {
+        // Tiny: W 32, 2 blocks, S = 5 + 3 = 8: 2 blocks × (QKᵀ: 2·8·8·32 + softmax·V: 2·8·8·32) = 16384, whatever
+        // the head count.
+        let cfg = MmditConfig::tiny();
+        let flops = cfg.forward_flops(5, 3);
+        assert_eq!(flops.attention, 16_384);
+        let mut more_heads = cfg.clone();
+        more_heads.heads = 8;
+        assert_eq!(more_heads.forward_flops(5, 3), flops);
+        assert_eq!(cfg.forward_flops(13, 3).attention, 16_384 * 4);
+        assert_eq!(flops.training_step(), 3 * (flops.linear + flops.attention));
     }
 }

@@ -11,8 +11,8 @@ pub enum BenchCmd {
     Data(super::data::BenchArgs),
     /// VAE encode+decode and RF forward+backward time per clip.
     Model(super::model::BenchArgs),
-    /// Training steps/s for the presets.
-    Train(super::train::BenchArgs),
+    /// Training steps/s for a preset: RF presets on random latents with model FLOP/s, VAE presets on a store.
+    Train(super::bench_train::BenchArgs),
     /// Metric throughput against the numpy/scipy reference.
     Metrics(super::eval::BenchArgs),
 }
@@ -21,7 +21,7 @@ pub fn run(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
     match cmd {
         BenchCmd::Data(args) => super::data::bench(args),
         BenchCmd::Model(args) => super::model::bench(args),
-        BenchCmd::Train(args) => super::train::bench(args),
+        BenchCmd::Train(args) => super::bench_train::bench(args),
         BenchCmd::Metrics(args) => super::eval::bench(args),
     }
 }

@@ -1,19 +1,16 @@
-//! `any4d train vae|rf` and `any4d bench train`: parse arguments, load the TOML, call the library
+//! `any4d train vae|rf`: parse arguments, load the TOML, call the library
 //! (`vae_loop`, `rf_loop`). Ctrl-C saves a checkpoint and exits.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Instant;
 
 use clap::{Args, Subcommand};
 
 use crate::backend::Backend;
-use crate::config::Duration;
 use crate::loop_common::{Outcome, StopFlag};
 use crate::multi_device::{Parallel, Strategy, resume_vae_data_parallel, train_vae_data_parallel};
 use crate::progress::ProgressMode;
 use crate::rf_loop::{RfRunConfig, RfRunOptions, resume_rf, train_rf};
-use crate::run_folder::{METRICS_FILE, read_table};
 use crate::vae_loop::{VaeRunConfig, VaeRunOptions, resume_vae, train_vae};
 
 #[derive(Subcommand, Debug)]
@@ -99,22 +96,6 @@ pub struct RfArgs {
     runs_dir: PathBuf,
 }
 
-#[derive(Args, Debug)]
-pub struct BenchArgs {
-    /// VAE run config to time (e.g. `configs/vae/tiny.toml`).
-    #[arg(long, default_value = "configs/vae/tiny.toml")]
-    config: PathBuf,
-    /// Dataset store folder.
-    #[arg(long)]
-    data: PathBuf,
-    /// Optimiser steps per backend.
-    #[arg(long, default_value_t = 10)]
-    steps: u64,
-    /// Backends to compare.
-    #[arg(long, value_enum, num_args = 1.., default_values = ["flex", "ndarray"])]
-    backends: Vec<Backend>,
-}
-
 pub fn run(cmd: TrainCmd) -> anyhow::Result<ExitCode> {
     match cmd {
         TrainCmd::Vae(args) => vae(args),
@@ -197,59 +178,4 @@ fn report(outcome: &Outcome) -> ExitCode {
             ExitCode::from(130)
         }
     }
-}
-
-/// `any4d bench train`: the same VAE preset for `--steps` steps on each backend; prints steps/s (median over
-/// the steps after the first, which includes start-up).
-pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
-    let base = VaeRunConfig::load(&args.config)?;
-    let runs = tempfile_dir()?;
-    println!(
-        "backend  steps  median steps/s  median samples/s  wall s   ({})",
-        args.config.display()
-    );
-    for backend in &args.backends {
-        let mut cfg = base.clone();
-        cfg.device.backend = *backend;
-        cfg.train.duration = Duration::Steps(args.steps);
-        cfg.train.checkpoint_every = args.steps;
-        cfg.train.valid_every = args.steps;
-        let opts = VaeRunOptions {
-            data: args.data.clone(),
-            runs_dir: runs.clone(),
-            name: format!("bench-{backend}"),
-            progress: ProgressMode::Quiet,
-            stop: StopFlag::new(),
-        };
-        let t0 = Instant::now();
-        let (run, _) = train_vae(&cfg, &opts)?;
-        let wall = t0.elapsed().as_secs_f64();
-        let table = read_table(&run.path(METRICS_FILE))?;
-        let col = |name: &str| table.header.iter().position(|h| h == name).map(|i| i - 1);
-        let (Some(sps), Some(xps)) = (col("steps_per_s"), col("samples_per_s")) else {
-            anyhow::bail!("metrics.csv lacks the throughput columns");
-        };
-        let median = |c: usize| {
-            let mut v: Vec<f64> = table.rows.iter().skip(1).map(|r| r.1[c]).collect();
-            v.sort_by(f64::total_cmp);
-            v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-        };
-        println!(
-            "{backend:<8} {:>5}  {:>14.3}  {:>16.2}  {wall:>6.1}",
-            args.steps,
-            median(sps),
-            median(xps)
-        );
-    }
-    println!("(run folders under {})", runs.display());
-    Ok(ExitCode::SUCCESS)
-}
-
-fn tempfile_dir() -> anyhow::Result<PathBuf> {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)?
-        .as_secs();
-    let dir = std::env::temp_dir().join(format!("any4d-bench-train-{secs}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir)?;
-    Ok(dir)
 }

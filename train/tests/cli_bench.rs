@@ -1,0 +1,137 @@
+//! `any4d bench train` run as a user would: the built binary, its exit code and its output.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn any4d(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_any4d"))
+        .args(args)
+        .output()
+        .expect("the any4d binary runs")
+}
+
+fn text(out: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn preset(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+#[test]
+fn rf_preset_prints_the_header_and_a_positive_rate_without_a_store() {
+    let tiny = preset("configs/rf/tiny.toml");
+    let out = any4d(&[
+        "bench",
+        "train",
+        "--config",
+        p(&tiny),
+        "--steps",
+        "2",
+        "--backends",
+        "flex",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stdout.contains("model FLOPs per step:"), "{stdout}");
+    let header: Vec<&str> = stdout
+        .lines()
+        .find(|l| l.starts_with("backend"))
+        .unwrap_or_else(|| panic!("no header line in {stdout}"))
+        .split_whitespace()
+        .collect();
+    for column in [
+        "micro_batch",
+        "median_s",
+        "steps/s",
+        "samples/s",
+        "GFLOP/step",
+        "GFLOP/s",
+    ] {
+        assert!(header.contains(&column), "header {header:?} lacks {column}");
+    }
+    let row: Vec<&str> = stdout
+        .lines()
+        .find(|l| l.starts_with("flex"))
+        .unwrap_or_else(|| panic!("no flex row in {stdout}"))
+        .split_whitespace()
+        .collect();
+    assert_eq!(row.len(), header.len(), "{row:?} vs {header:?}");
+    let value = |name: &str| -> f64 {
+        let i = header.iter().position(|h| *h == name).unwrap();
+        row[i].parse().unwrap_or_else(|e| panic!("{name} = {:?}: {e}", row[i]))
+    };
+    assert!(value("steps/s") > 0.0, "{stdout}");
+    assert!(value("GFLOP/step") > 0.0, "{stdout}");
+    // The preset's micro-batch: samples/s = micro_batch × steps/s (both rounded in the table).
+    assert_eq!(value("micro_batch"), 4.0);
+    let ratio = value("samples/s") / value("steps/s");
+    assert!((ratio - 4.0).abs() < 0.05, "samples/s / steps/s = {ratio}");
+}
+
+#[test]
+fn broken_configs_and_arguments_give_clear_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let tiny = std::fs::read_to_string(preset("configs/rf/tiny.toml")).unwrap();
+    let fail = |args: &[&str], needles: &[&str]| {
+        let out = any4d(args);
+        let (stdout, stderr) = text(&out);
+        assert!(!out.status.success(), "{args:?} succeeded: {stdout}");
+        for needle in needles {
+            assert!(stderr.contains(needle), "{args:?}: {needle:?} not in {stderr}");
+        }
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    };
+
+    let bad_width = tmp.path().join("bad_width.toml");
+    std::fs::write(&bad_width, tiny.replacen("width = 64", "width = 0", 1)).unwrap();
+    fail(
+        &["bench", "train", "--config", p(&bad_width), "--steps", "2"],
+        &["bad_width.toml", "model.width"],
+    );
+
+    let unknown_key = tmp.path().join("unknown_key.toml");
+    std::fs::write(&unknown_key, tiny.replacen("[rf]\n", "[rf]\nspeed = 3\n", 1)).unwrap();
+    fail(
+        &["bench", "train", "--config", p(&unknown_key), "--steps", "2"],
+        &["unknown_key.toml", "speed"],
+    );
+
+    let neither = tmp.path().join("neither.toml");
+    std::fs::write(&neither, "[model]\nwidth = 8\n").unwrap();
+    fail(
+        &["bench", "train", "--config", p(&neither), "--steps", "2"],
+        &["neither.toml", "neither an RF run config"],
+    );
+
+    let not_toml = tmp.path().join("not_toml.toml");
+    std::fs::write(&not_toml, "[rf\n").unwrap();
+    fail(
+        &["bench", "train", "--config", p(&not_toml)],
+        &["not_toml.toml", "invalid TOML"],
+    );
+
+    let missing = tmp.path().join("missing.toml");
+    fail(
+        &["bench", "train", "--config", p(&missing)],
+        &["missing.toml", "cannot read"],
+    );
+
+    let rf = preset("configs/rf/tiny.toml");
+    fail(
+        &["bench", "train", "--config", p(&rf), "--steps", "1"],
+        &["--steps must be at least 2"],
+    );
+    let vae = preset("configs/vae/tiny.toml");
+    fail(
+        &["bench", "train", "--config", p(&vae), "--steps", "2"],
+        &["--data STORE"],
+    );
+}
