@@ -23,31 +23,39 @@ pub enum TrainCmd {
 
 #[derive(Args, Debug)]
 pub struct VaeArgs {
-    /// Run config (`configs/vae/*.toml`); not with `--resume`, which reads the run's own config.
+    #[command(flatten)]
+    common: RunArgs,
+}
+
+#[derive(Args, Debug)]
+pub struct RfArgs {
+    /// The VAE run folder whose newest checkpoint encodes the clips (with `--resume`: optional, must be the
+    /// run's own).
+    #[arg(long, required_unless_present = "resume")]
+    vae: Option<PathBuf>,
+    #[command(flatten)]
+    common: RunArgs,
+}
+
+/// The options `train vae` and `train rf` share.
+#[derive(Args, Debug)]
+pub struct RunArgs {
+    /// Run config (`configs/vae/*.toml` or `configs/rf/*.toml`); not with `--resume`, which reads the run's own
+    /// config.
     #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
     config: Option<PathBuf>,
     /// Dataset store folder (`any4d data import|synth`).
     #[arg(long)]
     data: PathBuf,
-    /// Run name: the run goes to `<runs>/<NAME>-<n>/` with the next free n.
-    #[arg(long, default_value = "vae")]
-    run: String,
+    /// Run name: the run goes to `<runs>/<NAME>-<n>/` with the next free n (default: `vae` or `rf`).
+    #[arg(long)]
+    run: Option<String>,
     /// Continue this run folder from its newest checkpoint.
     #[arg(long)]
     resume: Option<PathBuf>,
     /// Override `[device] backend`.
     #[arg(long, value_enum)]
     backend: Option<Backend>,
-    #[command(flatten)]
-    parallel: ParallelArgs,
-    /// Folder of run folders.
-    #[arg(long, default_value = "runs")]
-    runs_dir: PathBuf,
-}
-
-/// `--devices` and `--strategy`, shared by `train vae` and `train rf`.
-#[derive(Args, Debug)]
-pub struct ParallelArgs {
     /// Train data-parallel over these devices, comma-separated `BACKEND[:INDEX]` (`cuda:0,cuda:1`,
     /// `flex,flex`); the first holds the model and the optimiser. Replaces `[device] backend`.
     #[arg(long, conflicts_with = "backend")]
@@ -56,44 +64,20 @@ pub struct ParallelArgs {
     /// copied to the first device), `auto` (ddp on distinct cuda devices, main-device otherwise).
     #[arg(long, value_enum, default_value = "auto", requires = "devices")]
     strategy: Strategy,
+    /// Folder of run folders.
+    #[arg(long, default_value = "runs")]
+    runs_dir: PathBuf,
 }
 
-impl ParallelArgs {
-    fn parse(&self) -> anyhow::Result<Option<Parallel>> {
+impl RunArgs {
+    /// `--devices` with `--strategy`, checked.
+    fn parallel(&self) -> anyhow::Result<Option<Parallel>> {
         Ok(self
             .devices
             .as_deref()
             .map(|d| Parallel::parse(d, self.strategy))
             .transpose()?)
     }
-}
-
-#[derive(Args, Debug)]
-pub struct RfArgs {
-    /// Run config (`configs/rf/*.toml`); not with `--resume`, which reads the run's own config.
-    #[arg(long, required_unless_present = "resume", conflicts_with = "resume")]
-    config: Option<PathBuf>,
-    /// The VAE run folder whose newest checkpoint encodes the clips (with `--resume`: optional, must be the
-    /// run's own).
-    #[arg(long, required_unless_present = "resume")]
-    vae: Option<PathBuf>,
-    /// Dataset store folder.
-    #[arg(long)]
-    data: PathBuf,
-    /// Run name: the run goes to `<runs>/<NAME>-<n>/` with the next free n.
-    #[arg(long, default_value = "rf")]
-    run: String,
-    /// Continue this run folder from its newest checkpoint.
-    #[arg(long)]
-    resume: Option<PathBuf>,
-    /// Override `[device] backend`.
-    #[arg(long, value_enum)]
-    backend: Option<Backend>,
-    #[command(flatten)]
-    parallel: ParallelArgs,
-    /// Folder of run folders.
-    #[arg(long, default_value = "runs")]
-    runs_dir: PathBuf,
 }
 
 pub fn run(cmd: TrainCmd) -> anyhow::Result<ExitCode> {
@@ -103,17 +87,18 @@ pub fn run(cmd: TrainCmd) -> anyhow::Result<ExitCode> {
     }
 }
 
-fn rf(args: RfArgs) -> anyhow::Result<ExitCode> {
+fn rf(RfArgs { vae, common: args }: RfArgs) -> anyhow::Result<ExitCode> {
+    let parallel = args.parallel()?;
     let stop = StopFlag::new();
     stop.install_ctrlc()?;
     let opts = RfRunOptions {
         data: args.data,
-        vae_run: args.vae,
+        vae_run: vae,
         runs_dir: args.runs_dir,
-        name: args.run,
+        name: args.run.unwrap_or_else(|| "rf".into()),
         progress: ProgressMode::Auto,
         stop,
-        parallel: args.parallel.parse()?,
+        parallel,
     };
     let outcome = match (args.resume, args.config) {
         (Some(run_dir), _) => resume_rf(&run_dir, args.backend, &opts)?,
@@ -131,17 +116,17 @@ fn rf(args: RfArgs) -> anyhow::Result<ExitCode> {
     Ok(report(&outcome))
 }
 
-fn vae(args: VaeArgs) -> anyhow::Result<ExitCode> {
+fn vae(VaeArgs { common: args }: VaeArgs) -> anyhow::Result<ExitCode> {
+    let devices = args.parallel()?;
     let stop = StopFlag::new();
     stop.install_ctrlc()?;
     let opts = VaeRunOptions {
         data: args.data,
         runs_dir: args.runs_dir,
-        name: args.run,
+        name: args.run.unwrap_or_else(|| "vae".into()),
         progress: ProgressMode::Auto,
         stop,
     };
-    let devices = args.parallel.parse()?;
     let outcome = match (args.resume, args.config) {
         (Some(run_dir), _) => match &devices {
             Some(d) => resume_vae_data_parallel(&run_dir, &opts, d)?,
