@@ -45,7 +45,8 @@ pub struct BenchArgs {
     /// Override `[device] precision` (bf16: cuda only).
     #[arg(long, value_enum)]
     precision: Option<Precision>,
-    /// RF presets: clips per timed step (default: the preset's `train.micro_batch`; no accumulation).
+    /// Clips per timed step (RF default: the preset's `train.micro_batch`; VAE default: the preset's global batch;
+    /// given, one micro-batch of this size per step, no accumulation).
     #[arg(long)]
     micro_batch: Option<usize>,
     /// RF presets: FPS tokens P per clip (default: the stores' P, 512).
@@ -313,8 +314,8 @@ fn bench_vae(args: &BenchArgs, base: &VaeRunConfig) -> anyhow::Result<ExitCode> 
             args.config.display()
         );
     };
-    if args.micro_batch.is_some() || args.tokens.is_some() || args.peak_tflops.is_some() {
-        bail!("--micro-batch, --tokens and --peak-tflops apply to RF presets only");
+    if args.tokens.is_some() || args.peak_tflops.is_some() {
+        bail!("--tokens and --peak-tflops apply to RF presets only");
     }
     let runs = tempfile_dir()?;
     println!(
@@ -326,6 +327,11 @@ fn bench_vae(args: &BenchArgs, base: &VaeRunConfig) -> anyhow::Result<ExitCode> 
         cfg.device.backend = *backend;
         if let Some(p) = args.precision {
             cfg.device.precision = p;
+        }
+        if let Some(mb) = args.micro_batch {
+            // One micro-batch per step: the step time of that many clips, no accumulation.
+            cfg.train.micro_batch = mb;
+            cfg.train.batch_size = mb;
         }
         cfg.train.duration = Duration::Steps(args.steps);
         cfg.train.checkpoint_every = args.steps;
