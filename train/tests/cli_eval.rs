@@ -50,28 +50,38 @@ fn any4d(args: &[&str]) -> Output {
         .expect("run the any4d binary")
 }
 
+/// A prediction of `pred_n` vertices shifted by (d, 0, 0) and a ground truth of `gt_n` vertices (see [`clips`]),
+/// written as `pred.bin` and `gt.bin` in a fresh temporary folder.
+struct Pair {
+    dir: tempfile::TempDir,
+    pred: PathBuf,
+    gt: PathBuf,
+}
+
+fn pair(pred_n: usize, gt_n: usize, d: f32) -> Pair {
+    let dir = tempfile::tempdir().unwrap();
+    let (pred, _) = clips(pred_n, d);
+    let (_, gt) = clips(gt_n, d);
+    Pair {
+        pred: write(dir.path(), "pred.bin", pred, pred_n),
+        gt: write(dir.path(), "gt.bin", gt, gt_n),
+        dir,
+    }
+}
+
+/// `any4d eval metrics PRED GT ARGS…`.
+fn eval_metrics(pair: &Pair, args: &[&str]) -> Output {
+    let (pred, gt) = (pair.pred.to_str().unwrap(), pair.gt.to_str().unwrap());
+    any4d(&[&["eval", "metrics", pred, gt], args].concat())
+}
+
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
 #[test]
 fn json_reports_raw_values() {
-    let dir = tempfile::tempdir().unwrap();
-    let (pred, gt) = clips(8, 0.3);
-    let (p, g) = (
-        write(dir.path(), "pred.bin", pred, 8),
-        write(dir.path(), "gt.bin", gt, 8),
-    );
-    let out = any4d(&[
-        "eval",
-        "metrics",
-        p.to_str().unwrap(),
-        g.to_str().unwrap(),
-        "--keyframes",
-        "0,7,15",
-        "--format",
-        "json",
-    ]);
+    let out = eval_metrics(&pair(8, 8, 0.3), &["--keyframes", "0,7,15", "--format", "json"]);
     assert!(out.status.success(), "stderr: {}", text(&out.stderr));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stdout is JSON");
     for key in [
@@ -97,20 +107,7 @@ fn json_reports_raw_values() {
 
 #[test]
 fn table_prints_times_100() {
-    let dir = tempfile::tempdir().unwrap();
-    let (pred, gt) = clips(8, 0.3);
-    let (p, g) = (
-        write(dir.path(), "pred.bin", pred, 8),
-        write(dir.path(), "gt.bin", gt, 8),
-    );
-    let out = any4d(&[
-        "eval",
-        "metrics",
-        p.to_str().unwrap(),
-        g.to_str().unwrap(),
-        "--keyframes",
-        "0,7,15",
-    ]);
+    let out = eval_metrics(&pair(8, 8, 0.3), &["--keyframes", "0,7,15"]);
     assert!(out.status.success(), "stderr: {}", text(&out.stderr));
     let stdout = text(&out.stdout);
     let line = stdout
@@ -124,21 +121,7 @@ fn table_prints_times_100() {
 
 #[test]
 fn mismatched_vertex_counts_fail_with_a_clear_error() {
-    let dir = tempfile::tempdir().unwrap();
-    let (pred, _) = clips(5, 0.1);
-    let (_, gt) = clips(4, 0.1);
-    let (p, g) = (
-        write(dir.path(), "pred.bin", pred, 5),
-        write(dir.path(), "gt.bin", gt, 4),
-    );
-    let out = any4d(&[
-        "eval",
-        "metrics",
-        p.to_str().unwrap(),
-        g.to_str().unwrap(),
-        "--format",
-        "json",
-    ]);
+    let out = eval_metrics(&pair(5, 4, 0.1), &["--format", "json"]);
     assert!(!out.status.success());
     let stderr = text(&out.stderr);
     assert!(
@@ -150,28 +133,16 @@ fn mismatched_vertex_counts_fail_with_a_clear_error() {
 
 #[test]
 fn bad_keyframes_and_missing_files_fail() {
-    let dir = tempfile::tempdir().unwrap();
-    let (pred, gt) = clips(4, 0.1);
-    let (p, g) = (
-        write(dir.path(), "pred.bin", pred, 4),
-        write(dir.path(), "gt.bin", gt, 4),
-    );
-    let out = any4d(&[
-        "eval",
-        "metrics",
-        p.to_str().unwrap(),
-        g.to_str().unwrap(),
-        "--keyframes",
-        "0,16",
-    ]);
+    let files = pair(4, 4, 0.1);
+    let out = eval_metrics(&files, &["--keyframes", "0,16"]);
     assert!(!out.status.success());
     assert!(
         text(&out.stderr).contains("keyframe index 16 is out of range for 16 frames"),
         "{}",
         text(&out.stderr)
     );
-    let missing = dir.path().join("nope.bin");
-    let out = any4d(&["eval", "metrics", missing.to_str().unwrap(), g.to_str().unwrap()]);
+    let missing = files.dir.path().join("nope.bin");
+    let out = any4d(&["eval", "metrics", missing.to_str().unwrap(), files.gt.to_str().unwrap()]);
     assert!(!out.status.success());
     assert!(text(&out.stderr).contains("nope.bin"), "{}", text(&out.stderr));
 }

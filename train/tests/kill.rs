@@ -4,6 +4,8 @@
 //! Ctrl-C saves a checkpoint, exits with 130 and resumes to completion.
 #![cfg(unix)]
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::fs::{self, File};
 use std::os::unix::process::ExitStatusExt;
@@ -12,17 +14,13 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::thread::sleep;
 use std::time::{Duration, Instant};
 
-use any4d_data::store::write_synth_with;
-use any4d_data::synth::SynthConfig;
 use any4d_model::frame_vae::FrameVae;
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::checkpoint;
-use any4d_train::config::Duration as RunLength;
 use any4d_train::run_folder::{CHECKPOINTS_DIR, LOG_FILE, METRICS_FILE, RunFolder, Table, VALID_FILE, read_table};
 use any4d_train::runs::{LoadedVae, load_vae_run};
 use any4d_train::vae_loop::{LATENT_STATS_FILE, VaeModelConfig, VaeRunConfig};
-use burn::module::{Module, ModuleVisitor, Param};
-use burn::prelude::Tensor;
+use common::{params, synth_store, tiny_vae};
 use tempfile::TempDir;
 
 /// Optimiser steps of every run. A step takes about 0.1 s in a debug build, so a run killed after its second
@@ -43,19 +41,8 @@ struct Fixture {
 impl Fixture {
     fn new() -> Self {
         let dir = tempfile::tempdir().expect("temporary folder");
-        let data = dir.path().join("store");
-        let synth = SynthConfig {
-            clips: 10,
-            seed: 3,
-            frames: 4,
-            min_vertices: 256,
-            max_vertices: 512,
-        };
-        write_synth_with(&synth, &data, 32, None).expect("synthetic store");
-        let tiny = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/vae/tiny.toml");
-        let mut cfg = VaeRunConfig::load(&tiny).expect("configs/vae/tiny.toml");
-        cfg.train.duration = RunLength::Steps(STEPS);
-        cfg.train.batch_size = 4;
+        let data = synth_store(dir.path(), 3);
+        let mut cfg = tiny_vae(STEPS);
         cfg.train.micro_batch = 2;
         cfg.train.checkpoint_every = 1;
         cfg.train.keep_last = 2;
@@ -212,19 +199,6 @@ impl Launched {
 
 fn cpu() -> burn::prelude::Device {
     device(Backend::Flex, Precision::F32).expect("CPU device")
-}
-
-fn params(m: &FrameVae) -> Vec<f32> {
-    struct Collect(Vec<f32>);
-    impl ModuleVisitor for Collect {
-        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            self.0
-                .extend(p.val().into_data().try_to_vec::<f32>().expect("f32 parameters"));
-        }
-    }
-    let mut c = Collect(Vec::new());
-    m.visit(&mut c);
-    c.0
 }
 
 fn frame_vae(vae: &LoadedVae) -> &FrameVae {

@@ -3,150 +3,49 @@
 //! float-summation tolerance); a tiny VAE trains over `flex,flex` with finite losses; `--devices` parsing
 //! rejects bad entries with a message naming them.
 
-use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard};
+mod common;
 
-use any4d_data::store::write_synth_with;
-use any4d_data::synth::SynthConfig;
-use any4d_train::Result;
 use any4d_train::backend::{Backend, Precision, device};
-use any4d_train::config::{Duration, OptimConfig, TrainConfig};
-use any4d_train::loop_common::{LoopSetup, Losses, Objective, Outcome, StopFlag, train};
+use any4d_train::config::{OptimConfig, TrainConfig};
+use any4d_train::loop_common::{Outcome, StopFlag, train};
 use any4d_train::multi_device::{DeviceSpec, Parallel, Strategy, train_data_parallel, train_vae_data_parallel};
 use any4d_train::progress::ProgressMode;
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, read_table};
-use any4d_train::vae_loop::{LATENT_STATS_FILE, VaeRunConfig, VaeRunOptions};
-use burn::module::{Module, ModuleVisitor, Param};
-use burn::nn::{Linear, LinearConfig, Relu};
-use burn::prelude::{Device, Tensor, TensorData};
-use rand_chacha::ChaCha8Rng;
+use any4d_train::vae_loop::{LATENT_STATS_FILE, VaeRunOptions};
+use burn::prelude::Device;
+use common::{Mlp, Toy, params, quiet_setup, root, serial, synth_store, tiny_vae, toy_configs};
 
-/// burn's CPU RNG seed is process-wide: tests that train run one at a time.
-static SERIAL: Mutex<()> = Mutex::new(());
-
-fn serial() -> MutexGuard<'static, ()> {
-    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-#[derive(Module, Debug)]
-struct Mlp {
-    fc1: Linear,
-    fc2: Linear,
-    act: Relu,
-}
-
-impl Mlp {
-    fn new(device: &Device) -> Self {
-        device.seed(1);
-        Mlp {
-            fc1: LinearConfig::new(4, 16).init(device),
-            fc2: LinearConfig::new(16, 1).init(device),
-            act: Relu::new(),
-        }
-    }
-    fn forward(&self, x: Tensor<2>) -> Tensor<2> {
-        self.fc2.forward(self.act.forward(self.fc1.forward(x)))
-    }
-}
-
-/// y = Σx / 2 on 32 fixed examples, no randomness: both loops must see the same data and gradients.
-struct Toy {
-    xs: Vec<[f32; 4]>,
-}
-
-impl Toy {
-    fn new() -> Self {
-        let xs = (0..32).map(|i| {
-            let f = i as f32;
-            [(f * 0.37).sin(), (f * 0.71).cos(), (f * 0.13).sin(), (f * 1.3).cos()]
-        });
-        Toy { xs: xs.collect() }
-    }
-}
-
-impl Objective for Toy {
-    type Model = Mlp;
-    fn terms(&self) -> Vec<String> {
-        vec!["mse".into()]
-    }
-    fn train_len(&self) -> usize {
-        self.xs.len()
-    }
-    fn loss(&self, model: &Mlp, idx: &[usize], _rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
-        let flat: Vec<f32> = idx.iter().flat_map(|&i| self.xs[i]).collect();
-        let x = Tensor::<2>::from_data(TensorData::new(flat, [idx.len(), 4]), device);
-        let y = x.clone().sum_dim(1).div_scalar(2.0);
-        let mse = (model.forward(x) - y).square().mean();
-        Ok(Losses {
-            total: mse.clone(),
-            terms: vec![mse],
-        })
-    }
-    fn validate(&self, _model: &Mlp, _device: &Device, _step: u64) -> Result<Option<Vec<f64>>> {
-        Ok(None)
-    }
-}
-
+/// The toy loop's configs with micro-batches of 2 and no checkpoint or validation before the end.
 fn cfgs(steps: u64) -> (TrainConfig, OptimConfig) {
+    let (train, optim) = toy_configs(steps);
     let train = TrainConfig {
-        seed: 666,
-        duration: Duration::Steps(steps),
-        batch_size: 8,
         micro_batch: 2,
         checkpoint_every: 100,
         keep_last: 1,
         valid_every: 100,
-        progress_every_secs: 5.0,
-    };
-    let optim = OptimConfig {
-        lr: 1e-2,
-        beta1: 0.9,
-        beta2: 0.99,
-        weight_decay: 0.01,
-        eps: 1e-8,
-        grad_clip: 1.0,
+        ..train
     };
     (train, optim)
-}
-
-fn params(m: &Mlp) -> Vec<f32> {
-    struct Collect(Vec<f32>);
-    impl ModuleVisitor for Collect {
-        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            self.0
-                .extend(p.val().into_data().convert::<f32>().try_to_vec::<f32>().unwrap());
-        }
-    }
-    let mut c = Collect(Vec::new());
-    m.visit(&mut c);
-    c.0
-}
-
-fn setup<'a>(run: &'a RunFolder, train: &'a TrainConfig, optim: &'a OptimConfig, dev: &Device) -> LoopSetup<'a> {
-    LoopSetup {
-        run,
-        train,
-        optim,
-        device: dev.clone(),
-        stop: StopFlag::new(),
-        progress: ProgressMode::Quiet,
-        resume: None,
-    }
 }
 
 /// Single device vs `workers` (autodiff devices): max |Δθ| after `steps` steps and the data-parallel losses.
 fn compare(workers: &[Device], steps: u64) -> (f32, Vec<f64>) {
     let dir = tempfile::tempdir().unwrap();
-    let toy = Toy::new();
+    let toy = Toy::exact();
     let (train_cfg, optim_cfg) = cfgs(steps);
     let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
     let run1 = RunFolder::create(dir.path(), "one", "# toy\n", &["mse"]).unwrap();
-    let (one, _) = train(&toy, Mlp::new(&dev), setup(&run1, &train_cfg, &optim_cfg, &dev)).unwrap();
+    let (one, _) = train(
+        &toy,
+        Mlp::new(&dev),
+        quiet_setup(&run1, &train_cfg, &optim_cfg, dev.clone(), None),
+    )
+    .unwrap();
     let run2 = RunFolder::create(dir.path(), "many", "# toy\n", &["mse"]).unwrap();
     let (many, outcome) = train_data_parallel(
         &toy,
         Mlp::new(&dev),
-        setup(&run2, &train_cfg, &optim_cfg, &dev),
+        quiet_setup(&run2, &train_cfg, &optim_cfg, dev.clone(), None),
         workers,
         Strategy::MainDevice,
     )
@@ -190,26 +89,12 @@ fn flex_and_ndarray_as_two_devices_match_one_device() {
     assert!(diff < 1e-4, "max parameter difference {diff}");
 }
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
 #[test]
 fn tiny_vae_trains_over_two_cpu_devices() {
     let _g = serial();
     let dir = tempfile::tempdir().unwrap();
-    let store = dir.path().join("store");
-    let synth = SynthConfig {
-        clips: 10,
-        seed: 1,
-        frames: 4,
-        min_vertices: 256,
-        max_vertices: 512,
-    };
-    write_synth_with(&synth, &store, 32, None).expect("synthetic store");
-    let mut cfg = VaeRunConfig::load(&root().join("configs/vae/tiny.toml")).expect("configs/vae/tiny.toml");
-    cfg.train.duration = Duration::Steps(4);
-    cfg.train.batch_size = 4;
+    let store = synth_store(dir.path(), 1);
+    let mut cfg = tiny_vae(4);
     cfg.train.micro_batch = 2;
     cfg.train.checkpoint_every = 4;
     cfg.train.valid_every = 4;

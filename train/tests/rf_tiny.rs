@@ -6,40 +6,29 @@
 //! naming the field or file. One tiny VAE run on
 //! procedural clips is shared by all tests.
 
-use std::path::{Path, PathBuf};
-use std::sync::{Mutex, MutexGuard, OnceLock};
+mod common;
 
-use any4d_data::store::write_synth_with;
-use any4d_data::synth::SynthConfig;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
 use any4d_model::mmdit::KfMode;
 use any4d_model::text::scratch::ScratchTokenizer;
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::Duration;
-use any4d_train::loop_common::{LoopSetup, Objective, Outcome, StopFlag, train};
+use any4d_train::loop_common::{Objective, Outcome, StopFlag, train};
 use any4d_train::multi_device::{Parallel, Strategy};
 use any4d_train::progress::ProgressMode;
 use any4d_train::rf_loop::{
-    KfSampler, LatentCache, LatentDraw, RF_TERMS, RfModel, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS,
-    Subset, TextDropout, draw_keyframe_mask, resume_rf, train_rf,
+    KfSampler, LatentCache, LatentDraw, RF_TERMS, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS, Subset,
+    TextDropout, draw_keyframe_mask, resume_rf, train_rf,
 };
 use any4d_train::run_folder::{LOG_FILE, METRICS_FILE, RunFolder, SAMPLES_FILE, VALID_FILE, read_table};
 use any4d_train::runs::{LoadedVae, VAE_RUN_FILE, load_rf_run, load_vae_run};
-use any4d_train::vae_loop::{VaeRunConfig, VaeRunOptions, train_vae};
-use burn::module::{Module, ModuleVisitor, Param};
+use any4d_train::vae_loop::{VaeRunOptions, train_vae};
 use burn::prelude::{Device, Tensor};
+use common::{params, quiet_setup, root, serial, synth_store, tiny_vae};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-
-/// burn's CPU RNG seed is process-wide: tests that draw from it run one at a time.
-static SERIAL: Mutex<()> = Mutex::new(());
-
-fn serial() -> MutexGuard<'static, ()> {
-    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
 
 /// A procedural store (4-frame clips, P = 32) and a finished tiny VAE run on it, made once per test process.
 struct Fixture {
@@ -53,18 +42,8 @@ fn fixture() -> &'static Fixture {
     static FIXTURE: OnceLock<Fixture> = OnceLock::new();
     FIXTURE.get_or_init(|| {
         let dir = tempfile::tempdir().expect("temp dir");
-        let store = dir.path().join("store");
-        let synth = SynthConfig {
-            clips: 10,
-            seed: 1, // 7 TRAIN and 3 VAL clips
-            frames: 4,
-            min_vertices: 256,
-            max_vertices: 512,
-        };
-        write_synth_with(&synth, &store, 32, None).expect("synthetic store");
-        let mut cfg = VaeRunConfig::load(&root().join("configs/vae/tiny.toml")).expect("configs/vae/tiny.toml");
-        cfg.train.duration = Duration::Steps(6);
-        cfg.train.batch_size = 4;
+        let store = synth_store(dir.path(), 1); // 7 TRAIN and 3 VAL clips
+        let mut cfg = tiny_vae(6);
         cfg.train.micro_batch = 4;
         cfg.train.checkpoint_every = 6;
         cfg.train.valid_every = 6;
@@ -145,19 +124,6 @@ fn trained_rf() -> &'static (PathBuf, RfRunConfig) {
 
 fn inference_device() -> Device {
     device(Backend::Flex, Precision::F32).expect("flex device")
-}
-
-fn params(m: &RfModel) -> Vec<f32> {
-    struct Collect(Vec<f32>);
-    impl ModuleVisitor for Collect {
-        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            self.0
-                .extend(p.val().into_data().try_to_vec::<f32>().expect("f32 parameters"));
-        }
-    }
-    let mut c = Collect(Vec::new());
-    m.visit(&mut c);
-    c.0
 }
 
 /// A folder with one tokenizer trained on the fixture's TRAIN captions, made once per test process: WordPiece
@@ -421,16 +387,7 @@ fn tiny_rf_resume_is_bitwise_equal_to_straight_training() {
         let dev = inference.clone().autodiff();
         dev.seed(cfg.train.seed);
         let model = cfg.model_config(vocab).init(&dev);
-        let setup = LoopSetup {
-            run,
-            train: &cfg.train,
-            optim: &cfg.optim,
-            device: dev,
-            stop: StopFlag::new(),
-            progress: ProgressMode::Quiet,
-            resume,
-        };
-        train(objective, model, setup).unwrap()
+        train(objective, model, quiet_setup(run, &cfg.train, &cfg.optim, dev, resume)).unwrap()
     };
     let sampling_objective = |run: &RunFolder| {
         let (mut objective, vocab) = make_objective(&cfg, &vae, &inference);

@@ -1,68 +1,31 @@
 //! A short tiny frame-wise VAE run on procedural clips lowers its loss, writes latent statistics, and resumes
 //! exactly (n steps + resume + n steps = 2n steps straight, bitwise on the CPU backend).
 
-use std::path::Path;
-use std::sync::Mutex;
+mod common;
 
-use any4d_data::store::write_synth_with;
-use any4d_data::synth::SynthConfig;
 use any4d_model::frame_vae::FrameVae;
 use any4d_train::backend::{Backend, Precision, device};
-use any4d_train::config::Duration;
-use any4d_train::loop_common::{LoopSetup, Outcome, StopFlag, train};
+use any4d_train::loop_common::{Outcome, StopFlag, train};
 use any4d_train::progress::ProgressMode;
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, read_table};
 use any4d_train::vae_loop::{
     LATENT_STATS_FILE, StoredLatentStats, VaeModelConfig, VaeObjective, VaeRunConfig, VaeRunOptions, train_vae,
 };
-use burn::module::{Module, ModuleVisitor, Param};
-use burn::prelude::Tensor;
-
-/// burn's CPU RNG seed is process-wide: tests that train run one at a time.
-static SERIAL: Mutex<()> = Mutex::new(());
-
-fn store(dir: &Path) -> std::path::PathBuf {
-    let out = dir.join("store");
-    let cfg = SynthConfig {
-        clips: 10,
-        seed: 3,
-        frames: 4,
-        min_vertices: 256,
-        max_vertices: 512,
-    };
-    write_synth_with(&cfg, &out, 32, None).expect("synthetic store");
-    out
-}
+use common::{params, quiet_setup, serial, synth_store, tiny_vae};
 
 fn tiny(steps: u64) -> VaeRunConfig {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/vae/tiny.toml");
-    let mut cfg = VaeRunConfig::load(&path).expect("configs/vae/tiny.toml");
-    cfg.train.duration = Duration::Steps(steps);
-    cfg.train.batch_size = 4;
+    let mut cfg = tiny_vae(steps);
     cfg.train.micro_batch = 2;
     cfg.train.checkpoint_every = 5;
     cfg.train.valid_every = 5;
     cfg
 }
 
-fn params(m: &FrameVae) -> Vec<f32> {
-    struct Collect(Vec<f32>);
-    impl ModuleVisitor for Collect {
-        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            self.0
-                .extend(p.val().into_data().try_to_vec::<f32>().expect("f32 parameters"));
-        }
-    }
-    let mut c = Collect(Vec::new());
-    m.visit(&mut c);
-    c.0
-}
-
 #[test]
 fn tiny_vae_run_lowers_its_loss_and_stores_latent_stats() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = serial();
     let dir = tempfile::tempdir().unwrap();
-    let data = store(dir.path());
+    let data = synth_store(dir.path(), 3);
     let cfg = tiny(30);
     let opts = VaeRunOptions {
         data,
@@ -89,9 +52,9 @@ fn tiny_vae_run_lowers_its_loss_and_stores_latent_stats() {
 
 #[test]
 fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
-    let _g = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let _g = serial();
     let dir = tempfile::tempdir().unwrap();
-    let data = store(dir.path());
+    let data = synth_store(dir.path(), 3);
     let n = 3;
     let go = |run: &RunFolder, steps: u64, resume: Option<std::path::PathBuf>| {
         let cfg = tiny(steps);
@@ -102,16 +65,7 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
         dev.seed(cfg.train.seed);
         let model = m.init(&dev);
         let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch).unwrap();
-        let setup = LoopSetup {
-            run,
-            train: &cfg.train,
-            optim: &cfg.optim,
-            device: dev,
-            stop: StopFlag::new(),
-            progress: ProgressMode::Quiet,
-            resume,
-        };
-        train(&objective, model, setup).unwrap()
+        train(&objective, model, quiet_setup(run, &cfg.train, &cfg.optim, dev, resume)).unwrap()
     };
     let runs = dir.path().join("runs");
     let straight_run = RunFolder::create(&runs, "straight", "", &["rec", "kl"]).unwrap();

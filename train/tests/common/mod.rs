@@ -1,0 +1,229 @@
+//! Helpers shared by the train crate's integration tests: the one-at-a-time lock, paths, the small procedural
+//! store, the tiny VAE config, a parameter dump, and the toy MLP regression that exercises the generic loop.
+// Each test file compiles its own copy of this module and uses only some of it.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Mutex, MutexGuard};
+
+use any4d_data::store::write_synth_with;
+use any4d_data::synth::SynthConfig;
+use any4d_train::Result;
+use any4d_train::config::{Duration, OptimConfig, TrainConfig};
+use any4d_train::loop_common::{LoopSetup, Losses, Objective, StopFlag};
+use any4d_train::progress::ProgressMode;
+use any4d_train::run_folder::RunFolder;
+use any4d_train::vae_loop::VaeRunConfig;
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::nn::{Linear, LinearConfig, Relu};
+use burn::prelude::{Device, Tensor, TensorData};
+use burn::tensor::Distribution;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+/// burn's CPU RNG seed is process-wide: tests that train or draw from it run one at a time.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+/// Holds the one-at-a-time lock until dropped (a test that panicked while holding it does not block the rest).
+pub fn serial() -> MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The workspace root (configs/, scripts/).
+pub fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Writes `dir/store`: 10 procedural clips of 4 frames and 256–512 vertices drawn with `seed`, P = 32 FPS points.
+pub fn synth_store(dir: &Path, seed: u64) -> PathBuf {
+    let store = dir.join("store");
+    let synth = SynthConfig {
+        clips: 10,
+        seed,
+        frames: 4,
+        min_vertices: 256,
+        max_vertices: 512,
+    };
+    write_synth_with(&synth, &store, 32, None).expect("synthetic store");
+    store
+}
+
+/// configs/vae/tiny.toml for `steps` steps of 4 clips; callers set micro-batches, checkpoints and validation.
+pub fn tiny_vae(steps: u64) -> VaeRunConfig {
+    let mut cfg = VaeRunConfig::load(&root().join("configs/vae/tiny.toml")).expect("configs/vae/tiny.toml");
+    cfg.train.duration = Duration::Steps(steps);
+    cfg.train.batch_size = 4;
+    cfg
+}
+
+/// A [`LoopSetup`] on `device` that prints nothing, is never asked to stop, and resumes from `resume` when given.
+pub fn quiet_setup<'a>(
+    run: &'a RunFolder,
+    train: &'a TrainConfig,
+    optim: &'a OptimConfig,
+    device: Device,
+    resume: Option<PathBuf>,
+) -> LoopSetup<'a> {
+    LoopSetup {
+        run,
+        train,
+        optim,
+        device,
+        stop: StopFlag::new(),
+        progress: ProgressMode::Quiet,
+        resume,
+    }
+}
+
+/// Every float parameter of `m`, in visiting order, as f32 (never empty, so equality of two dumps means something).
+pub fn params<M: Module>(m: &M) -> Vec<f32> {
+    struct Collect(Vec<f32>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            let values = p.val().into_data().convert::<f32>().try_to_vec::<f32>();
+            self.0.extend(values.expect("f32 parameters"));
+        }
+    }
+    let mut c = Collect(Vec::new());
+    m.visit(&mut c);
+    assert!(!c.0.is_empty(), "the module has no float parameters to compare");
+    c.0
+}
+
+/// The toy network: 4 → 16 → ReLU → 1, initialised from device seed 1.
+#[derive(Module, Debug)]
+pub struct Mlp {
+    fc1: Linear,
+    fc2: Linear,
+    act: Relu,
+}
+
+impl Mlp {
+    pub fn new(device: &Device) -> Self {
+        device.seed(1);
+        Mlp {
+            fc1: LinearConfig::new(4, 16).init(device),
+            fc2: LinearConfig::new(16, 1).init(device),
+            act: Relu::new(),
+        }
+    }
+    pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+        self.fc2.forward(self.act.forward(self.fc1.forward(x)))
+    }
+}
+
+/// Training examples of [`Toy`]; any further examples are its validation set.
+const TOY_TRAIN: usize = 32;
+
+/// y = Σx / 2 on fixed inputs: [`Toy::noisy`] or [`Toy::exact`].
+pub struct Toy {
+    xs: Vec<[f32; 4]>,
+    noisy: bool,
+    /// Requests a stop on the given flag during this (1-based) `loss` call.
+    pub stop_after_calls: Option<(usize, StopFlag)>,
+    /// Makes the loss of this (1-based) `loss` call NaN.
+    pub nan_at_call: Option<usize>,
+    calls: AtomicUsize,
+}
+
+impl Toy {
+    /// 32 training and 8 validation examples; the host RNG adds input jitter and the device RNG target noise, so
+    /// both random streams must be restored for an exact resume.
+    pub fn noisy() -> Self {
+        Self::new(TOY_TRAIN + 8, true)
+    }
+
+    /// 32 training examples, no randomness and no validation: every loop must see the same data and gradients.
+    pub fn exact() -> Self {
+        Self::new(TOY_TRAIN, false)
+    }
+
+    fn new(examples: usize, noisy: bool) -> Self {
+        let xs = (0..examples).map(|i| {
+            let f = i as f32;
+            [(f * 0.37).sin(), (f * 0.71).cos(), (f * 0.13).sin(), (f * 1.3).cos()]
+        });
+        Toy {
+            xs: xs.collect(),
+            noisy,
+            stop_after_calls: None,
+            nan_at_call: None,
+            calls: AtomicUsize::new(0),
+        }
+    }
+}
+
+impl Objective for Toy {
+    type Model = Mlp;
+    fn terms(&self) -> Vec<String> {
+        vec!["mse".into()]
+    }
+    fn train_len(&self) -> usize {
+        TOY_TRAIN
+    }
+    fn loss(&self, model: &Mlp, idx: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
+        let calls = self.calls.fetch_add(1, Ordering::SeqCst) + 1;
+        if let Some((n, flag)) = &self.stop_after_calls
+            && calls == *n
+        {
+            flag.request();
+        }
+        let mut flat = Vec::new();
+        for &i in idx {
+            if self.noisy {
+                flat.extend(self.xs[i].iter().map(|v| v + rng.random_range(-0.01f32..0.01)));
+            } else {
+                flat.extend(self.xs[i]);
+            }
+        }
+        let x = Tensor::<2>::from_data(TensorData::new(flat, [idx.len(), 4]), device);
+        let mut y = x.clone().sum_dim(1).div_scalar(2.0);
+        if self.noisy {
+            y = y + Tensor::<2>::random([idx.len(), 1], Distribution::Normal(0.0, 0.01), device);
+        }
+        let mut mse = (model.forward(x) - y).square().mean();
+        if self.nan_at_call == Some(calls) {
+            mse = mse.div_scalar(0.0).mul_scalar(0.0);
+        }
+        Ok(Losses {
+            total: mse.clone(),
+            terms: vec![mse],
+        })
+    }
+    fn validate(&self, model: &Mlp, device: &Device, _step: u64) -> Result<Option<Vec<f64>>> {
+        let valid = &self.xs[TOY_TRAIN..];
+        if valid.is_empty() {
+            return Ok(None);
+        }
+        let flat: Vec<f32> = valid.iter().flatten().copied().collect();
+        let x = Tensor::<2>::from_data(TensorData::new(flat, [valid.len(), 4]), device);
+        let y = x.clone().sum_dim(1).div_scalar(2.0);
+        let mse = f64::from((model.forward(x) - y).square().mean().into_scalar::<f32>());
+        Ok(Some(vec![mse, mse]))
+    }
+}
+
+/// The toy loop's configs: seed 666, batches of 8 in micro-batches of 4, checkpoints every 3 steps (2 kept),
+/// validation every 4, AdamW at 1e-2 with clipping at 1.
+pub fn toy_configs(steps: u64) -> (TrainConfig, OptimConfig) {
+    let train = TrainConfig {
+        seed: 666,
+        duration: Duration::Steps(steps),
+        batch_size: 8,
+        micro_batch: 4,
+        checkpoint_every: 3,
+        keep_last: 2,
+        valid_every: 4,
+        progress_every_secs: 5.0,
+    };
+    let optim = OptimConfig {
+        lr: 1e-2,
+        beta1: 0.9,
+        beta2: 0.99,
+        weight_decay: 0.01,
+        eps: 1e-8,
+        grad_clip: 1.0,
+    };
+    (train, optim)
+}
