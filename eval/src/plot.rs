@@ -225,12 +225,30 @@ fn tick_label(v: f64, step: f64) -> String {
 
 /// A line plot with markers, optional error bars and a legend, saved as PNG.
 /// Errors: no series, no points, or non-finite values (named by series label).
+/// The y axis starts at zero (or below, for negative values).
 pub fn line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series], path: &Path) -> Result<()> {
     canvas_line_plot(title, x_label, y_label, series, path)?.save_png(path)
 }
 
+/// As [`line_plot`], with the y axis fitted to the values instead of starting at zero (for log-scale values such
+/// as loss curves, where zero means nothing).
+pub fn line_plot_fit_y(title: &str, x_label: &str, y_label: &str, series: &[Series], path: &Path) -> Result<()> {
+    plot_canvas(title, x_label, y_label, series, path, false)?.save_png(path)
+}
+
 /// As [`line_plot`], returning the canvas instead of writing it (`path` only names errors).
 pub fn canvas_line_plot(title: &str, x_label: &str, y_label: &str, series: &[Series], path: &Path) -> Result<Canvas> {
+    plot_canvas(title, x_label, y_label, series, path, true)
+}
+
+fn plot_canvas(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+    path: &Path,
+    y_from_zero: bool,
+) -> Result<Canvas> {
     let mut xs = Vec::new();
     let mut ys = Vec::new();
     for s in series {
@@ -259,7 +277,7 @@ pub fn canvas_line_plot(title: &str, x_label: &str, y_label: &str, series: &[Ser
         fold(&xs, f64::max, f64::NEG_INFINITY),
     );
     let (mut y0, mut y1) = (
-        fold(&ys, f64::min, f64::INFINITY).min(0.0),
+        fold(&ys, f64::min, f64::INFINITY).min(if y_from_zero { 0.0 } else { f64::INFINITY }),
         fold(&ys, f64::max, f64::NEG_INFINITY),
     );
     if x1 - x0 < 1e-12 {

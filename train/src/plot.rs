@@ -1,10 +1,10 @@
 //! Loss-curve PNG of a run (issue 5 item 3): every `metrics.csv` loss column (diagnostics such as the RF's
-//! keyframe fraction left out) and the validation loss against the step, on a log₁₀ y axis, drawn with the
+//! keyframe fraction left out, and the total when it equals the single term) and the validation loss against the step, on a log₁₀ y axis, drawn with the
 //! evaluation crate's plotter (`any4d_eval::plot`, no system fonts).
 
 use std::path::Path;
 
-use any4d_eval::plot::{Series, line_plot};
+use any4d_eval::plot::{Series, line_plot_fit_y};
 
 use crate::error::{Result, TrainError};
 use crate::run_folder::{METRIC_TAIL, read_table};
@@ -26,7 +26,7 @@ pub fn plot_run(metrics: &Path, valid: &Path, out: &Path) -> Result<()> {
     if series.is_empty() {
         return Ok(());
     }
-    line_plot("LOSS CURVES", "STEP", "LOG10 LOSS", &series, out).map_err(|e| TrainError::Other(e.to_string()))
+    line_plot_fit_y("LOSS CURVES", "STEP", "LOG10 LOSS", &series, out).map_err(|e| TrainError::Other(e.to_string()))
 }
 
 /// The curves of [`plot_run`]: each loss column, then `valid`; empty curves dropped.
@@ -34,8 +34,16 @@ fn loss_series(metrics: &Path, valid: &Path) -> Result<Vec<Series>> {
     let table = read_table(metrics)?;
     let n_loss_cols = table.header.len().saturating_sub(1 + METRIC_TAIL.len() - 1);
     let mut series = Vec::new();
+    let names = &table.header[1..=n_loss_cols];
+    // With a single loss term the total equals it: draw the term only.
+    let single_term = names
+        .iter()
+        .filter(|n| *n != "loss" && !NOT_LOSSES.contains(&n.as_str()))
+        .count()
+        == 1;
     for col in 0..n_loss_cols {
-        if NOT_LOSSES.contains(&table.header[col + 1].as_str()) {
+        let name = names[col].as_str();
+        if NOT_LOSSES.contains(&name) || (single_term && name == "loss") {
             continue;
         }
         series.push(Series {
@@ -79,6 +87,13 @@ mod tests {
             .into_iter()
             .map(|s| s.label)
             .collect();
-        assert_eq!(labels, ["rf", "loss"]);
+        assert_eq!(
+            labels,
+            ["rf"],
+            "the total equals the single term and kf_frac is no loss"
+        );
+        let out = dir.path().join("loss.png");
+        plot_run(&run.path(METRICS_FILE), &run.path(VALID_FILE), &out).unwrap();
+        assert!(out.is_file());
     }
 }
