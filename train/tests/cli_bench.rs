@@ -1,21 +1,9 @@
 //! `any4d bench train` run as a user would: the built binary, its exit code and its output.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn any4d(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_any4d"))
-        .args(args)
-        .output()
-        .expect("the any4d binary runs")
-}
-
-fn text(out: &Output) -> (String, String) {
-    (
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+mod common;
+use common::{any4d, text};
 
 fn preset(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)

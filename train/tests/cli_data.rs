@@ -1,24 +1,12 @@
 //! `any4d data …` and `any4d bench data` run as a user would: the built binary, its exit code and its output.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
 use any4d_data::Clip;
 use any4d_data::formats;
 
-fn any4d(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_any4d"))
-        .args(args)
-        .output()
-        .expect("the any4d binary runs")
-}
-
-fn text(out: &Output) -> (String, String) {
-    (
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+mod common;
+use common::{any4d, text};
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()

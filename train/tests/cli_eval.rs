@@ -2,10 +2,13 @@
 //! `any4d_data::formats::write_clip`, checks the JSON and table outputs and the errors on malformed input.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
 use any4d_data::Clip;
 use any4d_data::formats::write_clip;
+
+mod common;
+use common::any4d;
 
 const FRAMES: usize = 16;
 
@@ -41,13 +44,6 @@ fn write(dir: &Path, name: &str, vertices: Vec<[f32; 3]>, n: usize) -> PathBuf {
     .expect("valid test clip");
     write_clip(&path, &clip).expect("write test clip");
     path
-}
-
-fn any4d(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_any4d"))
-        .args(args)
-        .output()
-        .expect("run the any4d binary")
 }
 
 /// A prediction of `pred_n` vertices shifted by (d, 0, 0) and a ground truth of `gt_n` vertices (see [`clips`]),

@@ -4,6 +4,7 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard};
 
@@ -226,4 +227,20 @@ pub fn toy_configs(steps: u64) -> (TrainConfig, OptimConfig) {
         grad_clip: 1.0,
     };
     (train, optim)
+}
+
+/// Runs the built `any4d` binary with `args` and waits for it.
+pub fn any4d(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_any4d"))
+        .args(args)
+        .output()
+        .expect("the any4d binary runs")
+}
+
+/// (stdout, stderr) of a finished command, as text.
+pub fn text(out: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
