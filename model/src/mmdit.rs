@@ -570,44 +570,27 @@ impl Mmdit {
 
 #[cfg(test)]
 mod tests {
-    use burn::module::{ModuleVisitor, Param};
-
     use super::*;
+    use crate::summary::named_params;
 
     /// 2 × Σ (weight-matrix size × the number of times the layer is applied per sample), read from the module's
     /// own 2-D parameters: motion-only layers act on P tokens, the text projection on L, the shared block
     /// layers on S = P + L, the timestep MLP and adaLN once per sample. An unknown 2-D parameter fails the test,
     /// so a Linear added to the network without updating [`MmditConfig::forward_flops`] is caught.
-    struct LinearFlops {
-        path: Vec<String>,
-        tokens: u64,
-        text_len: u64,
-        flops: u64,
-    }
-
-    impl ModuleVisitor for LinearFlops {
-        fn enter_module(&mut self, name: &str, _container_type: &str) {
-            self.path.push(name.to_string());
-        }
-
-        fn exit_module(&mut self, _name: &str, _container_type: &str) {
-            self.path.pop();
-        }
-
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            if D != 2 {
-                return;
-            }
-            let layer = self.path.iter().rev().nth(1).map_or("", String::as_str);
-            let applications = match (self.path[0].as_str(), layer) {
-                ("input_proj" | "output_proj", _) => self.tokens,
-                ("text_proj", _) => self.text_len,
+    fn linear_flops_of_weights(model: &Mmdit, tokens: u64, text_len: u64) -> u64 {
+        let mut flops = 0;
+        for p in named_params(model).into_iter().filter(|p| p.shape.len() == 2) {
+            let layer = p.path.iter().rev().nth(1).map_or("", String::as_str);
+            let applications = match (p.path[0].as_str(), layer) {
+                ("input_proj" | "output_proj", _) => tokens,
+                ("text_proj", _) => text_len,
                 ("time", _) | ("blocks", "ada_motion" | "ada_text") => 1,
-                ("blocks", "qkv" | "proj" | "fc1" | "fc2") => self.tokens + self.text_len,
-                _ => panic!("2-D parameter {} has no FLOP rule", self.path.join(".")),
+                ("blocks", "qkv" | "proj" | "fc1" | "fc2") => tokens + text_len,
+                _ => panic!("2-D parameter {} has no FLOP rule", p.path.join(".")),
             };
-            self.flops += 2 * param.lazy_shape().num_elements() as u64 * applications;
+            flops += 2 * p.numel() as u64 * applications;
         }
+        flops
     }
 
     #[test]
@@ -616,15 +599,9 @@ mod tests {
         let mut other = MmditConfig::tiny();
         (other.kf_mode, other.text_dim, other.blocks, other.width) = (KfMode::None, 12, 3, 24);
         for (cfg, tokens, text_len) in [(MmditConfig::tiny(), 7, 3), (other, 5, 11)] {
-            let mut visitor = LinearFlops {
-                path: Vec::new(),
-                tokens,
-                text_len,
-                flops: 0,
-            };
-            cfg.init(&device).visit(&mut visitor);
+            let weights = linear_flops_of_weights(&cfg.init(&device), tokens, text_len);
             let counted = cfg.forward_flops(tokens as usize, text_len as usize);
-            assert_eq!(counted.linear, visitor.flops, "{cfg:?}");
+            assert_eq!(counted.linear, weights, "{cfg:?}");
         }
     }
 

@@ -7,44 +7,61 @@ use burn::prelude::*;
 /// Name of the last row of [`param_report`].
 pub const TOTAL: &str = "total";
 
-/// Collects element counts keyed by the first path component.
-#[derive(Default)]
-struct TopLevelCounter {
-    path: Vec<String>,
-    rows: Vec<(String, usize)>,
+/// One float parameter: the names of the modules and fields leading to it (`["blocks", "0", "qkv", "weight"]`)
+/// and its shape.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NamedParam {
+    /// Module and field names from the root down to the parameter.
+    pub path: Vec<String>,
+    /// Its shape.
+    pub shape: Vec<usize>,
 }
 
-impl TopLevelCounter {
-    fn add(&mut self, count: usize) {
-        let name = self.path.first().cloned().unwrap_or_else(|| "(root)".to_string());
-        match self.rows.iter_mut().find(|(n, _)| *n == name) {
-            Some((_, total)) => *total += count,
-            None => self.rows.push((name, count)),
+impl NamedParam {
+    /// Number of elements.
+    pub fn numel(&self) -> usize {
+        self.shape.iter().product()
+    }
+}
+
+/// Every float parameter of `module`, in visiting (declaration) order.
+pub fn named_params<M: Module>(module: &M) -> Vec<NamedParam> {
+    #[derive(Default)]
+    struct Collect {
+        path: Vec<String>,
+        params: Vec<NamedParam>,
+    }
+    impl ModuleVisitor for Collect {
+        fn enter_module(&mut self, name: &str, _container_type: &str) {
+            self.path.push(name.to_string());
+        }
+        fn exit_module(&mut self, _name: &str, _container_type: &str) {
+            self.path.pop();
+        }
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            self.params.push(NamedParam {
+                path: self.path.clone(),
+                shape: param.lazy_shape().dims::<D>().to_vec(),
+            });
         }
     }
-}
-
-impl ModuleVisitor for TopLevelCounter {
-    fn enter_module(&mut self, name: &str, _container_type: &str) {
-        self.path.push(name.to_string());
-    }
-
-    fn exit_module(&mut self, _name: &str, _container_type: &str) {
-        self.path.pop();
-    }
-
-    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-        self.add(param.lazy_shape().num_elements());
-    }
+    let mut c = Collect::default();
+    module.visit(&mut c);
+    c.params
 }
 
 /// Float parameter counts per top-level submodule, in declaration order, followed by `("total", sum)`.
 /// Vectors of blocks count as one submodule (e.g. `blocks`).
 pub fn param_report<M: Module>(module: &M) -> Vec<(String, usize)> {
-    let mut counter = TopLevelCounter::default();
-    module.visit(&mut counter);
-    let total = counter.rows.iter().map(|(_, n)| n).sum();
-    let mut rows = counter.rows;
+    let mut rows: Vec<(String, usize)> = Vec::new();
+    for p in named_params(module) {
+        let name = p.path.first().cloned().unwrap_or_else(|| "(root)".to_string());
+        match rows.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, total)) => *total += p.numel(),
+            None => rows.push((name, p.numel())),
+        }
+    }
+    let total = rows.iter().map(|(_, n)| n).sum();
     rows.push((TOTAL.to_string(), total));
     rows
 }

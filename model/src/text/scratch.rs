@@ -17,6 +17,8 @@ use tokenizers::normalizers::BertNormalizer;
 use tokenizers::pre_tokenizers::bert::BertPreTokenizer;
 use tokenizers::{AddedToken, Tokenizer};
 
+use crate::mmdit::FlopCount;
+
 use super::{PaddedIds, TextBatch, TextEncoder, TextError, load_tokenizer, pad_batch, text_self_attention};
 
 /// File name of the trained tokenizer inside its folder.
@@ -117,6 +119,17 @@ pub struct ScratchTextConfig {
 }
 
 impl ScratchTextConfig {
+    /// Model FLOPs of one forward pass for one caption of `max_len` tokens, counted as in
+    /// [`crate::mmdit::MmditConfig::forward_flops`]: per layer 2·L·(3W² + W² + 4W² + 4W²) for qkv, out, fc1,
+    /// fc2, and 2·2·L²·W for the attention; the embedding lookups are not counted.
+    pub fn forward_flops(&self) -> FlopCount {
+        let [layers, l, w] = [self.layers, self.max_len, self.width].map(|x| x as u64);
+        FlopCount {
+            linear: layers * 2 * l * (3 * w * w + w * w + 4 * w * w + 4 * w * w),
+            attention: layers * 2 * 2 * l * l * w,
+        }
+    }
+
     /// Builds the module (token and learned position embeddings N(0, 0.02²), pre-LN layers).
     pub fn init(&self, device: &Device) -> ScratchTextModel {
         let emb_init = Initializer::Normal { mean: 0.0, std: 0.02 };
@@ -216,5 +229,35 @@ impl TextEncoder for ScratchTextEncoder {
 
     fn max_len(&self) -> usize {
         self.model.max_len
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::summary::named_params;
+
+    #[test]
+    fn linear_flops_match_the_weights_of_the_initialised_encoder() {
+        let cfg = ScratchTextConfig {
+            vocab_size: 11,
+            width: 16,
+            layers: 3,
+            heads: 4,
+            max_len: 7,
+        };
+        // 2 × Σ (2-D weight size × L) over the layers' Linear weights; embeddings are lookups, not products.
+        let mut weights = 0u64;
+        for p in named_params(&cfg.init(&Device::flex())) {
+            match (p.shape.len(), p.path[0].as_str()) {
+                (2, "layers") => weights += 2 * p.numel() as u64 * 7,
+                (2, "token_embedding" | "position_embedding") | (1, _) => {}
+                _ => panic!("parameter {} has no FLOP rule", p.path.join(".")),
+            }
+        }
+        let flops = cfg.forward_flops();
+        assert_eq!(flops.linear, weights);
+        // 3 layers × (QKᵀ 2·7·7·16 + softmax·V 2·7·7·16).
+        assert_eq!(flops.attention, 3 * 4 * 49 * 16);
     }
 }

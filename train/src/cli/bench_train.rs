@@ -8,9 +8,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use any4d_data::store::DEFAULT_P;
-use any4d_model::mmdit::FlopCount;
 use any4d_model::rectified_flow::{RfBatch, rf_training_loss};
-use any4d_model::text::scratch::ScratchTextConfig;
 use anyhow::{Context, bail};
 use burn::optim::GradientsParams;
 use burn::prelude::{Bool, Device, Int, Tensor, TensorData};
@@ -102,20 +100,6 @@ impl Preset {
 
 // ---------------------------------------------------------------------------------------------------------------
 // RF presets
-
-/// Model FLOPs of one forward pass of the scratch caption transformer for one caption of `cfg.max_len` tokens
-/// (trained jointly with the MMDiT, so part of the RF step), counted as in [`MmditConfig::forward_flops`]:
-/// per layer 2·L·(3W² + W² + 4W² + 4W²) for qkv, out, fc1, fc2, and 2·2·L²·W for the attention; the
-/// embedding lookups are not counted.
-///
-/// [`MmditConfig::forward_flops`]: any4d_model::mmdit::MmditConfig::forward_flops
-pub fn scratch_text_flops(cfg: &ScratchTextConfig) -> FlopCount {
-    let [layers, l, w] = [cfg.layers, cfg.max_len, cfg.width].map(|x| x as u64);
-    FlopCount {
-        linear: layers * 2 * l * (3 * w * w + w * w + 4 * w * w + 4 * w * w),
-        attention: layers * 2 * 2 * l * l * w,
-    }
-}
 
 /// Sizes of the timed RF batch.
 #[derive(Clone, Copy, Debug)]
@@ -234,7 +218,11 @@ fn bench_rf(args: &BenchArgs, cfg: &RfRunConfig) -> anyhow::Result<ExitCode> {
     }
     let precision = args.precision.unwrap_or(cfg.device.precision);
     let mmdit = cfg.model.forward_flops(shape.tokens, shape.text_len).training_step();
-    let text = scratch_text_flops(&cfg.model_config(cfg.text.vocab_size).text).training_step();
+    let text = cfg
+        .model_config(cfg.text.vocab_size)
+        .text
+        .forward_flops()
+        .training_step();
     let step_flops = (mmdit + text) as f64 * shape.batch as f64;
     if cfg!(debug_assertions) {
         println!(
@@ -378,55 +366,7 @@ fn tempfile_dir() -> anyhow::Result<PathBuf> {
 
 #[cfg(test)]
 mod tests {
-    use burn::module::{Module, ModuleVisitor, Param};
-
     use super::*;
-
-    /// 2 × Σ (2-D weight size × L) over the transformer's Linear layers, the embeddings left out.
-    struct LinearFlops {
-        path: Vec<String>,
-        text_len: u64,
-        flops: u64,
-    }
-
-    impl ModuleVisitor for LinearFlops {
-        fn enter_module(&mut self, name: &str, _container_type: &str) {
-            self.path.push(name.to_string());
-        }
-
-        fn exit_module(&mut self, _name: &str, _container_type: &str) {
-            self.path.pop();
-        }
-
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            match (D, self.path.first().map(String::as_str)) {
-                (2, Some("layers")) => self.flops += 2 * param.lazy_shape().num_elements() as u64 * self.text_len,
-                (2, Some("token_embedding" | "position_embedding")) | (1, _) => {}
-                _ => panic!("parameter {} has no FLOP rule", self.path.join(".")),
-            }
-        }
-    }
-
-    #[test]
-    fn text_encoder_linear_flops_match_its_weights() {
-        let cfg = ScratchTextConfig {
-            vocab_size: 11,
-            width: 16,
-            layers: 3,
-            heads: 4,
-            max_len: 7,
-        };
-        let mut visitor = LinearFlops {
-            path: Vec::new(),
-            text_len: 7,
-            flops: 0,
-        };
-        cfg.init(&Device::flex()).visit(&mut visitor);
-        let flops = scratch_text_flops(&cfg);
-        assert_eq!(flops.linear, visitor.flops);
-        // 3 layers × (QKᵀ 2·7·7·16 + softmax·V 2·7·7·16).
-        assert_eq!(flops.attention, 3 * 4 * 49 * 16);
-    }
 
     #[test]
     fn rf_steps_run_and_are_timed() {
