@@ -30,7 +30,7 @@ use crate::loop_common::{LoopSetup, Objective, Outcome, StepGradients, StepLosse
 use crate::run_folder::{CHECKPOINTS_DIR, RunFolder, write_atomic};
 use crate::vae_loop::{
     LATENT_STATS_FILE, MeshVae, StoredLatentStats, VaeModelConfig, VaeObjective, VaeRunConfig, VaeRunOptions,
-    latent_stats,
+    check_store, latent_stats,
 };
 
 /// One entry of `--devices`: a backend and a device index (`flex`, `ndarray`, `cuda:1`, `vulkan:0`).
@@ -320,7 +320,7 @@ pub fn train_vae_data_parallel(
     parallel: &Parallel,
 ) -> Result<(RunFolder, Outcome)> {
     let plain = parallel.plain_devices(cfg.device.precision)?;
-    Store::open(&opts.data).map_err(|e| TrainError::Other(format!("{}: {e}", opts.data.display())))?;
+    check_store(cfg, &opts.data)?;
     let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &["rec", "kl"])?;
     let outcome = run_vae(cfg, &run, opts, plain, parallel.strategy, None)?;
     Ok((run, outcome))
@@ -372,7 +372,7 @@ fn fit_vae<V: MeshVae>(
 where
     VaeObjective<V>: Sync,
 {
-    let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch)?;
+    let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch, cfg.vae.train_frames)?;
     run.log(&format!(
         "VAE {:?} on {}, data-parallel over {} devices ({strategy:?})",
         cfg.vae.kind,

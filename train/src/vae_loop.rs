@@ -10,7 +10,7 @@ use any4d_data::store::{Split, Store, StoredClip};
 use any4d_model::dymesh_vae::DyMeshVaeConfig;
 use any4d_model::frame_vae::{EdgeList, FrameVaeConfig, MeshVaeModel, VaeBatch, VaeEncoding, VaeLoss};
 use any4d_model::latent_stats::{LatentStats, LatentStatsAccumulator};
-use burn::prelude::{Device, Tensor};
+use burn::prelude::{Device, Int, Tensor, TensorData};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -40,6 +40,11 @@ pub enum VaeKind {
 pub struct VaeSection {
     /// Which VAE the `[model]` table configures.
     pub kind: VaeKind,
+    /// Frames of each clip in a training micro-batch: 0 = all T (SPEC §3.5); k ≥ 2 = frame 0 (the reference) and
+    /// k − 1 other frames drawn without replacement for each micro-batch. The frame-wise VAE encodes and decodes
+    /// frames independently (SPEC §3.1), so this trades frames per step for steps per second; the sequence-wise
+    /// VAE needs whole clips (0 only). Validation always uses every frame.
+    pub train_frames: usize,
 }
 
 /// The model configuration, by kind.
@@ -86,6 +91,20 @@ impl VaeRunConfig {
         };
         t.train.validate(file)?;
         t.optim.validate(file)?;
+        let bad = |reason: String| TrainError::Config {
+            path: file.to_path_buf(),
+            reason: format!("vae.train_frames = {}: {reason}", t.vae.train_frames),
+        };
+        match (t.vae.kind, t.vae.train_frames) {
+            (_, 0) => {}
+            (VaeKind::Sequencewise, _) => return Err(bad("the sequence-wise VAE encodes whole clips; use 0".into())),
+            (VaeKind::Framewise, 1) => {
+                return Err(bad(
+                    "frame 0 alone has no motion; use 0 (all frames) or at least 2".into()
+                ));
+            }
+            (VaeKind::Framewise, _) => {}
+        }
         Ok(VaeRunConfig {
             vae: t.vae,
             model,
@@ -171,13 +190,16 @@ pub struct VaeObjective<V> {
     train: Vec<usize>,
     valid: Vec<usize>,
     micro_batch: usize,
+    /// `vae.train_frames` (0 = all).
+    train_frames: usize,
     _vae: std::marker::PhantomData<V>,
 }
 
 impl<V> VaeObjective<V> {
-    /// Serves the train split of the store in `data`, validating on its val split.
-    pub fn new(data: &Path, micro_batch: usize) -> Result<Self> {
-        let store = Store::open(data).map_err(|e| TrainError::Other(e.to_string()))?;
+    /// Serves the train split of the store in `data`, validating on its val split; training micro-batches keep
+    /// `train_frames` frames per clip (0 = all; see [`VaeSection::train_frames`]).
+    pub fn new(data: &Path, micro_batch: usize, train_frames: usize) -> Result<Self> {
+        let store = open_store(data, train_frames)?;
         let train = store.indices(Split::Train);
         let valid = store.indices(Split::Val);
         Ok(VaeObjective {
@@ -185,9 +207,39 @@ impl<V> VaeObjective<V> {
             train,
             valid,
             micro_batch,
+            train_frames,
             _vae: std::marker::PhantomData,
         })
     }
+}
+
+/// Opens the store in `data` and checks that its clips have at least `train_frames` frames.
+fn open_store(data: &Path, train_frames: usize) -> Result<Store> {
+    let store = Store::open(data).map_err(|e| TrainError::Other(format!("{}: {e}", data.display())))?;
+    if train_frames > store.frames() {
+        return Err(TrainError::Other(format!(
+            "vae.train_frames = {train_frames} but the store {} holds {}-frame clips",
+            data.display(),
+            store.frames()
+        )));
+    }
+    Ok(store)
+}
+
+/// Fails before a run folder is claimed when the store in `data` cannot serve `cfg`.
+pub(crate) fn check_store(cfg: &VaeRunConfig, data: &Path) -> Result<()> {
+    open_store(data, cfg.vae.train_frames).map(|_| ())
+}
+
+/// Frame 0 and `k − 1` distinct frames of `1..t` in increasing order, drawn from `rng`; all `t` frames when `k` is
+/// 0 or at least `t`.
+pub fn training_frames(t: usize, k: usize, rng: &mut ChaCha8Rng) -> Vec<usize> {
+    if k == 0 || k >= t {
+        return (0..t).collect();
+    }
+    let mut rest = rand::seq::index::sample(rng, t - 1, k - 1).into_vec();
+    rest.sort_unstable();
+    std::iter::once(0).chain(rest.into_iter().map(|f| f + 1)).collect()
 }
 
 impl<V: MeshVae> Objective for VaeObjective<V> {
@@ -201,9 +253,16 @@ impl<V: MeshVae> Objective for VaeObjective<V> {
         self.train.len()
     }
 
-    fn loss(&self, model: &V, idx: &[usize], _rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
+    fn loss(&self, model: &V, idx: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
         let ids: Vec<usize> = idx.iter().map(|&i| self.train[i]).collect();
-        let (clips, _) = load_clips(&self.store, &ids, device)?;
+        let (mut clips, _) = load_clips(&self.store, &ids, device)?;
+        let t = clips.vertices.dims()[1];
+        if self.train_frames != 0 && self.train_frames < t {
+            let frames = training_frames(t, self.train_frames, rng);
+            let frames: Vec<i64> = frames.into_iter().map(|f| f as i64).collect();
+            let index = Tensor::<1, Int>::from_data(TensorData::new(frames, [self.train_frames]), device);
+            clips.vertices = clips.vertices.select(1, index);
+        }
         let l = model.vae_loss(&vae_batch(&clips, device)?); // (V1)–(V3)
         Ok(Losses {
             total: l.total,
@@ -274,7 +333,7 @@ pub struct VaeRunOptions {
 pub fn train_vae(cfg: &VaeRunConfig, opts: &VaeRunOptions) -> Result<(RunFolder, Outcome)> {
     // Fail before claiming a run folder when the backend or the store is unusable.
     backend::check(cfg.device.backend, cfg.device.precision)?;
-    Store::open(&opts.data).map_err(|e| TrainError::Other(e.to_string()))?;
+    check_store(cfg, &opts.data)?;
     let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &["rec", "kl"])?;
     let outcome = run_vae(cfg, &run, opts, None)?;
     Ok((run, outcome))
@@ -315,7 +374,7 @@ fn fit<V: MeshVae>(
     resume: Option<PathBuf>,
     device: &Device,
 ) -> Result<Outcome> {
-    let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch)?;
+    let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch, cfg.vae.train_frames)?;
     run.log(&format!(
         "VAE {:?} on {} ({} train / {} val clips), backend {}",
         cfg.vae.kind,

@@ -64,7 +64,7 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
         let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
         dev.seed(cfg.train.seed);
         let model = m.init(&dev);
-        let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch).unwrap();
+        let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch, cfg.vae.train_frames).unwrap();
         train(&objective, model, quiet_setup(run, &cfg.train, &cfg.optim, dev, resume)).unwrap()
     };
     let runs = dir.path().join("runs");
@@ -80,5 +80,51 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
         params(&straight),
         params(&resumed),
         "resumed VAE differs from straight training"
+    );
+}
+
+#[test]
+fn training_on_a_subset_of_frames_draws_frame_0_and_distinct_others() {
+    use any4d_train::vae_loop::training_frames;
+    use rand::SeedableRng;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    assert_eq!(training_frames(16, 0, &mut rng), (0..16).collect::<Vec<_>>());
+    assert_eq!(training_frames(4, 4, &mut rng), vec![0, 1, 2, 3]);
+    let mut seen = [false; 16];
+    for _ in 0..50 {
+        let f = training_frames(16, 4, &mut rng);
+        assert_eq!(f.len(), 4);
+        assert_eq!(f[0], 0, "{f:?}");
+        assert!(f.windows(2).all(|w| w[0] < w[1]) && f[3] < 16, "{f:?}");
+        f.iter().for_each(|&i| seen[i] = true);
+    }
+    assert!(seen.iter().all(|&s| s), "some frame was never drawn: {seen:?}");
+}
+
+#[test]
+fn tiny_vae_trains_on_two_frames_per_clip_and_validates_on_all() {
+    let _g = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let data = synth_store(dir.path(), 3);
+    let mut cfg = tiny(4);
+    cfg.vae.train_frames = 2;
+    let opts = VaeRunOptions {
+        data: data.clone(),
+        runs_dir: dir.path().join("runs"),
+        name: "vae".into(),
+        progress: ProgressMode::Quiet,
+        stop: StopFlag::new(),
+    };
+    let (run, outcome) = train_vae(&cfg, &opts).unwrap();
+    assert!(matches!(outcome, Outcome::Finished { steps: 4, .. }), "{outcome:?}");
+    let t = read_table(&run.path(METRICS_FILE)).unwrap();
+    assert!(t.rows.iter().all(|r| r.1.iter().all(|v| v.is_finite())), "{t:?}");
+    // More frames than the clips have is an error naming the key.
+    cfg.vae.train_frames = 5;
+    let err = train_vae(&cfg, &opts).unwrap_err().to_string();
+    assert!(err.contains("vae.train_frames = 5") && err.contains("4-frame"), "{err}");
+    assert!(
+        !dir.path().join("runs/vae-2").exists(),
+        "a run folder was claimed by a run that cannot start"
     );
 }
