@@ -102,6 +102,9 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
     let mut base_cfg = RfRunConfig::parse(BASELINE_TINY, Path::new("configs/rf/baseline_tiny.toml"))?;
     if let Some(n) = opts.vae_steps {
         vae_cfg.train.duration = Duration::Steps(n);
+        // Four validations (each encodes every frame of the VAL clips, the slow part of a short run).
+        vae_cfg.train.valid_every = (n / 4).max(1);
+        vae_cfg.train.checkpoint_every = (n / 4).max(1);
     }
     if let Some(n) = opts.rf_steps {
         rf_cfg.train.duration = Duration::Steps(n);

@@ -23,7 +23,7 @@ pub struct QuickstartArgs {
     #[arg(long, default_value_t = 768)]
     pub max_vertices: usize,
     /// VAE optimiser steps (the quickstart's time budget; the tiny preset itself says 60).
-    #[arg(long, default_value_t = 80)]
+    #[arg(long, default_value_t = 280)]
     pub vae_steps: u64,
     /// Optimiser steps of each RF (the quickstart's time budget; the tiny preset itself says 60).
     #[arg(long, default_value_t = 300)]
