@@ -65,8 +65,8 @@ fn typos_and_omissions_are_rejected_in_every_table() {
         ("keep_last = 3", "keep_lats = 3", "keep_lats"), // [train]
         ("grad_clip = 1.0", "grad_clip = 0.0", "optim"), // out of range
         ("kind = \"framewise\"", "kind = \"framewize\"", "framewize"),
-        ("train_frames = 0", "train_frames = 1", "vae.train_frames = 1"), // frame 0 alone
-        ("train_frames = 0", "train_frames = -2", "train_frames"),        // not a count
+        ("train_frames = 4", "train_frames = 1", "vae.train_frames = 1"), // frame 0 alone
+        ("train_frames = 4", "train_frames = -2", "train_frames"),        // not a count
     ] {
         assert!(text.contains(from), "{from}");
         let err = parse_any(&text.replacen(from, to, 1), &vae).unwrap_err();

@@ -1,0 +1,231 @@
+//! `configs/rf/*.toml`: the run config of the keyframe RF (`[model]`, `[rf]`, `[text]`, `[train]`, `[optim]`,
+//! `[device]`), parsed strictly.
+
+use std::path::Path;
+
+use any4d_model::mmdit::MmditConfig;
+use any4d_model::rectified_flow::{KeyframeLoss, RfLossOptions, TauSampler};
+use any4d_model::text::scratch::ScratchTextConfig;
+use serde::{Deserialize, Serialize};
+
+use crate::config::{DeviceConfig, OptimConfig, TrainConfig, parse_strict, to_toml};
+use crate::error::{Result, TrainError, io_err};
+
+use super::*;
+
+/// How the keyframe set of a training sample is drawn (SPEC §4.5, §5.4, §8 X3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum KfSampler {
+    /// k ~ Unif{0..=k_max}, a uniform k-subset of the T frames (paper, k_max = 5).
+    Random,
+    /// SceneMI: k ~ Unif{2..=T}, first and last always included.
+    Scenemi,
+}
+
+/// Which VAE latent trains the RF (SPEC §3.4: statistics over posterior samples).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LatentDraw {
+    /// z = μ + σξ, a fresh posterior sample every time a clip enters a batch.
+    Sample,
+    /// z = μ.
+    Mean,
+}
+
+/// Where the frozen-VAE latents live during training.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LatentCache {
+    /// Encode every clip once at run start and keep z₀, μ and log σ² in host memory: P·C·(1 + 2T) floats per clip
+    /// (811 KB at the paper's P = 512, C = 12, T = 16, so about 169 GB for 208K clips).
+    Memory,
+    /// Encode each micro-batch with the frozen VAE when it is drawn: no memory, one VAE forward per batch.
+    PerBatch,
+}
+
+/// The `[rf]` table: options of the RF objective.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RfSection {
+    /// Keyframe sampler in training.
+    pub kf_sampler: KfSampler,
+    /// Largest k of the random sampler (SPEC §4.5: 5).
+    pub k_max: usize,
+    /// τ distribution (SPEC §4.5 step 4: uniform; AAM: cosmap).
+    pub tau_sampler: TauSampler,
+    /// Which slots enter (R5) (SPEC §4.2: all).
+    pub keyframe_loss: KeyframeLoss,
+    /// τ* of (R9) for `kf_mode = "impute_until"` (SPEC §5.4: 0.98).
+    pub tau_star: f64,
+    /// Std of the keyframe vertex noise per unit l ~ U(0, 1) for `impute_until` (SPEC §5.4: 0.02).
+    pub keyframe_noise: f64,
+    /// Probability of dropping the caption for CFG (SPEC §4.4: 0.1).
+    pub text_dropout: f64,
+    /// Posterior sample or mean as the RF's target latent.
+    pub latent: LatentDraw,
+    /// Frozen-VAE latents cached in memory or encoded per batch.
+    pub latent_cache: LatentCache,
+    /// Validation sampling (issue 5 item 4) at every validation whose step is a multiple of this, and at the
+    /// last step; 0 = off. A multiple of `train.valid_every`.
+    pub valid_sample_every: u64,
+    /// VAL clips sampled (the first ones in store order, the same every time).
+    pub valid_sample_clips: usize,
+    /// Grid points over [0, 1] of the validation sampler (SPEC §4.6: 64, midpoint solver).
+    pub valid_sample_grid: usize,
+}
+
+/// Which caption encoder the RF trains with (SPEC §4.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TextEncoderKind {
+    /// WordPiece tokenizer trained on the TRAIN captions + a small transformer trained jointly with the RF.
+    /// (The CLIP and BERT loaders of the model crate are not wired into training yet.)
+    Scratch,
+}
+
+/// The `[text]` table: the caption encoder. Its width is `model.text_dim`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TextSection {
+    /// Encoder kind.
+    pub encoder: TextEncoderKind,
+    /// Largest tokenizer vocabulary (special tokens included); the trained one may be smaller.
+    pub vocab_size: usize,
+    /// Transformer layers.
+    pub layers: usize,
+    /// Attention heads; must divide `model.text_dim`.
+    pub heads: usize,
+    /// Tokens L per caption (SPEC §1.1: 77).
+    pub max_len: usize,
+}
+
+/// A whole `configs/rf/*.toml` run config.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RfRunConfig {
+    /// `[model]`: the MMDiT (strict serde struct of the model crate).
+    pub model: MmditConfig,
+    /// `[rf]`.
+    pub rf: RfSection,
+    /// `[text]`.
+    pub text: TextSection,
+    /// `[train]`.
+    pub train: TrainConfig,
+    /// `[optim]`.
+    pub optim: OptimConfig,
+    /// `[device]`.
+    pub device: DeviceConfig,
+}
+
+impl RfRunConfig {
+    /// Parses and validates an RF run config; unknown or missing keys anywhere are errors naming `file`.
+    pub fn parse(text: &str, file: &Path) -> Result<Self> {
+        let cfg: RfRunConfig = parse_strict(text, file)?;
+        let bad = |reason: String| TrainError::Config {
+            path: file.to_path_buf(),
+            reason,
+        };
+        cfg.model.validate().map_err(bad)?;
+        cfg.train.validate(file)?;
+        cfg.optim.validate(file)?;
+        let rf = &cfg.rf;
+        if !(0.0..=1.0).contains(&rf.text_dropout) {
+            return Err(bad(format!("rf.text_dropout {} is outside [0, 1]", rf.text_dropout)));
+        }
+        if !(0.0..=1.0).contains(&rf.tau_star) {
+            return Err(bad(format!("rf.tau_star {} is outside [0, 1]", rf.tau_star)));
+        }
+        if !(rf.keyframe_noise >= 0.0 && rf.keyframe_noise.is_finite()) {
+            return Err(bad(format!(
+                "rf.keyframe_noise {} must be finite and non-negative",
+                rf.keyframe_noise
+            )));
+        }
+        if rf.k_max > cfg.model.frames {
+            return Err(bad(format!(
+                "rf.k_max {} exceeds model.frames {}",
+                rf.k_max, cfg.model.frames
+            )));
+        }
+        if rf.kf_sampler == KfSampler::Scenemi && cfg.model.frames < 2 {
+            return Err(bad(format!(
+                "rf.kf_sampler = \"scenemi\" keeps the first and last frames: needs model.frames ≥ 2, got {}",
+                cfg.model.frames
+            )));
+        }
+        if rf.valid_sample_every > 0 {
+            if !rf.valid_sample_every.is_multiple_of(cfg.train.valid_every) {
+                return Err(bad(format!(
+                    "rf.valid_sample_every {} must be a multiple of train.valid_every {} (samples are drawn at \
+                     validations), or 0 for off",
+                    rf.valid_sample_every, cfg.train.valid_every
+                )));
+            }
+            if rf.valid_sample_clips == 0 {
+                return Err(bad("rf.valid_sample_clips must be positive when sampling is on".into()));
+            }
+            if rf.valid_sample_grid < 2 {
+                return Err(bad(format!(
+                    "rf.valid_sample_grid {} must be at least 2",
+                    rf.valid_sample_grid
+                )));
+            }
+            VALID_SAMPLE_KEYFRAMES
+                .check(cfg.model.frames)
+                .map_err(|e| bad(format!("rf.valid_sample_every > 0 needs model.frames ≥ 3: {e}")))?;
+        }
+        let t = &cfg.text;
+        for (name, value) in [
+            ("vocab_size", t.vocab_size),
+            ("layers", t.layers),
+            ("heads", t.heads),
+            ("max_len", t.max_len),
+        ] {
+            if value == 0 {
+                return Err(bad(format!("text.{name} must be positive, got 0")));
+            }
+        }
+        if !cfg.model.text_dim.is_multiple_of(t.heads) {
+            return Err(bad(format!(
+                "text.heads ({}) must divide model.text_dim ({})",
+                t.heads, cfg.model.text_dim
+            )));
+        }
+        Ok(cfg)
+    }
+
+    /// Reads a config file.
+    pub fn load(file: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(file).map_err(io_err("read config", file))?;
+        Self::parse(&text, file)
+    }
+
+    /// The fully resolved config as TOML.
+    pub fn to_toml(&self) -> Result<String> {
+        to_toml(self)
+    }
+
+    /// The network of this config for a trained tokenizer of `vocab_size` tokens.
+    pub fn model_config(&self, vocab_size: usize) -> RfModelConfig {
+        RfModelConfig {
+            mmdit: self.model.clone(),
+            text: ScratchTextConfig {
+                vocab_size,
+                width: self.model.text_dim,
+                layers: self.text.layers,
+                heads: self.text.heads,
+                max_len: self.text.max_len,
+            },
+        }
+    }
+
+    /// The options of (R5) for this config.
+    pub fn loss_options(&self) -> RfLossOptions {
+        RfLossOptions {
+            kf_mode: self.model.kf_mode,
+            keyframe_loss: self.rf.keyframe_loss,
+            tau_star: self.rf.tau_star,
+        }
+    }
+}

@@ -1,0 +1,168 @@
+//! `any4d train rf`: new runs and `--resume`, on one device or data-parallel.
+
+use std::path::{Path, PathBuf};
+
+use any4d_data::store::{Split, Store};
+use any4d_model::text::scratch::ScratchTokenizer;
+use burn::prelude::Device;
+
+use crate::backend;
+use crate::error::{Result, TrainError, io_err};
+use crate::loop_common::{self, LoopSetup, Objective, Outcome, StopFlag};
+use crate::multi_device::{Parallel, train_data_parallel};
+use crate::progress::ProgressMode;
+use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder};
+use crate::runs::{self, LoadedVae, VaeRunRecord};
+
+use super::objective::{check_compatible, open_store};
+use super::*;
+
+/// Options of `any4d train rf` besides the config.
+pub struct RfRunOptions {
+    /// Store folder (`--data`).
+    pub data: PathBuf,
+    /// The frozen VAE's run folder (`--vae`): required for a new run; for `--resume` it may be omitted (the run
+    /// folder records it) and must otherwise name the same run.
+    pub vae_run: Option<PathBuf>,
+    /// Folder that holds run folders.
+    pub runs_dir: PathBuf,
+    /// Run name.
+    pub name: String,
+    /// Progress display.
+    pub progress: ProgressMode,
+    /// Ctrl-C flag.
+    pub stop: StopFlag,
+    /// Data-parallel devices (`--devices`, `--strategy`); `None` trains on `[device] backend`.
+    pub parallel: Option<Parallel>,
+}
+
+/// The plain devices a run trains on: `opts.parallel`'s, or the one of `[device] backend`. Fails before a run
+/// folder is claimed when a backend is not in this binary.
+fn run_devices(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<Vec<Device>> {
+    match &opts.parallel {
+        Some(p) => p.plain_devices(cfg.device.precision),
+        None => {
+            backend::check(cfg.device.backend, cfg.device.precision)?;
+            Ok(vec![backend::device(cfg.device.backend, cfg.device.precision)?])
+        }
+    }
+}
+
+/// Starts a new RF run with `cfg` on the frozen VAE of `opts.vae_run`; returns the run folder and the outcome.
+/// The run folder gets `vae_run.json` (which VAE run and checkpoint step) and `tokenizer.json`.
+pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Outcome)> {
+    let vae_dir = opts
+        .vae_run
+        .as_deref()
+        .ok_or_else(|| TrainError::Other("a new RF run needs the VAE run folder (--vae RUN)".into()))?;
+    // Fail before claiming a run folder when the backend, the store or the VAE run is unusable.
+    let devices = run_devices(cfg, opts)?;
+    let store = open_store(&opts.data)?;
+    let vae = runs::load_vae_run(vae_dir, &devices[0])?;
+    check_compatible(cfg, &store, &vae)?;
+    let captions = train_captions(&store)?;
+    let tokenizer =
+        ScratchTokenizer::train(&captions, cfg.text.vocab_size).map_err(|e| TrainError::Other(e.to_string()))?;
+
+    let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &RF_TERMS)?;
+    runs::write_vae_record(&run, &VaeRunRecord::of(&vae)?)?;
+    tokenizer
+        .save(run.root())
+        .map_err(|e| TrainError::Other(e.to_string()))?;
+    run.log(&format!(
+        "tokenizer trained on {} TRAIN captions: {} tokens",
+        captions.len(),
+        tokenizer.vocab_size()
+    ))?;
+    let outcome = run_rf(cfg, &run, opts, &vae, tokenizer, &devices, None)?;
+    Ok((run, outcome))
+}
+
+/// Continues the RF run in `run_dir` from its newest checkpoint (config, tokenizer and VAE run from the run
+/// folder; the backend may be overridden).
+pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRunOptions) -> Result<Outcome> {
+    let run = RunFolder::open(run_dir)?;
+    let mut cfg = RfRunConfig::parse(&run.config_text()?, &run.path(CONFIG_FILE))?;
+    if let Some(b) = backend {
+        cfg.device.backend = b;
+    }
+    let ckpt = crate::checkpoint::latest(&run.path(CHECKPOINTS_DIR))?.ok_or_else(|| TrainError::Checkpoint {
+        path: run_dir.to_path_buf(),
+        reason: "no complete checkpoint to resume".into(),
+    })?;
+    let record = runs::read_vae_record(run_dir)?;
+    if let Some(given) = &opts.vae_run {
+        let given = std::fs::canonicalize(given).map_err(io_err("resolve VAE run folder", given))?;
+        if given != record.run {
+            return Err(TrainError::Other(format!(
+                "--vae {} differs from the VAE run {} that {} was trained on",
+                given.display(),
+                record.run.display(),
+                run_dir.display()
+            )));
+        }
+    }
+    let devices = run_devices(&cfg, opts)?;
+    let vae = record.load(&devices[0])?;
+    let tokenizer = ScratchTokenizer::load(run_dir).map_err(|e| TrainError::Other(e.to_string()))?;
+    run_rf(&cfg, &run, opts, &vae, tokenizer, &devices, Some(ckpt))
+}
+
+fn train_captions(store: &Store) -> Result<Vec<String>> {
+    store
+        .indices(Split::Train)
+        .into_iter()
+        .map(|i| {
+            store
+                .get(i)
+                .map(|c| c.clip.caption)
+                .map_err(|e| TrainError::Other(e.to_string()))
+        })
+        .collect()
+}
+
+fn run_rf(
+    cfg: &RfRunConfig,
+    run: &RunFolder,
+    opts: &RfRunOptions,
+    vae: &LoadedVae,
+    tokenizer: ScratchTokenizer,
+    devices: &[Device],
+    resume: Option<PathBuf>,
+) -> Result<Outcome> {
+    let vocab = tokenizer.vocab_size();
+    let mut objective = RfObjective::new(cfg, &opts.data, vae, tokenizer, &devices[0])?;
+    objective.log_validation_samples(run)?;
+    run.log(&format!(
+        "RF {:?} on {} ({} train / {} val clips, latents {:?}: {:.1} MiB), VAE {} step {}, backend {}",
+        cfg.model.kf_mode,
+        opts.data.display(),
+        objective.train_len(),
+        objective.valid_len(),
+        cfg.rf.latent_cache,
+        objective.cached_bytes() as f64 / (1024.0 * 1024.0),
+        vae.run.display(),
+        vae.step,
+        cfg.device.backend
+    ))?;
+    let ad: Vec<Device> = devices.iter().map(|d| d.clone().autodiff()).collect();
+    ad[0].seed(cfg.train.seed);
+    let model = cfg.model_config(vocab).init(&ad[0]);
+    let setup = LoopSetup {
+        run,
+        train: &cfg.train,
+        optim: &cfg.optim,
+        device: ad[0].clone(),
+        stop: opts.stop.clone(),
+        progress: opts.progress,
+        resume,
+    };
+    let (_, outcome) = match &opts.parallel {
+        Some(p) => {
+            run.log(&format!("data-parallel over {} devices ({:?})", ad.len(), p.strategy))?;
+            train_data_parallel(&objective, model, setup, &ad, p.strategy)?
+        }
+        None => loop_common::train(&objective, model, setup)?,
+    };
+    Ok(outcome)
+}
