@@ -222,7 +222,7 @@ fn time_runs(iters: usize, mut run: impl FnMut()) -> StepTiming {
 }
 
 /// Median of a non-empty list (mean of the two middle values for an even count).
-fn median(values: &[f64]) -> f64 {
+pub fn median(values: &[f64]) -> f64 {
     let mut sorted = values.to_vec();
     sorted.sort_by(f64::total_cmp);
     let n = sorted.len();

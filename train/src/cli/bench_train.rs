@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use any4d_data::store::DEFAULT_P;
 use any4d_model::rectified_flow::{RfBatch, rf_training_loss};
+use any4d_model::summary::median;
 use anyhow::{Context, bail};
 use burn::optim::GradientsParams;
 use burn::prelude::{Bool, Device, Int, Tensor, TensorData};
@@ -276,18 +277,6 @@ fn bench_rf(args: &BenchArgs, cfg: &RfRunConfig) -> anyhow::Result<ExitCode> {
         );
     }
     Ok(ExitCode::SUCCESS)
-}
-
-/// Median of a non-empty list (mean of the two middle values for an even count).
-fn median(values: &[f64]) -> f64 {
-    let mut sorted = values.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let n = sorted.len();
-    if n % 2 == 1 {
-        sorted[n / 2]
-    } else {
-        0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
-    }
 }
 
 // ---------------------------------------------------------------------------------------------------------------
