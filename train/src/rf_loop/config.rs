@@ -11,7 +11,8 @@ use serde::{Deserialize, Serialize};
 use crate::config::{DeviceConfig, OptimConfig, TrainConfig, parse_strict, to_toml};
 use crate::error::{Result, TrainError, io_err};
 
-use super::*;
+use super::VALID_SAMPLE_KEYFRAMES;
+use super::network::RfModelConfig;
 
 /// How the keyframe set of a training sample is drawn (SPEC §4.5, §5.4, §8 X3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

@@ -10,7 +10,7 @@ use rand::seq::SliceRandom;
 
 use crate::error::{Result, TrainError};
 
-use super::*;
+use super::config::{KfSampler, RfSection};
 
 /// Sizes of [`RfModel`].
 #[derive(Clone, Debug, PartialEq)]

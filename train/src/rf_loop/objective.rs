@@ -25,7 +25,10 @@ use crate::run_folder::{RunFolder, SAMPLES_FILE};
 use crate::runs::LoadedVae;
 use crate::vae_loop::{MeshVae, load_clips, vae_batch};
 
-use super::*;
+use super::config::{LatentCache, LatentDraw, RfRunConfig};
+use super::latents::{LatentSet, encode_latents};
+use super::network::{RfModel, draw_keyframe_mask};
+use super::{RF_TERMS, SAMPLE_TERMS, VALID_SAMPLE_KEYFRAMES};
 
 /// Whether a batch applies the CFG caption dropout.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

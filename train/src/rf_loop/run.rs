@@ -14,8 +14,9 @@ use crate::progress::ProgressMode;
 use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 
-use super::objective::{check_compatible, open_store};
-use super::*;
+use super::RF_TERMS;
+use super::config::RfRunConfig;
+use super::objective::{RfObjective, check_compatible, open_store};
 
 /// Options of `any4d train rf` besides the config.
 pub struct RfRunOptions {
