@@ -141,13 +141,7 @@ pub fn time_vae_reconstruct(
     iters: usize,
     device: &Device,
 ) -> Result<StepTiming, String> {
-    use crate::frame_vae::Posterior;
-    let model = cfg.init(device);
-    let vae_batch = synthetic_vae_batch(batch, vertices, tokens, frames, device)?;
-    Ok(time_runs(iters, || {
-        let (recon, _) = model.reconstruct(&vae_batch, Posterior::Mean);
-        let _ = recon.into_data();
-    }))
+    time_reconstruct(&cfg.init(device), batch, vertices, tokens, frames, iters, device)
 }
 
 /// Times sequence-wise DyMeshVAE (SPEC §3.5) encode + decode on the same synthetic clips as
@@ -163,11 +157,22 @@ pub fn time_dymesh_reconstruct(
     iters: usize,
     device: &Device,
 ) -> Result<StepTiming, String> {
-    use crate::frame_vae::Posterior;
-    let model = cfg.init(device);
-    let vae_batch = synthetic_vae_batch(batch, vertices, tokens, cfg.frames, device)?;
+    time_reconstruct(&cfg.init(device), batch, vertices, tokens, cfg.frames, iters, device)
+}
+
+/// Encode + decode (posterior mean) of `model` on the synthetic clips of [`synthetic_vae_batch`].
+fn time_reconstruct<V: crate::frame_vae::MeshVaeModel>(
+    model: &V,
+    batch: usize,
+    vertices: usize,
+    tokens: usize,
+    frames: usize,
+    iters: usize,
+    device: &Device,
+) -> Result<StepTiming, String> {
+    let vae_batch = synthetic_vae_batch(batch, vertices, tokens, frames, device)?;
     Ok(time_runs(iters, || {
-        let (recon, _) = model.reconstruct(&vae_batch, Posterior::Mean);
+        let (recon, _) = model.reconstruct(&vae_batch, crate::frame_vae::Posterior::Mean);
         let _ = recon.into_data();
     }))
 }

@@ -149,28 +149,26 @@ impl<O: Objective> StepGradients<O> for OneDevice {
         let mut accum = GradientsAccumulator::<O::Model>::new();
         for _ in 0..cfg.accumulation() {
             let idx = state.order.take(cfg.micro_batch);
-            let micro = micro_batch(objective, model, &idx, &mut state.rng, &self.0, cfg)?;
-            losses.record(micro.weight, &micro.terms, micro.total)?;
-            accum.accumulate(model, GradientsParams::from_grads(micro.grads, model));
+            let (micro, grads) = micro_batch(objective, model, &idx, &mut state.rng, &self.0, cfg)?;
+            losses.record(&micro)?;
+            accum.accumulate(model, GradientsParams::from_grads(grads, model));
         }
         Ok(accum.grads())
     }
 }
 
-/// What one micro-batch contributes to a step.
-pub(crate) struct MicroBatch {
+/// The losses one micro-batch contributes to a step.
+pub(crate) struct MicroLoss {
     /// Its share of the global batch (micro-batch size / batch size).
     pub weight: f64,
     /// The unweighted loss terms.
     pub terms: Vec<f64>,
     /// The weighted total (`weight · total`), the value that was differentiated.
     pub total: f64,
-    /// Gradients of the weighted total.
-    pub grads: Gradients,
 }
 
-/// Loss and backward pass of the training examples `idx` on `device` (the one place where a micro-batch's loss is
-/// weighted by its share of the global batch).
+/// Loss and backward pass of the training examples `idx` on `device`: the losses and the gradients of the weighted
+/// total (the one place where a micro-batch's loss is weighted by its share of the global batch).
 pub(crate) fn micro_batch<O: Objective>(
     objective: &O,
     model: &O::Model,
@@ -178,18 +176,13 @@ pub(crate) fn micro_batch<O: Objective>(
     rng: &mut ChaCha8Rng,
     device: &Device,
     cfg: &TrainConfig,
-) -> Result<MicroBatch> {
+) -> Result<(MicroLoss, Gradients)> {
     let out = objective.loss(model, idx, rng, device)?;
     let weight = idx.len() as f64 / cfg.batch_size as f64;
     let terms: Vec<f64> = out.terms.into_iter().map(scalar).collect();
     let scaled = out.total.mul_scalar(weight);
     let total = scalar(scaled.clone());
-    Ok(MicroBatch {
-        weight,
-        terms,
-        total,
-        grads: scaled.backward(),
-    })
+    Ok((MicroLoss { weight, terms, total }, scaled.backward()))
 }
 
 /// The losses of one step's micro-batches: batch-weighted sums, each value checked by the NaN/Inf guard.
@@ -202,23 +195,20 @@ pub(crate) struct StepLosses<'a> {
 }
 
 impl StepLosses<'_> {
-    /// An error unless the objective returned one value per declared term.
-    pub(crate) fn check_count(&self, n: usize) -> Result<()> {
-        if n == self.names.len() {
-            Ok(())
-        } else {
-            Err(TrainError::Other(format!(
-                "objective returned {n} loss terms, declared {}",
-                self.names.len()
-            )))
-        }
-    }
-
-    /// Adds one micro-batch: its unweighted `terms`, its `weight` (share of the global batch) and its
-    /// weighted total `scaled_total`.
-    pub(crate) fn record(&mut self, weight: f64, terms: &[f64], scaled_total: f64) -> Result<()> {
-        self.check_count(terms.len())?;
+    /// Adds one micro-batch; an error unless the objective returned one value per declared term.
+    pub(crate) fn record(&mut self, micro: &MicroLoss) -> Result<()> {
+        let MicroLoss {
+            weight,
+            ref terms,
+            total: scaled_total,
+        } = *micro;
         let n = self.names.len();
+        if terms.len() != n {
+            return Err(TrainError::Other(format!(
+                "objective returned {} loss terms, declared {n}",
+                terms.len()
+            )));
+        }
         for (i, &v) in terms.iter().enumerate() {
             guard(v, self.step, &format!("loss term `{}`", self.names[i]), self.last_good)?;
             self.sums[i] += weight * v;

@@ -26,7 +26,7 @@ use crate::backend::{self, Backend, Precision};
 use crate::checkpoint::{self, TrainState};
 use crate::config::TrainConfig;
 use crate::error::{Result, TrainError};
-use crate::loop_common::{LoopSetup, Objective, Outcome, StepGradients, StepLosses, micro_batch, run_steps};
+use crate::loop_common::{LoopSetup, MicroLoss, Objective, Outcome, StepGradients, StepLosses, micro_batch, run_steps};
 use crate::run_folder::{CHECKPOINTS_DIR, RunFolder, write_atomic};
 use crate::vae_loop::{
     LATENT_STATS_FILE, MeshVae, StoredLatentStats, VaeModelConfig, VaeObjective, VaeRunConfig, VaeRunOptions,
@@ -265,9 +265,9 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
                         let keep_grads = !self.ddp || worker == 0;
                         s.spawn(move || -> Result<WorkerResult> {
                             // Under DDP the backward pass inside blocks until every device has reached it.
-                            let m = micro_batch(objective, &worker_model, &idx, &mut rng, dev, cfg)?;
-                            let grads = keep_grads.then(|| GradientsParams::from_grads(m.grads, &worker_model));
-                            Ok((m.weight, m.terms, m.total, grads))
+                            let (micro, grads) = micro_batch(objective, &worker_model, &idx, &mut rng, dev, cfg)?;
+                            let grads = keep_grads.then(|| GradientsParams::from_grads(grads, &worker_model));
+                            Ok((micro, grads))
                         })
                     })
                     .collect();
@@ -284,8 +284,8 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
                     .collect()
             });
             for r in results {
-                let (weight, terms, total, grads) = r?;
-                losses.record(weight, &terms, total)?;
+                let (micro, grads) = r?;
+                losses.record(&micro)?;
                 if let Some(grads) = grads {
                     // Main-device: burn-train's OptimMainDevice, gradients to the main device, summed there.
                     // DDP: only the main device's (already all-reduced) gradients arrive here.
@@ -297,9 +297,9 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
     }
 }
 
-/// A worker's micro-batch: weight, terms and weighted total (see [`micro_batch`]) and its gradients as
-/// parameters; `None` for the secondary DDP workers, whose gradients equal the main device's after the all-reduce.
-type WorkerResult = (f64, Vec<f64>, f64, Option<GradientsParams>);
+/// A worker's micro-batch: its losses and its gradients as parameters; `None` for the secondary DDP workers, whose
+/// gradients equal the main device's after the all-reduce.
+type WorkerResult = (MicroLoss, Option<GradientsParams>);
 
 fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
     if let Some(s) = p.downcast_ref::<&str>() {
