@@ -23,7 +23,7 @@ use burn::prelude::*;
 use burn::tensor::TensorData;
 
 use crate::baselines::lerp_latents;
-use crate::methods::{MethodKind, WindowSampler};
+use crate::methods::{MethodKind, Request, WindowSampler};
 use crate::run::Reconstructor;
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
@@ -529,58 +529,94 @@ impl RfSampler {
     /// # Shapes
     /// `clip.vertices`: `[T, N_v]` rows; `latents` `[1, T, P, C]`.
     pub fn sample_latents(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<SampledWindow> {
+        let mut out = self.sample_latents_batch(&[Request { clip, keyframes, seed }], caption)?;
+        Ok(out.remove(0))
+    }
+
+    /// [`RfSampler::sample_latents`] for several windows with one caption: every ODE evaluation is one network
+    /// call over the whole batch. Each window keeps its own ε (from its seed), keyframes and encoding, so the
+    /// result per window is the one [`RfSampler::sample_latents`] gives.
+    pub fn sample_latents_batch(&self, requests: &[Request<'_>], caption: &str) -> Result<Vec<SampledWindow>> {
         let m = &self.models;
         let cfg = &m.rf_config;
         let device = m.codec.device().clone();
-        if clip.frames != cfg.frames {
-            return Err(DataError::new(
-                &clip.id,
-                "frames",
-                format!(
-                    "the window has {} frames, the RF was built for T = {}",
-                    clip.frames, cfg.frames
-                ),
-            ));
-        }
-        let keys = keyframe_list(clip, keyframes)?;
-        let encoding = m.codec.encode(clip, &encoded_frames(&keys))?;
-        let [_, p, c] = encoding.z0.dims();
-        if c != cfg.channels {
-            return Err(DataError::new(
-                &clip.id,
-                "latents",
-                format!(
-                    "the VAE gives C = {c} channels, the RF was built for C = {}",
-                    cfg.channels
-                ),
-            ));
-        }
-        let (keyframe_latents, mask) = scatter_keyframes(&encoding, &keys, &device)?;
         let t = cfg.frames;
-        let mask_t: Tensor<2> = Tensor::from_data(TensorData::new(mask.clone(), [1, t]), &device);
+        let mut windows = Vec::with_capacity(requests.len());
+        for r in requests {
+            let clip = r.clip;
+            if clip.frames != t {
+                return Err(DataError::new(
+                    &clip.id,
+                    "frames",
+                    format!("the window has {} frames, the RF was built for T = {t}", clip.frames),
+                ));
+            }
+            let keys = keyframe_list(clip, r.keyframes)?;
+            let encoding = m.codec.encode(clip, &encoded_frames(&keys))?;
+            let c = encoding.z0.dims()[2];
+            if c != cfg.channels {
+                return Err(DataError::new(
+                    &clip.id,
+                    "latents",
+                    format!(
+                        "the VAE gives C = {c} channels, the RF was built for C = {}",
+                        cfg.channels
+                    ),
+                ));
+            }
+            let (keyframe_latents, mask) = scatter_keyframes(&encoding, &keys, &device)?;
+            windows.push((encoding, keyframe_latents, mask));
+        }
+        let Some((first, _, _)) = windows.first() else {
+            return Ok(Vec::new());
+        };
+        let [_, p, c] = first.z0.dims();
+        let b = windows.len();
+        let cat3 = |f: &dyn Fn(&(WindowEncoding, Tensor<4>, Vec<f32>)) -> Tensor<3>| {
+            Tensor::cat(windows.iter().map(f).collect(), 0)
+        };
+        let cat4 = |f: &dyn Fn(&(WindowEncoding, Tensor<4>, Vec<f32>)) -> Tensor<4>| {
+            Tensor::cat(windows.iter().map(f).collect(), 0)
+        };
+        let masks: Vec<f32> = windows.iter().flat_map(|(_, _, m)| m.iter().copied()).collect();
+        let mask_t: Tensor<2> = Tensor::from_data(TensorData::new(masks, [b, t]), &device);
+        let keyframe_latents = cat4(&|(_, k, _)| k.clone()); // [B, T, P, C], raw μ
         let cond = Conditioning {
-            z0: m.stats.standardize_shape(encoding.z0.clone()),
-            z_key: m.stats.standardize_motion(keyframe_latents.clone()).swap_dims(1, 2), // [1, P, T, C]
+            z0: m.stats.standardize_shape(cat3(&|(e, _, _)| e.z0.clone())),
+            z_key: m.stats.standardize_motion(keyframe_latents.clone()).swap_dims(1, 2), // [B, P, T, C]
             mask: mask_t.clone(),
         };
         let text = m
             .text
             .encode(&[caption.to_string()], &device)
-            .map_err(|e| DataError::new(&clip.id, "caption", e.to_string()))?
+            .map_err(|e| DataError::new(&first.id, "caption", e.to_string()))?
             .states;
-        let eps = sampler_noise(seed, [1, p, t, c], &device);
+        let [_, l, d] = text.dims();
+        let text = text.expand([b, l, d]);
+        let eps = Tensor::cat(
+            requests
+                .iter()
+                .map(|r| sampler_noise(r.seed, [1, p, t, c], &device))
+                .collect(),
+            0,
+        );
         let x1 = sample_mmdit(&m.rf, &cond, text, eps, self.guidance, &self.options); // (R6)
-        let mut latents = m.stats.destandardize_motion(x1); // [1, P, T, C]
+        let mut latents = m.stats.destandardize_motion(x1); // [B, P, T, C]
         if matches!(self.options.kf_mode, KfMode::InputMask | KfMode::ReplaceNoised) {
             // SPEC §4.6: keyframe slots are Z_key; done on raw latents so they are μ exactly.
-            latents = replace_keyframes(latents, keyframe_latents.clone().swap_dims(1, 2), mask_t);
+            latents = replace_keyframes(latents, keyframe_latents.swap_dims(1, 2), mask_t);
         }
-        Ok(SampledWindow {
-            encoding,
-            keyframe_latents,
-            mask,
-            latents: latents.swap_dims(1, 2),
-        })
+        let latents = latents.swap_dims(1, 2); // [B, T, P, C]
+        Ok(windows
+            .into_iter()
+            .enumerate()
+            .map(|(i, (encoding, keyframe_latents, mask))| SampledWindow {
+                encoding,
+                keyframe_latents,
+                mask,
+                latents: latents.clone().narrow(0, i, 1),
+            })
+            .collect())
     }
 }
 
@@ -588,6 +624,13 @@ impl WindowSampler for RfSampler {
     fn sample(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
         let s = self.sample_latents(clip, keyframes, caption, seed)?;
         self.models.codec.decode(&s.encoding, s.latents)
+    }
+
+    fn sample_batch(&self, requests: &[Request<'_>], caption: &str) -> Result<Vec<Vec<[f32; 3]>>> {
+        self.sample_latents_batch(requests, caption)?
+            .into_iter()
+            .map(|s| self.models.codec.decode(&s.encoding, s.latents))
+            .collect()
     }
 }
 

@@ -136,6 +136,28 @@ pub trait Method {
     /// # Shapes
     /// `clip.vertices`: `[T, N]` rows of xyz; returns `[T, N]` rows.
     fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>>;
+
+    /// Several completions of one window that share a caption, in request order (e.g. every keyframe set and seed
+    /// of one clip of a protocol). The default runs [`Method::complete`] once per request; learned methods batch
+    /// them into one network call per ODE evaluation, with the same results.
+    fn complete_batch(&self, requests: &[Request<'_>], caption: &str) -> Result<Vec<Vec<[f32; 3]>>> {
+        requests
+            .iter()
+            .map(|r| self.complete(r.clip, r.keyframes, caption, r.seed))
+            .collect()
+    }
+}
+
+/// One completion asked of a [`Method`] or [`WindowSampler`]: the visible window (see [`hide_non_keyframes`]), its
+/// keyframes and the sampler seed.
+#[derive(Debug, Clone, Copy)]
+pub struct Request<'a> {
+    /// The normalised window; only frame 0 and the keyframes may be read.
+    pub clip: &'a Clip,
+    /// Keyframe indices.
+    pub keyframes: &'a [usize],
+    /// Sampler seed.
+    pub seed: u64,
 }
 
 /// The training-free vertex-space methods: (L1) and the static nearest keyframe.
@@ -166,6 +188,14 @@ pub trait WindowSampler {
     /// # Shapes
     /// `clip.vertices`: `[T, N]` rows; returns `[T, N]` rows.
     fn sample(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>>;
+
+    /// Several windows sharing a caption, in request order; the default samples them one by one.
+    fn sample_batch(&self, requests: &[Request<'_>], caption: &str) -> Result<Vec<Vec<[f32; 3]>>> {
+        requests
+            .iter()
+            .map(|r| self.sample(r.clip, r.keyframes, caption, r.seed))
+            .collect()
+    }
 }
 
 /// An RF method (ours, the replacement baseline or impute-until-τ*) around its sampler. It applies the evaluation
@@ -195,31 +225,60 @@ impl<S: WindowSampler> Method for RfMethod<S> {
     }
 
     fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
-        let given = match self.kind {
-            MethodKind::ImputeUntil {
-                keyframes: KeyframeNoise::Noisy { level },
-                ..
-            } => noisy_keyframes(clip, keyframes, level, seed),
-            _ => clip.clone(),
-        };
-        let mut out = self.sampler.sample(&given, keyframes, caption, seed)?;
-        let n = clip.n_vertices;
-        if out.len() != clip.frames * n {
+        let mut out = self.complete_batch(&[Request { clip, keyframes, seed }], caption)?;
+        Ok(out.remove(0))
+    }
+
+    fn complete_batch(&self, requests: &[Request<'_>], caption: &str) -> Result<Vec<Vec<[f32; 3]>>> {
+        let given: Vec<Clip> = requests
+            .iter()
+            .map(|r| match self.kind {
+                MethodKind::ImputeUntil {
+                    keyframes: KeyframeNoise::Noisy { level },
+                    ..
+                } => noisy_keyframes(r.clip, r.keyframes, level, r.seed),
+                _ => r.clip.clone(),
+            })
+            .collect();
+        let asked: Vec<Request<'_>> = requests
+            .iter()
+            .zip(&given)
+            .map(|(r, clip)| Request { clip, ..*r })
+            .collect();
+        let outs = self.sampler.sample_batch(&asked, caption)?;
+        if outs.len() != requests.len() {
             return Err(DataError::new(
-                &clip.id,
                 self.kind.label(),
+                "samples",
                 format!(
-                    "sampler returned {} rows, expected {} frames × {n}",
-                    out.len(),
-                    clip.frames
+                    "sampler returned {} windows for {} requests",
+                    outs.len(),
+                    requests.len()
                 ),
             ));
         }
-        // Evaluation assembly (SPEC §4.6): keyframe frames are the given keyframe meshes.
-        for &f in keyframes.iter().filter(|&&f| f < clip.frames) {
-            out[f * n..(f + 1) * n].copy_from_slice(given.frame(f));
-        }
-        Ok(out)
+        outs.into_iter()
+            .zip(&asked)
+            .map(|(mut out, r)| {
+                let (clip, n) = (r.clip, r.clip.n_vertices);
+                if out.len() != clip.frames * n {
+                    return Err(DataError::new(
+                        &clip.id,
+                        self.kind.label(),
+                        format!(
+                            "sampler returned {} rows, expected {} frames × {n}",
+                            out.len(),
+                            clip.frames
+                        ),
+                    ));
+                }
+                // Evaluation assembly (SPEC §4.6): keyframe frames are the given keyframe meshes.
+                for &f in r.keyframes.iter().filter(|&&f| f < clip.frames) {
+                    out[f * n..(f + 1) * n].copy_from_slice(clip.frame(f));
+                }
+                Ok(out)
+            })
+            .collect()
     }
 }
 
@@ -273,9 +332,43 @@ pub fn complete_and_score(
     caption: &str,
     seed: u64,
 ) -> Result<Scored> {
-    let label = method.kind().label();
     let visible = hide_non_keyframes(gt, keyframes);
     let prediction = method.complete(&visible, keyframes, caption, seed)?;
+    score(method.kind(), gt, keyframes, prediction)
+}
+
+/// [`complete_and_score`] for several (keyframes, seed) pairs of one clip in one [`Method::complete_batch`] call,
+/// in the order of `asks`.
+pub fn complete_and_score_batch(
+    method: &dyn Method,
+    gt: &Clip,
+    asks: &[(&[usize], u64)],
+    caption: &str,
+) -> Result<Vec<Scored>> {
+    let visible: Vec<Clip> = asks.iter().map(|(k, _)| hide_non_keyframes(gt, k)).collect();
+    let requests: Vec<Request<'_>> = asks
+        .iter()
+        .zip(&visible)
+        .map(|(&(keyframes, seed), clip)| Request { clip, keyframes, seed })
+        .collect();
+    let predictions = method.complete_batch(&requests, caption)?;
+    if predictions.len() != asks.len() {
+        return Err(DataError::new(
+            &gt.id,
+            method.kind().label(),
+            format!("{} predictions for {} requests", predictions.len(), asks.len()),
+        ));
+    }
+    predictions
+        .into_iter()
+        .zip(asks)
+        .map(|(p, (k, _))| score(method.kind(), gt, k, p))
+        .collect()
+}
+
+/// Checks a prediction's shape and finiteness and scores it against `gt` by [`evaluate_clip`].
+fn score(kind: MethodKind, gt: &Clip, keyframes: &[usize], prediction: Vec<[f32; 3]>) -> Result<Scored> {
+    let label = kind.label();
     let pred = Motion::new(&prediction, gt.frames, gt.n_vertices)
         .map_err(|e| DataError::new(&gt.id, &label, format!("prediction: {e}")))?;
     let truth = Motion::from_clip(gt).map_err(|e| DataError::new(&gt.id, "vertices", e.to_string()))?;

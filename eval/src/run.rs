@@ -12,7 +12,7 @@ use any4d_data::{Clip, DataError};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::baselines::VertexBaseline;
-use crate::methods::{Method, MethodKind, VertexMethod, complete_and_score, metrics_map};
+use crate::methods::{Method, MethodKind, VertexMethod, complete_and_score_batch, metrics_map};
 use crate::metrics::{Motion, evaluate_clip, replace_keyframes, vae_reconstruction};
 use crate::plot::{Series, line_plot};
 use crate::protocol::{Manifest, ManifestOptions, Placement, StoreSource, noise_seed, write_atomic};
@@ -160,17 +160,33 @@ pub fn evaluate(
     let mut kept = Vec::new();
     for (i, item) in manifest.clips.iter().enumerate() {
         let (gt, captions) = source.item(item, manifest.frames)?;
-        for keyframes in &item.keyframes {
-            for &base in &manifest.seeds {
-                let seed = noise_seed(base, i);
-                for method in methods {
-                    let label = method.kind().label();
-                    let (prediction, metrics) = if manifest.frames <= RolloutSpec::paper().window {
-                        let s = complete_and_score(method.as_ref(), &gt, keyframes, &captions[0], seed)?;
-                        (s.prediction, metrics_map(&s.metrics))
-                    } else {
-                        long_horizon(method.as_ref(), &gt, keyframes, &captions, seed, overlap_source)?
-                    };
+        // Every (keyframe set, seed) of the clip, in this order; one batched call per method on a short horizon.
+        let asks: Vec<(&[usize], u64, u64)> = item
+            .keyframes
+            .iter()
+            .flat_map(|k| {
+                manifest
+                    .seeds
+                    .iter()
+                    .map(move |&base| (k.as_slice(), base, noise_seed(base, i)))
+            })
+            .collect();
+        for method in methods {
+            let label = method.kind().label();
+            let scored: Vec<Scored> = if manifest.frames <= RolloutSpec::paper().window {
+                let pairs: Vec<(&[usize], u64)> = asks.iter().map(|&(k, _, seed)| (k, seed)).collect();
+                complete_and_score_batch(method.as_ref(), &gt, &pairs, &captions[0])?
+                    .into_iter()
+                    .map(|s| (s.prediction, metrics_map(&s.metrics)))
+                    .collect()
+            } else {
+                asks.iter()
+                    .map(|&(k, _, seed)| long_horizon(method.as_ref(), &gt, k, &captions, seed, overlap_source))
+                    .collect::<Result<_>>()?
+            };
+            for (&(keyframes, base, _), (prediction, metrics)) in asks.iter().zip(scored) {
+                {
+                    let keyframes = keyframes.to_vec();
                     records.push(ClipRecord {
                         method: label.clone(),
                         placement: manifest.placement.label(),
@@ -183,8 +199,8 @@ pub fn evaluate(
                     if i < keep_items {
                         kept.push(Prediction {
                             item: i,
-                            method: label,
-                            keyframes: keyframes.clone(),
+                            method: label.clone(),
+                            keyframes,
                             seed: base,
                             vertices: prediction,
                         });

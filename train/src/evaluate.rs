@@ -69,7 +69,7 @@ fn eval_err(e: impl std::fmt::Display) -> TrainError {
     TrainError::Other(e.to_string())
 }
 
-fn codec_of(vae: &LoadedVae, tokens: usize, device: &Device) -> Result<Arc<MeshCodec>> {
+fn codec_of(vae: &LoadedVae, device: &Device) -> Result<Arc<MeshCodec>> {
     use crate::vae_loop::VaeModelConfig;
     let model = match (&vae.model, &vae.config.model) {
         (VaeModel::Framewise(m), _) => MeshVae::Frame(m.clone().valid()),
@@ -85,7 +85,7 @@ fn codec_of(vae: &LoadedVae, tokens: usize, device: &Device) -> Result<Arc<MeshC
         }
     };
     Ok(Arc::new(
-        MeshCodec::new(model, tokens, PadTo::BatchMax, device.clone()).map_err(eval_err)?,
+        MeshCodec::new(model, vae.tokens(), PadTo::BatchMax, device.clone()).map_err(eval_err)?,
     ))
 }
 
@@ -97,13 +97,12 @@ fn checkpoint_label(run: &Path, step: u64) -> String {
 fn rf_method(
     kind: MethodKind,
     run_dir: &Path,
-    tokens: usize,
     sampling: SamplingSetup,
     device: &Device,
 ) -> Result<(Box<dyn Method>, String)> {
     let rf = load_rf_run(run_dir, device)?;
     let vae = rf.load_vae(device)?;
-    let codec = codec_of(&vae, tokens, device)?;
+    let codec = codec_of(&vae, device)?;
     let label = checkpoint_label(&rf.run, rf.step);
     let rf_config = rf.config.model.clone();
     let text = ScratchTextEncoder {
@@ -133,11 +132,10 @@ fn vae_run_for(runs: &LearnedRuns, device: &Device) -> Result<LoadedVae> {
     ))
 }
 
-/// Builds `kinds` in order. `tokens` is the store's P.
+/// Builds `kinds` in order; learned methods encode with their VAE run's P (`vae.tokens`).
 pub fn build_methods(
     kinds: &[MethodKind],
     runs: &LearnedRuns,
-    tokens: usize,
     sampling: SamplingSetup,
     device: &Device,
 ) -> Result<BuiltMethods> {
@@ -150,18 +148,14 @@ pub fn build_methods(
                 (m.remove(0), "none".to_string())
             }
             MethodKind::KeyframeRf | MethodKind::ImputeUntil { .. } => {
-                rf_method(kind, need(&runs.rf, "--rf", kind)?, tokens, sampling, device)?
+                rf_method(kind, need(&runs.rf, "--rf", kind)?, sampling, device)?
             }
-            MethodKind::ReplacementRf => rf_method(
-                kind,
-                need(&runs.baseline_rf, "--baseline-rf", kind)?,
-                tokens,
-                sampling,
-                device,
-            )?,
+            MethodKind::ReplacementRf => {
+                rf_method(kind, need(&runs.baseline_rf, "--baseline-rf", kind)?, sampling, device)?
+            }
             MethodKind::LerpLatent => {
                 let vae = vae_run_for(runs, device)?;
-                let sampler = LatentLerpSampler::new(codec_of(&vae, tokens, device)?).map_err(eval_err)?;
+                let sampler = LatentLerpSampler::new(codec_of(&vae, device)?).map_err(eval_err)?;
                 let method = RfMethod::new(kind, sampler).map_err(eval_err)?;
                 (
                     Box::new(method) as Box<dyn Method>,
@@ -179,7 +173,7 @@ pub fn build_methods(
 pub type BuiltReconstructors = (Vec<Box<dyn Reconstructor>>, Vec<(String, String)>);
 
 /// Table 5 rows: `--vae` (and `--vae-b`) as reconstructors labelled by their VAE kind.
-pub fn build_reconstructors(runs: &LearnedRuns, tokens: usize, device: &Device) -> Result<BuiltReconstructors> {
+pub fn build_reconstructors(runs: &LearnedRuns, device: &Device) -> Result<BuiltReconstructors> {
     let mut out: Vec<Box<dyn Reconstructor>> = Vec::new();
     let mut ckpts = Vec::new();
     for run in [&runs.vae, &runs.vae_b].into_iter().flatten() {
@@ -189,7 +183,7 @@ pub fn build_reconstructors(runs: &LearnedRuns, tokens: usize, device: &Device) 
             VaeModel::Sequencewise(_) => "sequencewise",
         };
         ckpts.push((label.to_string(), checkpoint_label(&vae.run, vae.step)));
-        out.push(Box::new(VaeReconstructor::new(label, codec_of(&vae, tokens, device)?)));
+        out.push(Box::new(VaeReconstructor::new(label, codec_of(&vae, device)?)));
     }
     if out.is_empty() {
         return Err(TrainError::Other(

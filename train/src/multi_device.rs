@@ -372,7 +372,7 @@ fn fit_vae<V: MeshVae>(
 where
     VaeObjective<V>: Sync,
 {
-    let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch, cfg.vae.train_frames)?;
+    let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch, &cfg.vae)?;
     run.log(&format!(
         "VAE {:?} on {}, data-parallel over {} devices ({strategy:?})",
         cfg.vae.kind,
@@ -394,7 +394,14 @@ where
         inference.seed(cfg.train.seed);
         let store = Store::open(&opts.data).map_err(|e| TrainError::Other(format!("{}: {e}", opts.data.display())))?;
         let train_ids = store.indices(Split::Train);
-        let stats = latent_stats(&model.valid(), &store, &train_ids, cfg.train.micro_batch, &inference)?;
+        let stats = latent_stats(
+            &model.valid(),
+            &store,
+            &train_ids,
+            cfg.train.micro_batch,
+            cfg.vae.tokens,
+            &inference,
+        )?;
         let json = serde_json::to_vec_pretty(&StoredLatentStats { step: *steps, stats })
             .map_err(|e| TrainError::Other(format!("serialise latent stats: {e}")))?;
         write_atomic(&run.path(LATENT_STATS_FILE), &json)?;

@@ -182,7 +182,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         solver: Solver::Midpoint,
         guidance: 1.0,
     };
-    let built = build_methods(&kinds, &runs, report_p(&data)?, sampling, &device)?;
+    let built = build_methods(&kinds, &runs, sampling, &device)?;
     let eval_dir = out.join("eval");
     let mut run_opts = RunOptions::new(TableKind::Table1, data.clone(), eval_dir.clone());
     run_opts.methods = built.methods;
@@ -209,10 +209,4 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         eval_dir,
         table,
     })
-}
-
-fn report_p(data: &Path) -> Result<usize> {
-    Ok(any4d_data::store::Store::open(data)
-        .map_err(|e| TrainError::Other(e.to_string()))?
-        .p())
 }

@@ -59,6 +59,11 @@ impl LoadedVae {
         }
     }
 
+    /// FPS tokens P the VAE encodes (`vae.tokens`).
+    pub fn tokens(&self) -> usize {
+        self.config.vae.tokens
+    }
+
     /// Latent channels C per slot.
     pub fn latent_channels(&self) -> usize {
         match &self.config.model {

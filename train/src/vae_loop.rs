@@ -45,6 +45,9 @@ pub struct VaeSection {
     /// frames independently (SPEC §3.1), so this trades frames per step for steps per second; the sequence-wise
     /// VAE needs whole clips (0 only). Validation always uses every frame.
     pub train_frames: usize,
+    /// FPS tokens P per clip (SPEC §2.5: 512): the first P entries of the store's FPS order. Farthest-point
+    /// sampling is greedy, so they are exactly the FPS of P points, and one store serves every P up to its own.
+    pub tokens: usize,
 }
 
 /// The model configuration, by kind.
@@ -95,6 +98,12 @@ impl VaeRunConfig {
             path: file.to_path_buf(),
             reason: format!("vae.train_frames = {}: {reason}", t.vae.train_frames),
         };
+        if t.vae.tokens == 0 {
+            return Err(TrainError::Config {
+                path: file.to_path_buf(),
+                reason: "vae.tokens: P must be positive".into(),
+            });
+        }
         match (t.vae.kind, t.vae.train_frames) {
             (_, 0) => {}
             (VaeKind::Sequencewise, _) => return Err(bad("the sequence-wise VAE encodes whole clips; use 0".into())),
@@ -167,19 +176,26 @@ pub fn load_clips(store: &Store, indices: &[usize], device: &Device) -> Result<(
     Ok((batch, items))
 }
 
-/// The VAE view of a clip batch: reference = frame 0 (SPEC §1.2).
+/// The VAE view of a clip batch with `tokens` FPS tokens (the first ones of the store's FPS order, see
+/// [`VaeSection::tokens`]): reference = frame 0 (SPEC §1.2).
 ///
 /// # Shapes
-/// - `batch.vertices`: `[B, T, N, 3]` → reference `[B, N, 3]`, frames `[B, T, N, 3]`
-pub fn vae_batch(batch: &ClipBatch, device: &Device) -> Result<VaeBatch> {
+/// - `batch.vertices`: `[B, T, N, 3]` → reference `[B, N, 3]`, frames `[B, T, N, 3]`; fps `[B, tokens]`
+pub fn vae_batch(batch: &ClipBatch, tokens: usize, device: &Device) -> Result<VaeBatch> {
     let [b, _t, n, _] = batch.vertices.dims();
+    let stored = batch.fps.dims()[1];
+    if tokens == 0 || tokens > stored {
+        return Err(TrainError::Other(format!(
+            "the VAE encodes P = {tokens} FPS tokens per clip, the store holds {stored}: import the clips with --p {tokens} or more"
+        )));
+    }
     let reference: Tensor<3> = batch.vertices.clone().narrow(1, 0, 1).reshape([b, n, 3]);
     let edges = EdgeList::new(&batch.edges, n, device).map_err(|e| TrainError::Other(e.to_string()))?;
     Ok(VaeBatch {
         reference,
         frames: batch.vertices.clone(),
         vmask: batch.vmask.clone(),
-        fps: batch.fps.clone(),
+        fps: batch.fps.clone().narrow(1, 0, tokens),
         edges,
     })
 }
@@ -192,14 +208,17 @@ pub struct VaeObjective<V> {
     micro_batch: usize,
     /// `vae.train_frames` (0 = all).
     train_frames: usize,
+    /// `vae.tokens`.
+    tokens: usize,
     _vae: std::marker::PhantomData<V>,
 }
 
 impl<V> VaeObjective<V> {
     /// Serves the train split of the store in `data`, validating on its val split; training micro-batches keep
-    /// `train_frames` frames per clip (0 = all; see [`VaeSection::train_frames`]).
-    pub fn new(data: &Path, micro_batch: usize, train_frames: usize) -> Result<Self> {
-        let store = open_store(data, train_frames)?;
+    /// `vae.train_frames` frames per clip (0 = all; see [`VaeSection::train_frames`]) with `vae.tokens` FPS tokens.
+    pub fn new(data: &Path, micro_batch: usize, vae: &VaeSection) -> Result<Self> {
+        let (train_frames, tokens) = (vae.train_frames, vae.tokens);
+        let store = open_store(data, vae)?;
         let train = store.indices(Split::Train);
         let valid = store.indices(Split::Val);
         Ok(VaeObjective {
@@ -208,14 +227,26 @@ impl<V> VaeObjective<V> {
             valid,
             micro_batch,
             train_frames,
+            tokens,
             _vae: std::marker::PhantomData,
         })
     }
 }
 
-/// Opens the store in `data` and checks that its clips have at least `train_frames` frames.
-fn open_store(data: &Path, train_frames: usize) -> Result<Store> {
+/// Opens the store in `data` and checks that its clips have at least `vae.train_frames` frames and `vae.tokens`
+/// FPS tokens.
+fn open_store(data: &Path, vae: &VaeSection) -> Result<Store> {
+    let train_frames = vae.train_frames;
     let store = Store::open(data).map_err(|e| TrainError::Other(format!("{}: {e}", data.display())))?;
+    if vae.tokens > store.p() {
+        return Err(TrainError::Other(format!(
+            "vae.tokens = {} but the store {} holds {} FPS tokens per clip: import it with --p {} or more",
+            vae.tokens,
+            data.display(),
+            store.p(),
+            vae.tokens
+        )));
+    }
     if train_frames > store.frames() {
         return Err(TrainError::Other(format!(
             "vae.train_frames = {train_frames} but the store {} holds {}-frame clips",
@@ -228,7 +259,7 @@ fn open_store(data: &Path, train_frames: usize) -> Result<Store> {
 
 /// Fails before a run folder is claimed when the store in `data` cannot serve `cfg`.
 pub(crate) fn check_store(cfg: &VaeRunConfig, data: &Path) -> Result<()> {
-    open_store(data, cfg.vae.train_frames).map(|_| ())
+    open_store(data, &cfg.vae).map(|_| ())
 }
 
 /// Frame 0 and `k − 1` distinct frames of `1..t` in increasing order, drawn from `rng`; all `t` frames when `k` is
@@ -263,7 +294,7 @@ impl<V: MeshVae> Objective for VaeObjective<V> {
             let index = Tensor::<1, Int>::from_data(TensorData::new(frames, [self.train_frames]), device);
             clips.vertices = clips.vertices.select(1, index);
         }
-        let l = model.vae_loss(&vae_batch(&clips, device)?); // (V1)–(V3)
+        let l = model.vae_loss(&vae_batch(&clips, self.tokens, device)?); // (V1)–(V3)
         Ok(Losses {
             total: l.total,
             terms: vec![l.rec, l.kl],
@@ -277,7 +308,7 @@ impl<V: MeshVae> Objective for VaeObjective<V> {
         let mut sums = [0.0f64; 3];
         for chunk in self.valid.chunks(self.micro_batch) {
             let (clips, _) = load_clips(&self.store, chunk, device)?;
-            let l = model.vae_loss(&vae_batch(&clips, device)?);
+            let l = model.vae_loss(&vae_batch(&clips, self.tokens, device)?);
             let w = chunk.len() as f64 / self.valid.len() as f64;
             for (s, t) in sums.iter_mut().zip([l.rec, l.kl, l.total]) {
                 *s += w * loop_common::scalar(t);
@@ -293,12 +324,13 @@ pub fn latent_stats<V: MeshVae>(
     store: &Store,
     indices: &[usize],
     micro_batch: usize,
+    tokens: usize,
     device: &Device,
 ) -> Result<LatentStats> {
     let mut acc = LatentStatsAccumulator::new();
     for chunk in indices.chunks(micro_batch.max(1)) {
         let (clips, _) = load_clips(store, chunk, device)?;
-        let enc = model.vae_encode(&vae_batch(&clips, device)?);
+        let enc = model.vae_encode(&vae_batch(&clips, tokens, device)?);
         let z = any4d_model::frame_vae::sample(enc.mu, enc.logvar);
         acc.update(enc.z0, z);
     }
@@ -374,7 +406,7 @@ fn fit<V: MeshVae>(
     resume: Option<PathBuf>,
     device: &Device,
 ) -> Result<Outcome> {
-    let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch, cfg.vae.train_frames)?;
+    let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch, &cfg.vae)?;
     run.log(&format!(
         "VAE {:?} on {} ({} train / {} val clips), backend {}",
         cfg.vae.kind,
@@ -401,6 +433,7 @@ fn fit<V: MeshVae>(
             &objective.store,
             &objective.train,
             cfg.train.micro_batch,
+            cfg.vae.tokens,
             &inference,
         )?;
         let json = serde_json::to_vec_pretty(&StoredLatentStats { step: *steps, stats })

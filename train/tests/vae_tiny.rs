@@ -64,7 +64,7 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
         let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
         dev.seed(cfg.train.seed);
         let model = m.init(&dev);
-        let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch, cfg.vae.train_frames).unwrap();
+        let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch, &cfg.vae).unwrap();
         train(&objective, model, quiet_setup(run, &cfg.train, &cfg.optim, dev, resume)).unwrap()
     };
     let runs = dir.path().join("runs");

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use any4d_data::store::Store;
 use any4d_eval::methods::MethodKind;
 use any4d_eval::protocol::Placement;
 use any4d_eval::rollout::OverlapSource;
@@ -160,7 +159,6 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         ProtocolArg::Table5 => TableKind::Table5,
     };
     let device = backend::device(args.backend, Precision::F32)?;
-    let tokens = Store::open(&args.data)?.p();
     let runs = LearnedRuns {
         rf: args.rf.clone(),
         baseline_rf: args.baseline_rf.clone(),
@@ -169,7 +167,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     };
     let mut opts = RunOptions::new(protocol, args.data.clone(), args.out.clone());
     let checkpoints = if protocol == TableKind::Table5 {
-        let (vaes, ckpts) = build_reconstructors(&runs, tokens, &device)?;
+        let (vaes, ckpts) = build_reconstructors(&runs, &device)?;
         opts.vaes = vaes;
         ckpts
     } else {
@@ -181,7 +179,7 @@ pub fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             },
             guidance: args.guidance,
         };
-        let built = build_methods(&kinds, &runs, tokens, sampling, &device)?;
+        let built = build_methods(&kinds, &runs, sampling, &device)?;
         opts.methods = built.methods;
         built.checkpoints
     };

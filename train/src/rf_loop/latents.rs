@@ -49,24 +49,26 @@ fn host_f32<const D: usize>(t: Tensor<D>, what: &str) -> Result<Vec<f32>> {
         .map_err(|e| TrainError::Other(format!("{what}: cannot read tensor data: {e:?}")))
 }
 
-/// Encodes clips `store_indices` of `store` with the frozen frame-wise VAE, `micro_batch` clips at a time.
+/// Encodes clips `store_indices` of `store` with the frozen frame-wise VAE on `tokens` FPS tokens (the VAE run's
+/// `vae.tokens`), `micro_batch` clips at a time.
 pub fn encode_latents(
     vae: &FrameVae,
     store: &Store,
     store_indices: &[usize],
     micro_batch: usize,
+    tokens: usize,
     device: &Device,
 ) -> Result<LatentSet> {
-    let (frames, tokens) = (store.frames(), store.p());
+    let frames = store.frames();
     let mut clips = Vec::with_capacity(store_indices.len());
     let mut channels = 0;
     for chunk in store_indices.chunks(micro_batch.max(1)) {
         let (batch, _) = load_clips(store, chunk, device)?;
-        let enc = vae.vae_encode(&vae_batch(&batch, device)?);
+        let enc = vae.vae_encode(&vae_batch(&batch, tokens, device)?);
         let [b, t, p, c] = enc.mu.dims();
         if (t, p) != (frames, tokens) {
             return Err(TrainError::Other(format!(
-                "VAE latents are [{b}, {t}, {p}, {c}], the store {} has T = {frames}, P = {tokens}",
+                "VAE latents are [{b}, {t}, {p}, {c}], expected T = {frames} (the store {}) and P = {tokens}",
                 store.dir().display()
             )));
         }

@@ -70,6 +70,8 @@ pub struct RfObjective {
     stats: LatentStats,
     tokenizer: Arc<ScratchTokenizer>,
     vae: FrameVae,
+    /// FPS tokens P of the VAE run.
+    tokens: usize,
     store: Store,
     train: SplitLatents,
     valid: SplitLatents,
@@ -137,6 +139,7 @@ impl RfObjective {
                     &store,
                     &store_indices,
                     cfg.train.micro_batch,
+                    vae.tokens(),
                     device,
                 )?),
                 LatentCache::PerBatch => None,
@@ -149,6 +152,7 @@ impl RfObjective {
             stats: vae.stats,
             tokenizer: Arc::new(tokenizer),
             vae: frame_vae,
+            tokens: vae.tokens(),
             store,
             train,
             valid,
@@ -187,7 +191,7 @@ impl RfObjective {
         VALID_SAMPLE_KEYFRAMES.check(frames).map_err(|e| fail(&e))?;
         let codec = MeshCodec::new(
             CodecVae::Frame(self.vae.clone()),
-            self.store.p(),
+            self.tokens,
             PadTo::BatchMax,
             device.clone(),
         )
@@ -320,7 +324,14 @@ impl RfObjective {
             Some(set) => (set, indices.to_vec()),
             None => {
                 let inference = device.clone().without_autodiff();
-                encoded = encode_latents(&self.vae, &self.store, &store_ids, store_ids.len(), &inference)?;
+                encoded = encode_latents(
+                    &self.vae,
+                    &self.store,
+                    &store_ids,
+                    store_ids.len(),
+                    self.tokens,
+                    &inference,
+                )?;
                 (&encoded, (0..store_ids.len()).collect())
             }
         };
@@ -414,7 +425,7 @@ impl RfObjective {
             }
         }
         clips.vertices = clips.vertices + Tensor::from_data(TensorData::new(noise, [b, t, n, 3]), &inference);
-        let enc = self.vae.vae_encode(&vae_batch(&clips, &inference)?);
+        let enc = self.vae.vae_encode(&vae_batch(&clips, self.tokens, &inference)?);
         let z_key = self.stats.standardize_motion(enc.mu.swap_dims(1, 2));
         Ok(Tensor::from_data(z_key.into_data(), device))
     }
@@ -482,6 +493,16 @@ pub(super) fn open_store(data: &Path) -> Result<Store> {
 /// SPEC §4.1: the RF slots must match the VAE latents and the store windows.
 pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
     vae.frame_vae()?;
+    if vae.tokens() > store.p() {
+        return Err(TrainError::Other(format!(
+            "the VAE run {} encodes P = {} FPS tokens, the store {} holds {}: import it with --p {} or more",
+            vae.run.display(),
+            vae.tokens(),
+            store.dir().display(),
+            store.p(),
+            vae.tokens()
+        )));
+    }
     let c = vae.latent_channels();
     if cfg.model.channels != c {
         return Err(TrainError::Other(format!(
