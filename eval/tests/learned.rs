@@ -12,7 +12,7 @@ use any4d_data::preprocess::edges_from_faces;
 use any4d_eval::learned::{
     LatentLerpSampler, LearnedModels, MeshCodec, MeshVae, RfSampler, VaeReconstructor, sampler_noise,
 };
-use any4d_eval::methods::{Method, MethodKind, RfMethod, WindowSampler, hide_non_keyframes};
+use any4d_eval::methods::{Method, MethodKind, Request, RfMethod, WindowSampler, hide_non_keyframes};
 use any4d_eval::run::Reconstructor;
 use any4d_model::dymesh_vae::DyMeshVaeConfig;
 use any4d_model::frame_vae::{EdgeList, FrameVaeConfig, Posterior, VaeBatch};
@@ -175,6 +175,33 @@ fn rf_sampler_gives_t_times_n_rows_deterministic_per_seed() {
         rows_diff(&a[N..2 * N], &caption[N..2 * N]) > 1e-6,
         "the caption reaches the network"
     );
+}
+
+#[test]
+fn a_batch_of_requests_samples_what_each_request_samples_alone() {
+    let device = Device::flex();
+    for (net, mode) in [
+        (KfMode::InputMask, KfMode::InputMask),
+        (KfMode::ReplaceNoised, KfMode::ReplaceNoised),
+    ] {
+        let m = models(frame_codec(&device, PadTo::BatchMax), net, &device);
+        let sampler = RfSampler::new(m, options(mode), 1.0).unwrap();
+        let gt = wave_clip();
+        let (k1, k2) = ([0usize, 3], [0usize, 1, 3]);
+        let (v1, v2) = (hide_non_keyframes(&gt, &k1), hide_non_keyframes(&gt, &k2));
+        let requests = [
+            Request { clip: &v1, keyframes: &k1, seed: 5 },
+            Request { clip: &v2, keyframes: &k2, seed: 6 },
+            Request { clip: &v1, keyframes: &k1, seed: 7 },
+        ];
+        let batch = sampler.sample_batch(&requests, "a waving flag").unwrap();
+        assert_eq!(batch.len(), 3);
+        for (r, got) in requests.iter().zip(&batch) {
+            let alone = sampler.sample(r.clip, r.keyframes, "a waving flag", r.seed).unwrap();
+            assert!(rows_diff(got, &alone) < 1e-5, "{mode:?} seed {}: {}", r.seed, rows_diff(got, &alone));
+        }
+        assert!(rows_diff(&batch[0][N..2 * N], &batch[2][N..2 * N]) > 1e-4, "seeds differ inside a batch");
+    }
 }
 
 #[test]
