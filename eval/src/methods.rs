@@ -13,7 +13,7 @@ use any4d_data::{Clip, DataError};
 use serde::{Deserialize, Serialize};
 
 use crate::baselines::VertexBaseline;
-use crate::metrics::{ClipMetrics, Motion, evaluate_clip};
+use crate::metrics::{ClipMetrics, Motion, evaluate_clip, replace_keyframes};
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
 
@@ -198,9 +198,10 @@ pub trait WindowSampler {
     }
 }
 
-/// An RF method (ours, the replacement baseline or impute-until-τ*) around its sampler. It applies the evaluation
-/// assembly of SPEC §4.6 ("keyframe frames are replaced by ground-truth meshes"), so keyframes come back exactly,
-/// and adds SceneMI keyframe noise first when its kind asks for it.
+/// An RF method (ours, the replacement baseline or impute-until-τ*) around its sampler: it adds SceneMI keyframe
+/// noise first when its kind asks for it and returns the decoded sample as it is, keyframe frames included. The
+/// evaluation assembly of SPEC §4.6 ("keyframe frames are replaced by ground-truth meshes") is the scorer's job
+/// ([`evaluate_clip`]), after it has measured the keyframe error (E7) on the raw output.
 pub struct RfMethod<S> {
     kind: MethodKind,
     sampler: S,
@@ -259,7 +260,7 @@ impl<S: WindowSampler> Method for RfMethod<S> {
         }
         outs.into_iter()
             .zip(&asked)
-            .map(|(mut out, r)| {
+            .map(|(out, r)| {
                 let (clip, n) = (r.clip, r.clip.n_vertices);
                 if out.len() != clip.frames * n {
                     return Err(DataError::new(
@@ -271,10 +272,6 @@ impl<S: WindowSampler> Method for RfMethod<S> {
                             clip.frames
                         ),
                     ));
-                }
-                // Evaluation assembly (SPEC §4.6): keyframe frames are the given keyframe meshes.
-                for &f in r.keyframes.iter().filter(|&&f| f < clip.frames) {
-                    out[f * n..(f + 1) * n].copy_from_slice(clip.frame(f));
                 }
                 Ok(out)
             })
@@ -315,7 +312,8 @@ pub fn noisy_keyframes(clip: &Clip, keyframes: &[usize], level: f32, seed: u64) 
 /// One scored generation: the method's prediction and its metrics (SPEC §6.1 assembly and (E1)–(E7)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scored {
-    /// Raw prediction `[T, N]` rows (before keyframe replacement).
+    /// The completed window `[T, N]` rows: the method's output with the keyframe frames replaced by the ground truth
+    /// (SPEC §4.6 assembly; (E7) was measured on the output before that).
     pub prediction: Vec<[f32; 3]>,
     pub metrics: ClipMetrics,
 }
@@ -372,7 +370,9 @@ fn score(kind: MethodKind, gt: &Clip, keyframes: &[usize], prediction: Vec<[f32;
     let pred = Motion::new(&prediction, gt.frames, gt.n_vertices)
         .map_err(|e| DataError::new(&gt.id, &label, format!("prediction: {e}")))?;
     let truth = Motion::from_clip(gt).map_err(|e| DataError::new(&gt.id, "vertices", e.to_string()))?;
-    let metrics = evaluate_clip(pred, truth, keyframes).map_err(|e| DataError::new(&gt.id, &label, e.to_string()))?;
+    let err = |e: crate::metrics::EvalError| DataError::new(&gt.id, &label, e.to_string());
+    let metrics = evaluate_clip(pred, truth, keyframes).map_err(err)?;
+    let prediction = replace_keyframes(pred, truth, keyframes).map_err(err)?;
     Ok(Scored { prediction, metrics })
 }
 

@@ -243,7 +243,13 @@ fn long_horizon(
             w.caption,
             &gt.source,
         )?;
-        method.complete(&window, &w.keyframes, w.caption, seed.wrapping_add(w.index as u64))
+        let mut pred = method.complete(&window, &w.keyframes, w.caption, seed.wrapping_add(w.index as u64))?;
+        // The window's assembly (SPEC §4.6, §7 step 2): its keyframes are the meshes it was given, so the overlap
+        // frame a later window starts from is the keyframe itself.
+        for &k in w.keyframes.iter().filter(|&&k| k < spec.window) {
+            pred[k * n..(k + 1) * n].copy_from_slice(&w.vertices[k * n..(k + 1) * n]);
+        }
+        Ok(pred)
     })?;
     let err = |e: crate::metrics::EvalError| DataError::new(&gt.id, &label, e.to_string());
     let pred = Motion::new(&r.vertices, gt.frames, n).map_err(err)?;

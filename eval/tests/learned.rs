@@ -12,7 +12,9 @@ use any4d_data::preprocess::edges_from_faces;
 use any4d_eval::learned::{
     LatentLerpSampler, LearnedModels, MeshCodec, MeshVae, RfSampler, VaeReconstructor, sampler_noise,
 };
-use any4d_eval::methods::{Method, MethodKind, Request, RfMethod, WindowSampler, hide_non_keyframes};
+use any4d_eval::methods::{
+    Method, MethodKind, Request, RfMethod, WindowSampler, complete_and_score, hide_non_keyframes,
+};
 use any4d_eval::run::Reconstructor;
 use any4d_model::dymesh_vae::DyMeshVaeConfig;
 use any4d_model::frame_vae::{EdgeList, FrameVaeConfig, Posterior, VaeBatch};
@@ -190,17 +192,37 @@ fn a_batch_of_requests_samples_what_each_request_samples_alone() {
         let (k1, k2) = ([0usize, 3], [0usize, 1, 3]);
         let (v1, v2) = (hide_non_keyframes(&gt, &k1), hide_non_keyframes(&gt, &k2));
         let requests = [
-            Request { clip: &v1, keyframes: &k1, seed: 5 },
-            Request { clip: &v2, keyframes: &k2, seed: 6 },
-            Request { clip: &v1, keyframes: &k1, seed: 7 },
+            Request {
+                clip: &v1,
+                keyframes: &k1,
+                seed: 5,
+            },
+            Request {
+                clip: &v2,
+                keyframes: &k2,
+                seed: 6,
+            },
+            Request {
+                clip: &v1,
+                keyframes: &k1,
+                seed: 7,
+            },
         ];
         let batch = sampler.sample_batch(&requests, "a waving flag").unwrap();
         assert_eq!(batch.len(), 3);
         for (r, got) in requests.iter().zip(&batch) {
             let alone = sampler.sample(r.clip, r.keyframes, "a waving flag", r.seed).unwrap();
-            assert!(rows_diff(got, &alone) < 1e-5, "{mode:?} seed {}: {}", r.seed, rows_diff(got, &alone));
+            assert!(
+                rows_diff(got, &alone) < 1e-5,
+                "{mode:?} seed {}: {}",
+                r.seed,
+                rows_diff(got, &alone)
+            );
         }
-        assert!(rows_diff(&batch[0][N..2 * N], &batch[2][N..2 * N]) > 1e-4, "seeds differ inside a batch");
+        assert!(
+            rows_diff(&batch[0][N..2 * N], &batch[2][N..2 * N]) > 1e-4,
+            "seeds differ inside a batch"
+        );
     }
 }
 
@@ -347,7 +369,7 @@ fn impute_until_samples_and_differs_from_input_mask() {
 }
 
 #[test]
-fn rf_method_around_rf_sampler_returns_ground_truth_keyframes() {
+fn rf_method_returns_decoded_keyframes_and_scoring_assembles_ground_truth_ones() {
     let device = Device::flex();
     let m = models(frame_codec(&device, PadTo::BatchMax), KfMode::InputMask, &device);
     let sampler = RfSampler::for_method(MethodKind::KeyframeRf, m, options(KfMode::InputMask), 1.0).unwrap();
@@ -357,10 +379,18 @@ fn rf_method_around_rf_sampler_returns_ground_truth_keyframes() {
     let out = method
         .complete(&hide_non_keyframes(&gt, &keys), &keys, "flag", 1)
         .unwrap();
-    for &f in &keys {
-        assert_eq!(&out[f * N..(f + 1) * N], gt.frame(f), "keyframe {f}");
-    }
+    // The untrained VAE does not reproduce frame 3, so the raw keyframe differs from the ground truth …
+    assert!(
+        rows_diff(&out[3 * N..4 * N], gt.frame(3)) > 1e-4,
+        "keyframe 3 is decoded"
+    );
     assert!(rows_diff(&out[N..2 * N], gt.frame(1)) > 1e-3, "frame 1 is generated");
+    // … and (E7) sees it, while the assembled prediction carries the ground-truth keyframes.
+    let s = complete_and_score(&method, &gt, &keys, "flag", 1).unwrap();
+    assert!(s.metrics.keyframe_rmse > 1e-5, "(E7) = {}", s.metrics.keyframe_rmse);
+    for &f in &keys {
+        assert_eq!(&s.prediction[f * N..(f + 1) * N], gt.frame(f), "keyframe {f}");
+    }
 }
 
 #[test]

@@ -303,7 +303,8 @@ fn keyframe_noise_spares_the_ends_and_has_the_set_scale() {
 
 /// A stand-in sampler whose raw output misses the keyframes (as a decoded RF sample does).
 struct Drifting;
-impl any4d_eval::methods::WindowSampler for Drifting {
+use any4d_eval::methods::WindowSampler;
+impl WindowSampler for Drifting {
     fn sample(&self, clip: &Clip, _k: &[usize], _c: &str, seed: u64) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
         Ok(clip
             .vertices
@@ -314,29 +315,51 @@ impl any4d_eval::methods::WindowSampler for Drifting {
 }
 
 #[test]
-fn rf_methods_return_keyframes_exactly_in_the_eval_path() {
+fn rf_methods_are_scored_on_their_raw_keyframes_then_assembled() {
     use any4d_eval::methods::RfMethod;
     let gt = linear_clip(16);
     let keys = [0, 4, 11, 15];
     for kind in [MethodKind::ReplacementRf, MethodKind::KeyframeRf] {
         let m = RfMethod::new(kind, Drifting).unwrap();
+        let raw = m.complete(&hide_non_keyframes(&gt, &keys), &keys, "", 7).unwrap();
+        assert_ne!(
+            &raw[4 * 4..5 * 4],
+            gt.frame(4),
+            "{kind}: the method returns its own keyframes"
+        );
         let s = complete_and_score(&m, &gt, &keys, "", 7).unwrap();
         for &k in &keys {
-            assert_eq!(&s.prediction[k * 4..(k + 1) * 4], gt.frame(k), "{kind}: keyframe {k}");
+            assert_eq!(
+                &s.prediction[k * 4..(k + 1) * 4],
+                gt.frame(k),
+                "{kind}: assembled keyframe {k}"
+            );
         }
-        assert_eq!(s.metrics.keyframe_rmse, 0.0);
+        // (E7) measures the drift of the raw keyframes, (0.05, −0.02, 0.007) per vertex, in the frame of the ground
+        // truth's frame 0 (half-extent 0.5, so twice as large).
+        let drift = ((0.05f64.powi(2) + 0.02f64.powi(2) + 0.007f64.powi(2)) / 3.0).sqrt() / 0.5;
+        assert!(
+            (s.metrics.keyframe_rmse - drift).abs() < 1e-4,
+            "{kind}: (E7) = {} vs {drift}",
+            s.metrics.keyframe_rmse
+        );
         assert!(s.metrics.rmse > 0.01, "non-keyframes keep the sampler's output");
     }
     let noisy = MethodKind::ImputeUntil {
         tau_star: 0.98,
         keyframes: KeyframeNoise::Noisy { level: 1.0 },
     };
-    let s = complete_and_score(&RfMethod::new(noisy, Drifting).unwrap(), &gt, &keys, "", 7).unwrap();
+    let visible = hide_non_keyframes(&gt, &keys);
+    let raw = RfMethod::new(noisy, Drifting)
+        .unwrap()
+        .complete(&visible, &keys, "", 7)
+        .unwrap();
+    let clean = Drifting.sample(&visible, &keys, "", 7).unwrap();
     assert_ne!(
-        &s.prediction[4 * 4..5 * 4],
-        gt.frame(4),
-        "noisy keyframes are what the method is given"
+        &raw[4 * 4..5 * 4],
+        &clean[4 * 4..5 * 4],
+        "noisy keyframes are what the sampler is given"
     );
-    assert_eq!(&s.prediction[..4], gt.frame(0), "the first frame stays clean");
+    assert_eq!(&raw[..4], &clean[..4], "the first frame stays clean");
     assert!(RfMethod::new(MethodKind::Lerp, Drifting).is_err());
 }
