@@ -1,7 +1,8 @@
-//! Keyframe samplers: which frames of a T-frame window are observed (SPEC §1.3 masks, §4.5 training, §6.1 eval).
+//! Keyframe samplers: which frames of a T-frame window are observed (docs/method.md §1.3 masks, §4.5 training, §6.1
+//! eval).
 //!
 //! **Mask polarity (stated once, tested once): 1 / `true` = frame f is an observed keyframe whose clean latent is
-//! given; 0 / `false` = frame f is generated.** This is the `m` of SPEC §1.3; the RF input is
+//! given; 0 / `false` = frame f is generated.** This is the `m` of docs/method.md §1.3; the RF input is
 //! `m ⊙ clean + (1 − m) ⊙ state` (R3).
 //!
 //! Every sampler is deterministic given its generator, and [`keyframe_mask_batch`] derives its generator from a
@@ -20,11 +21,11 @@ pub const KEYFRAME_STREAM: u64 = 0x6b66;
 /// How the keyframe set 𝒦 ⊂ {0..T−1} is chosen.
 #[derive(Debug, Clone, PartialEq)]
 pub enum KeyframeStrategy {
-    /// RF training (SPEC §4.5): k ~ Unif{0..=k_max}, then a uniform k-subset of {0..T−1} without replacement;
+    /// RF training (docs/method.md §4.5): k ~ Unif{0..=k_max}, then a uniform k-subset of {0..T−1} without replacement;
     /// first and last frames are not forced. The paper uses k_max = 5; k = 0 is the keyframe-free case.
     Random { k_max: usize },
-    /// Evaluation (SPEC §6.1): {0, T−1} ∪ K_x distinct frames drawn from {1..T−2}. For one generator state the
-    /// sets are nested across K_x: the set for K_x is a subset of the set for K_x + 1.
+    /// Evaluation (docs/method.md §6.1): {0, T−1} ∪ K_x distinct frames drawn from {1..T−2}. For one generator state
+    /// the sets are nested across K_x: the set for K_x is a subset of the set for K_x + 1.
     FirstLastPlus(usize),
     /// Every r-th frame: f ∈ 𝒦 iff f mod r = 0 (r ≥ 1). The last frame is included only when r divides T − 1.
     Uniform(usize),
@@ -35,7 +36,7 @@ pub enum KeyframeStrategy {
 }
 
 impl KeyframeStrategy {
-    /// The training default of SPEC §4.5: `Random { k_max: 5 }`.
+    /// The training default of docs/method.md §4.5: `Random { k_max: 5 }`.
     pub const PAPER_TRAINING: KeyframeStrategy = KeyframeStrategy::Random { k_max: 5 };
 
     /// Checks that the strategy can be sampled for windows of `t` frames. Call it when a config is loaded:
@@ -85,7 +86,8 @@ pub fn sample_keyframes(strategy: &KeyframeStrategy, t: usize, rng: &mut impl Rn
     let mut mask = vec![false; t];
     match strategy {
         KeyframeStrategy::Random { k_max } => {
-            // SPEC §4.5 step 1: k ~ Unif{0..=k_max} (capped at T), step 2: uniform subset without replacement.
+            // docs/method.md §4.5 step 1: k ~ Unif{0..=k_max} (capped at T), step 2: uniform subset without
+            // replacement.
             let k = rng.random_range(0..=*k_max).min(t);
             let mut frames: Vec<usize> = (0..t).collect();
             let (chosen, _) = frames.partial_shuffle(rng, k);
@@ -97,7 +99,7 @@ pub fn sample_keyframes(strategy: &KeyframeStrategy, t: usize, rng: &mut impl Rn
             mask[0] = true;
             mask[t - 1] = true;
             // A full shuffle of the inner frames consumes the same draws for every K_x, so taking a prefix of it
-            // makes the sets nested across K_x (SPEC §6.1).
+            // makes the sets nested across K_x (docs/method.md §6.1).
             let mut inner: Vec<usize> = (1..t - 1).collect();
             inner.shuffle(rng);
             for &f in &inner[..*kx] {

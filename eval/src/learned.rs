@@ -1,4 +1,4 @@
-//! Trained networks on the evaluation protocol (SPEC §4.6, §5.1, §5.2 `lerp_space = "latent"`, §5.4, §6.1,
+//! Trained networks on the evaluation protocol (docs/method.md §4.6, §5.1, §5.2 `lerp_space = "latent"`, §5.4, §6.1,
 //! (E4)): one window (batch 1) is encoded with the mesh VAE, completed by the keyframe RF ((R3)–(R6)), the
 //! replacement baseline ((R7)–(R8)), impute-until-τ* ((R9)) or latent interpolation ((L1) on z), and decoded.
 //!
@@ -31,7 +31,7 @@ type Result<T, E = DataError> = std::result::Result<T, E>;
 /// RNG stream of the sampler's initial noise ε (distinct from the keyframe-noise stream of `methods.rs`).
 const NOISE_STREAM: u64 = 0x7266_6570; // "rfep"
 
-/// A trained mesh VAE of either kind (SPEC §3.5).
+/// A trained mesh VAE of either kind (docs/method.md §3.5).
 pub enum MeshVae {
     /// Frame-wise VAE: one trajectory latent per frame, `[B, T, P, C]`.
     Frame(FrameVae),
@@ -71,8 +71,8 @@ pub struct WindowEncoding {
     pub id: String,
 }
 
-/// A mesh VAE applied to single normalised windows: FPS on frame 0 (SPEC §2.5), edges from faces, padding
-/// (SPEC §2.4), encode, decode, and the real rows back.
+/// A mesh VAE applied to single normalised windows: FPS on frame 0 (docs/method.md §2.5), edges from faces, padding
+/// (docs/method.md §2.4), encode, decode, and the real rows back.
 pub struct MeshCodec {
     vae: MeshVae,
     tokens: usize,
@@ -209,8 +209,8 @@ impl MeshCodec {
         })
     }
 
-    /// Decodes trajectory latents against the encoded reference: x̂ = x̄₀ + offsets (SPEC §3.2 "Output"), real
-    /// rows only.
+    /// Decodes trajectory latents against the encoded reference: x̂ = x̄₀ + offsets (docs/method.md §3.2 "Output"),
+    /// real rows only.
     ///
     /// # Shapes
     /// `z`: `[1, G, P, C]` raw latents (frame-wise: G frames in order; sequence-wise: G = 1); returns
@@ -345,8 +345,8 @@ pub fn sampler_noise(seed: u64, dims: [usize; 4], device: &Device) -> Tensor<4> 
 }
 
 /// One trained RF checkpoint with everything it samples with: the frame-wise VAE (in a [`MeshCodec`], shareable
-/// with [`LatentLerpSampler`]), the MMDiT and its config, the latent statistics of SPEC §3.4 and the text encoder
-/// (the scratch encoder is trained jointly with the RF, so it comes from the same checkpoint).
+/// with [`LatentLerpSampler`]), the MMDiT and its config, the latent statistics of docs/method.md §3.4 and the text
+/// encoder (the scratch encoder is trained jointly with the RF, so it comes from the same checkpoint).
 pub struct LearnedModels {
     codec: Arc<MeshCodec>,
     rf: Mmdit,
@@ -442,7 +442,7 @@ pub struct SampledWindow {
     pub latents: Tensor<4>,
 }
 
-/// An RF method's window sampler (SPEC §4.6): keyframe latents = posterior mean μ, standardized; ε from the
+/// An RF method's window sampler (docs/method.md §4.6): keyframe latents = posterior mean μ, standardized; ε from the
 /// seed; [`sample_mmdit`] with the mode's input rule ((R3) ours, (R7)–(R8) baseline, (R9) impute-until-τ*);
 /// de-standardize; decode every frame with E₀ of the reference.
 pub struct RfSampler {
@@ -572,7 +572,7 @@ impl RfSampler {
         let x1 = sample_mmdit(&m.rf, &cond, text, eps, self.guidance, &self.options); // (R6)
         let mut latents = m.stats.destandardize_motion(x1); // [1, P, T, C]
         if matches!(self.options.kf_mode, KfMode::InputMask | KfMode::ReplaceNoised) {
-            // SPEC §4.6: keyframe slots are Z_key; done on raw latents so they are μ exactly.
+            // docs/method.md §4.6: keyframe slots are Z_key; done on raw latents so they are μ exactly.
             latents = replace_keyframes(latents, keyframe_latents.clone().swap_dims(1, 2), mask_t);
         }
         Ok(SampledWindow {
@@ -591,7 +591,7 @@ impl WindowSampler for RfSampler {
     }
 }
 
-/// (L1) in latent space (SPEC §5.2, `lerp_space = "latent"`): the keyframes' posterior means are interpolated
+/// (L1) in latent space (docs/method.md §5.2, `lerp_space = "latent"`): the keyframes' posterior means are interpolated
 /// between consecutive keyframes, then every frame is decoded. Frames 0 and T − 1 must be keyframes.
 pub struct LatentLerpSampler {
     codec: Arc<MeshCodec>,

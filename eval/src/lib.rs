@@ -1,4 +1,4 @@
-//! Evaluation (SPEC §5–§7): metrics as pure functions, baselines, the long-horizon rollout, paper tables.
+//! Evaluation (docs/method.md §5–§7): metrics as pure functions, baselines, the long-horizon rollout, paper tables.
 
 pub mod baselines;
 pub mod learned;

@@ -1,7 +1,7 @@
-//! The evaluation protocol of SPEC §6.1: a manifest of fixed validation clips, nested keyframe sets per K_x
-//! (or every-r / Bernoulli-p placements, SPEC §8 X4) and noise seeds, shared by every method and saved as JSON.
-//! The items are read from a dataset store's validation split ([`StoreSource`]); 31-frame items join two
-//! clips that share a frame (SPEC §2.7).
+//! The evaluation protocol of docs/method.md §6.1: a manifest of fixed validation clips, nested keyframe sets per K_x
+//! (or every-r / Bernoulli-p placements, docs/method.md §8 X4) and noise seeds, shared by every method and saved as
+//! JSON. The items are read from a dataset store's validation split ([`StoreSource`]); 31-frame items join two
+//! clips that share a frame (docs/method.md §2.7).
 
 use std::path::Path;
 
@@ -13,14 +13,14 @@ use serde::{Deserialize, Serialize};
 
 /// Manifest format version written by [`Manifest::save`]; [`Manifest::load`] rejects any other.
 pub const MANIFEST_VERSION: u32 = 1;
-/// The manifest seed of SPEC §6.1.
+/// The manifest seed of docs/method.md §6.1.
 pub const MANIFEST_SEED: u64 = 42;
 /// Stream label for the clip draw, so it never shares draws with the keyframe draws (streams 1 + position).
 const CLIP_STREAM: u64 = 0;
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
 
-/// Where the keyframes of a test window sit (SPEC §6.1, §8 X4). First and last frames are always keyframes.
+/// Where the keyframes of a test window sit (docs/method.md §6.1, §8 X4). First and last frames are always keyframes.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", tag = "kind")]
 pub enum Placement {
@@ -30,7 +30,7 @@ pub enum Placement {
     EveryR { r: usize },
     /// Each interior frame independently with probability p.
     Bernoulli { p: f32 },
-    /// Keyframes every `stride` frames, e.g. {0, 15, 30} for the 31-frame rollout (SPEC §7).
+    /// Keyframes every `stride` frames, e.g. {0, 15, 30} for the 31-frame rollout (docs/method.md §7).
     Stride { stride: usize },
 }
 
@@ -55,7 +55,7 @@ pub struct ClipRef {
     pub id: String,
 }
 
-/// One evaluation item: a 16-frame clip, or two clips sharing their boundary frame (31 frames, SPEC §2.7).
+/// One evaluation item: a 16-frame clip, or two clips sharing their boundary frame (31 frames, docs/method.md §2.7).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ManifestClip {
     /// The clip, or the first clip of a long-horizon pair.
@@ -68,7 +68,7 @@ pub struct ManifestClip {
     pub keyframes: Vec<Vec<usize>>,
 }
 
-/// The fixed protocol: which clips, which keyframes, which noise seeds (SPEC §6.1).
+/// The fixed protocol: which clips, which keyframes, which noise seeds (docs/method.md §6.1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Manifest {
@@ -93,7 +93,7 @@ pub struct Manifest {
 /// What to draw in [`Manifest::build`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ManifestOptions {
-    /// Number of items (100 in SPEC §6.1); fewer candidates is an error.
+    /// Number of items (100 in docs/method.md §6.1); fewer candidates is an error.
     pub n_clips: usize,
     /// Draw seed (42).
     pub seed: u64,
@@ -101,7 +101,7 @@ pub struct ManifestOptions {
     pub frames: usize,
     /// Keyframe placement.
     pub placement: Placement,
-    /// Base noise seeds (`[42]`; SPEC §8 X8: `[42, 43, 44, 45, 46]`).
+    /// Base noise seeds (`[42]`; docs/method.md §8 X8: `[42, 43, 44, 45, 46]`).
     pub seeds: Vec<u64>,
     /// Dataset description stored in the manifest.
     pub data: String,
@@ -263,7 +263,7 @@ impl Manifest {
     }
 }
 
-/// The noise seed of item `clip_index` under base seed `base` (SPEC §6.1: derived from (42, clip index)).
+/// The noise seed of item `clip_index` under base seed `base` (docs/method.md §6.1: derived from (42, clip index)).
 /// SplitMix64 of the pair, so neighbouring items and seeds get unrelated streams; the same for every K_x.
 pub fn noise_seed(base: u64, clip_index: usize) -> u64 {
     let mut z = base.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (clip_index as u64).wrapping_add(0xD1B5_4A32_D192_ED03);
@@ -321,7 +321,7 @@ fn check_set(set: &[usize], frames: usize) -> std::result::Result<(), String> {
     Ok(())
 }
 
-/// Long-horizon candidates (SPEC §2.7): pairs of clips of one animation (same id up to the `_<start>-<end>`
+/// Long-horizon candidates (docs/method.md §2.7): pairs of clips of one animation (same id up to the `_<start>-<end>`
 /// tail) where the second starts 15 frames after the first, so they share the first clip's last frame.
 /// Ids that do not follow the AAM form `<uid>_offset<k>_<start>-<end>` are skipped.
 pub fn long_horizon_pairs(clips: &[ClipRef]) -> Vec<Candidate> {
@@ -387,7 +387,7 @@ impl StoreSource {
     }
 
     /// Evaluation candidates: single validation clips when the store's clips are long enough for `frames`,
-    /// otherwise pairs of clips sharing their boundary frame (SPEC §2.7).
+    /// otherwise pairs of clips sharing their boundary frame (docs/method.md §2.7).
     pub fn candidates(&self, frames: usize) -> Vec<Candidate> {
         if self.store.frames() >= frames {
             self.val
@@ -453,7 +453,7 @@ fn first_frames(clip: &Clip, frames: usize) -> Result<Clip> {
     )
 }
 
-/// Two consecutive windows sharing a frame → one sequence without the duplicate (SPEC §2.7), in absolute
+/// Two consecutive windows sharing a frame → one sequence without the duplicate (docs/method.md §2.7), in absolute
 /// coordinates (each stored window is normalised by its own frame 0; the stored (c, s) undo that).
 fn join_shared_frame(a: &StoredClip, b: &StoredClip, dir: &Path) -> Result<Clip> {
     let (mut a_abs, mut b_abs) = (a.clip.clone(), b.clip.clone());

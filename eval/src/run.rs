@@ -1,5 +1,5 @@
-//! `any4d eval run` / `any4d eval render` as library calls (SPEC §6–§7, P-Tables 1, 2, 4, 5): build or load the
-//! manifest, run every method on it, write per-clip parquet, Markdown/CSV summaries, plots and predictions.
+//! `any4d eval run` / `any4d eval render` as library calls (docs/method.md §6–§7, P-Tables 1, 2, 4, 5): build or load
+//! the manifest, run every method on it, write per-clip parquet, Markdown/CSV summaries, plots and predictions.
 //!
 //! Methods arrive already built ([`Method`] trait objects): training-free ones come from [`vertex_methods`], the
 //! RF methods are built by the caller from its checkpoints (only `train` reads run folders).
@@ -56,7 +56,7 @@ pub struct RunOptions {
     pub placement: Placement,
     /// Reuse this manifest instead of drawing one (it is copied next to the results).
     pub manifest: Option<PathBuf>,
-    /// Reference of stage 2 in table 2 (SPEC §7, A8).
+    /// Reference of stage 2 in table 2 (docs/method.md §7, A8).
     pub overlap_source: OverlapSource,
     /// Predictions of the first `export_items` items are saved and drawn as PNG strips.
     pub export_items: usize,
@@ -73,7 +73,7 @@ pub struct RunOptions {
 }
 
 impl RunOptions {
-    /// Defaults of SPEC §6.1 for `protocol` on the store `data`, writing to `out`, with no methods yet.
+    /// Defaults of docs/method.md §6.1 for `protocol` on the store `data`, writing to `out`, with no methods yet.
     pub fn new(protocol: TableKind, data: PathBuf, out: PathBuf) -> Self {
         Self {
             protocol,
@@ -201,7 +201,8 @@ pub fn evaluate(
 /// A prediction and its metrics by name.
 type Scored = (Vec<[f32; 3]>, BTreeMap<String, f64>);
 
-/// One long-horizon generation (SPEC §7) scored by (E1)–(E7) over 𝒰 = {0..30} \ {0, 15, 30} plus the seam jerk.
+/// One long-horizon generation (docs/method.md §7) scored by (E1)–(E7) over 𝒰 = {0..30} \ {0, 15, 30} plus the seam
+/// jerk.
 fn long_horizon(
     method: &dyn Method,
     gt: &Clip,

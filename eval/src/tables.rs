@@ -1,5 +1,5 @@
-//! Paper-shaped result tables (SPEC §6.1, §6.4: P-Tables 1, 2, 4, 5): per-clip records to parquet, summaries to
-//! Markdown and CSV. Each metric is averaged over clips per seed, then reported as mean ± 95 % confidence
+//! Paper-shaped result tables (docs/method.md §6.1, §6.4: P-Tables 1, 2, 4, 5): per-clip records to parquet, summaries
+//! to Markdown and CSV. Each metric is averaged over clips per seed, then reported as mean ± 95 % confidence
 //! half-width over seeds, t_{0.975, n−1} · sd / √n (Student t with n − 1 degrees of freedom, sample sd).
 
 use std::collections::BTreeMap;

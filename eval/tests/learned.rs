@@ -1,4 +1,4 @@
-//! Learned methods on the evaluation protocol (SPEC §4.6, §5.1, §5.2 latent lerp, §5.4, (E4)): shapes, seed
+//! Learned methods on the evaluation protocol (docs/method.md §4.6, §5.1, §5.2 latent lerp, §5.4, (E4)): shapes, seed
 //! determinism, keyframe latents kept exactly, ground-truth keyframes after assembly, latent lerp, VAE rows. Tiny
 //! untrained networks on `Device::flex()`; their zero-initialised layers are woken with noise so that every
 //! network output depends on its input.
@@ -224,7 +224,7 @@ fn keyframe_slots_hold_the_keyframe_latents_after_sampling() {
 #[test]
 fn zero_velocity_leaves_the_seeded_noise_de_standardized() {
     // An untouched MMDiT has a zero-initialised output layer: v = 0, so X₁ = X₀ = ε (τ = 0 is noise) and the
-    // non-keyframe latents are ε · std + mean of the motion statistics (SPEC §3.4, §4.6).
+    // non-keyframe latents are ε · std + mean of the motion statistics (docs/method.md §3.4, §4.6).
     let device = Device::flex();
     let codec = frame_codec(&device, PadTo::BatchMax);
     let cfg = MmditConfig {

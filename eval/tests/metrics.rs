@@ -1,5 +1,5 @@
-//! Tests of the evaluation metrics (SPEC §6.1–§6.2) and the non-learned baselines (SPEC §5.2): hand-worked cases,
-//! properties (SPEC §9 item 14 bounds), malformed input, and a reference test against
+//! Tests of the evaluation metrics (docs/method.md §6.1–§6.2) and the non-learned baselines (docs/method.md §5.2):
+//! hand-worked cases, properties (docs/method.md §9 item 14 bounds), malformed input, and a reference test against
 //! `scripts/metrics_reference.py` (numpy + scipy), whose output is committed in `tests/fixtures/`.
 
 use any4d_eval::baselines::{VertexBaseline, lerp_latents};
@@ -214,7 +214,7 @@ fn assert_bounds(m: &ClipMetrics) {
 
 #[test]
 fn spec_bounds_hold_on_random_inputs() {
-    // SPEC §9 item 14: DTW ≤ mean per-vertex error ≤ √3·RMSE, Chamfer ≤ 2·mean per-vertex error.
+    // docs/method.md §9 item 14: DTW ≤ mean per-vertex error ≤ √3·RMSE, Chamfer ≤ 2·mean per-vertex error.
     for seed in 0..12u64 {
         let noise = [0.01, 0.3, 2.0][seed as usize % 3];
         let (pred, gt) = random_clip(100 + seed, 16, 30, noise);

@@ -1,4 +1,5 @@
-//! Protocol tests (SPEC §6.1): the manifest is deterministic, nested, validated on load; methods see only keyframes.
+//! Protocol tests (docs/method.md §6.1): the manifest is deterministic, nested, validated on load; methods see only
+//! keyframes.
 
 use any4d_data::Clip;
 use any4d_eval::baselines::VertexBaseline;

@@ -1,4 +1,4 @@
-//! Sequence-wise DyMeshVAE (AnimateAnyMesh; SPEC §3.5 ablation): the whole clip's trajectory of each vertex
+//! Sequence-wise DyMeshVAE (AnimateAnyMesh; docs/method.md §3.5 ablation): the whole clip's trajectory of each vertex
 //! (all T offsets, 3T = 48 values → 1008 Fourier values) is encoded into one motion latent z_T per token.
 //! Same body, losses (V1)–(V3) and API as the frame-wise VAE (`frame_vae.rs`); only the motion embedding,
 //! the latent size and the output head (3T values per vertex) differ.
@@ -10,7 +10,7 @@ use crate::frame_vae::{
 };
 use crate::point_embed::{OffsetEmbed, OffsetEmbedConfig};
 
-/// Configuration of the sequence-wise DyMeshVAE (SPEC §3.5 right column; AAM defaults).
+/// Configuration of the sequence-wise DyMeshVAE (docs/method.md §3.5 right column; AAM defaults).
 #[derive(Config, Debug)]
 pub struct DyMeshVaeConfig {
     /// Width d (256).
@@ -43,7 +43,7 @@ pub struct DyMeshVaeConfig {
     /// GEGLU multiple m: d → 2m·d, gate → m·d → d (4).
     #[config(default = 4)]
     pub ffn_mult: usize,
-    /// Padded vertices as encoder keys (SPEC §9.15): masked (ours) or visible (AAM).
+    /// Padded vertices as encoder keys (docs/method.md §9 item 15): masked (ours) or visible (AAM).
     #[config(default = "PadKeys::Masked")]
     pub pad_keys: PadKeys,
     /// Lower clamp of log σ² (−30).

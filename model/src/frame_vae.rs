@@ -1,5 +1,5 @@
-//! Frame-wise mesh VAE of CompletionAny4D (SPEC §3.1–§3.3, equations (V1)–(V3)) and the encoder/decoder body
-//! it shares with the sequence-wise DyMeshVAE ablation (`dymesh_vae.rs`, SPEC §3.5): AnimateAnyMesh's
+//! Frame-wise mesh VAE of CompletionAny4D (docs/method.md §3.1–§3.3, equations (V1)–(V3)) and the encoder/decoder body
+//! it shares with the sequence-wise DyMeshVAE ablation (`dymesh_vae.rs`, docs/method.md §3.5): AnimateAnyMesh's
 //! shape-synchronised attention with a per-frame motion input.
 
 use burn::nn::{LayerNorm, LayerNormConfig, Linear, LinearConfig};
@@ -14,7 +14,7 @@ use crate::attention::{
 };
 use crate::point_embed::{OffsetEmbed, OffsetEmbedConfig, PointEmbed, PointEmbedConfig};
 
-/// Whether padded vertex rows are visible as attention keys in the encoder (SPEC §2.4, §9.15).
+/// Whether padded vertex rows are visible as attention keys in the encoder (docs/method.md §2.4, §9 item 15).
 #[derive(Config, Debug, Copy, PartialEq, Eq)]
 pub enum PadKeys {
     /// Padded rows are masked out of the encoder's keys (ours, default): latents do not depend on padding.
@@ -28,7 +28,7 @@ pub enum PadKeys {
 pub enum Posterior {
     /// z = μ + σ·ξ with ξ ~ N(0, I) from the device RNG (training, latent statistics).
     Sample,
-    /// z = μ (keyframe latents at inference, SPEC §4.6).
+    /// z = μ (keyframe latents at inference, docs/method.md §4.6).
     Mean,
 }
 
@@ -67,7 +67,7 @@ impl GegluFfn {
     }
 }
 
-/// One shape-synchronised block (SPEC §3.2 encoder/decoder rows): one attention map computed from the shape
+/// One shape-synchronised block (docs/method.md §3.2 encoder/decoder rows): one attention map computed from the shape
 /// stream (queries) and the shape context (keys) pools both the shape context (updates S) and the motion
 /// context (updates M); pre-LayerNorm, residuals, a GEGLU FFN per stream. The encoder uses it as
 /// cross-attention into the per-vertex features, the decoder as self-attention over the P tokens.
@@ -301,7 +301,7 @@ impl MeshVaeBody {
     }
 }
 
-/// Draws z = μ + σ·ξ, σ = exp(½ log σ²), ξ from the device RNG (SPEC §3.2 "Bottleneck").
+/// Draws z = μ + σ·ξ, σ = exp(½ log σ²), ξ from the device RNG (docs/method.md §3.2 "Bottleneck").
 ///
 /// # Shapes
 /// - `mu`, `logvar`: `[B, G, P, C]` → `[B, G, P, C]`
@@ -311,7 +311,7 @@ pub fn sample(mu: Tensor<4>, logvar: Tensor<4>) -> Tensor<4> {
 }
 
 /// (V1) mean per-vertex Euclidean distance over the real vertices of all frames of the batch:
-/// Σ_{b,f,v real} ‖x̂ − x̄‖₂ / (T · Σ_b N_v) (AAM's batch form of SPEC (V1)).
+/// Σ_{b,f,v real} ‖x̂ − x̄‖₂ / (T · Σ_b N_v) (AAM's batch form of docs/method.md (V1)).
 ///
 /// # Shapes
 /// - `pred`, `target`: `[B, T, N, 3]`, `vmask`: `[B, N]` (true = real) → `[1]`
@@ -374,7 +374,7 @@ pub struct VaeEncoding {
     pub logvar: Tensor<4>,
 }
 
-/// One training batch of either mesh VAE, in the normalized, padded frame of SPEC §2.3–§2.4.
+/// One training batch of either mesh VAE, in the normalized, padded frame of docs/method.md §2.3–§2.4.
 #[derive(Debug, Clone)]
 pub struct VaeBatch {
     /// Reference mesh x̄₀ (clip frame 0), `[B, N, 3]`.
@@ -408,8 +408,8 @@ pub trait MeshVaeModel: Module + Clone {
         edges: &EdgeList,
     ) -> VaeEncoding;
 
-    /// Decodes every frame: x̂_{t,v} = x̄_{0,v} + o_{t,v} (SPEC §3.2 "Output"). Padded rows get values too; the
-    /// loss and metrics ignore them.
+    /// Decodes every frame: x̂_{t,v} = x̄_{0,v} + o_{t,v} (docs/method.md §3.2 "Output"). Padded rows get values too;
+    /// the loss and metrics ignore them.
     ///
     /// # Shapes
     /// - `e0`: `[B, N, D]`, `reference`: `[B, N, 3]`, `z0`: `[B, P, C]`, `z`: `[B, G, P, C]`
@@ -478,7 +478,7 @@ pub trait MeshVaeModel: Module + Clone {
     }
 }
 
-/// Configuration of the frame-wise mesh VAE (SPEC §3.2, §3.5; paper values are the defaults).
+/// Configuration of the frame-wise mesh VAE (docs/method.md §3.2, §3.5; paper values are the defaults).
 #[derive(Config, Debug)]
 pub struct FrameVaeConfig {
     /// Width d (P-Table S4: 128).
@@ -508,7 +508,7 @@ pub struct FrameVaeConfig {
     /// GEGLU multiple m: d → 2m·d, gate → m·d → d (4).
     #[config(default = 4)]
     pub ffn_mult: usize,
-    /// Padded vertices as encoder keys (SPEC §9.15): masked (ours) or visible (AAM).
+    /// Padded vertices as encoder keys (docs/method.md §9 item 15): masked (ours) or visible (AAM).
     #[config(default = "PadKeys::Masked")]
     pub pad_keys: PadKeys,
     /// Lower clamp of log σ² (−30).
@@ -560,7 +560,7 @@ impl FrameVaeConfig {
     }
 }
 
-/// Frame-wise mesh VAE (SPEC §3): the shape stream is computed once per clip, every frame's offset from the
+/// Frame-wise mesh VAE (docs/method.md §3): the shape stream is computed once per clip, every frame's offset from the
 /// reference is encoded into its own trajectory latent z_f with the same FPS tokens, and decoding predicts
 /// each frame as the reference plus a per-vertex offset.
 #[derive(Module, Debug)]
@@ -603,8 +603,8 @@ impl MeshVaeModel for FrameVae {
         VaeEncoding { e0, z0, mu, logvar }
     }
 
-    /// Decodes every frame: x̂_{f,v} = x̄_{0,v} + o_{f,v} (SPEC §3.2 "Output"). Padded rows get values too; the
-    /// loss and metrics ignore them.
+    /// Decodes every frame: x̂_{f,v} = x̄_{0,v} + o_{f,v} (docs/method.md §3.2 "Output"). Padded rows get values too;
+    /// the loss and metrics ignore them.
     ///
     /// # Shapes
     /// - `e0`: `[B, N, D]`, `reference`: `[B, N, 3]`, `z0`: `[B, P, C]`, `z`: `[B, T, P, C]`

@@ -1,4 +1,4 @@
-//! Networks of CompletionAny4D (SPEC §3–§5): frame-wise mesh VAE, keyframe-conditioned rectified-flow MMDiT,
+//! Networks of CompletionAny4D (docs/method.md §3–§5): frame-wise mesh VAE, keyframe-conditioned rectified-flow MMDiT,
 //! the sequence-wise DyMeshVAE ablation, text encoders. No file IO except weight loading.
 
 pub mod attention;

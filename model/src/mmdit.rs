@@ -1,5 +1,5 @@
-//! Keyframe-conditioned rectified-flow backbone: the MMDiT of SPEC §4.1 and §4.3 (CompletionAny4D P-Eq. 9 and 14,
-//! on AnimateAnyMesh's "40m" CogX-style MMDiT), plus the slot-major token layout of (R3).
+//! Keyframe-conditioned rectified-flow backbone: the MMDiT of docs/method.md §4.1 and §4.3 (CompletionAny4D P-Eq. 9 and
+//! 14, on AnimateAnyMesh's "40m" CogX-style MMDiT), plus the slot-major token layout of (R3).
 //!
 //! Reading order as in DiT's `models.py`: helpers → timestep embedder → block (`pre_attention` / joint attention /
 //! `post_attention`, as in SD3's `mmdit.py`) → model. One token per FPS point; the 16 frames live in the channels.
@@ -11,12 +11,12 @@ use burn::tensor::module::attention;
 use burn::tensor::ops::AttentionModuleOptions;
 use serde::{Deserialize, Serialize};
 
-/// Frequencies of the timestep sinusoid (SPEC §4.3): the embedding has `2 · TIME_FREQS` values `[cos ‖ sin]`.
+/// Frequencies of the timestep sinusoid (docs/method.md §4.3): the embedding has `2 · TIME_FREQS` values `[cos ‖ sin]`.
 pub const TIME_FREQS: usize = 256;
 /// Epsilon of the affine-free LayerNorm in front of the joint attention (AAM `LN0`).
 const PRE_NORM_EPS: f64 = 1e-6;
 
-/// How keyframes reach the network (SPEC §8 `rf.kf_mode`).
+/// How keyframes reach the network (docs/method.md §8 `rf.kf_mode`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum KfMode {
@@ -63,7 +63,7 @@ pub struct MmditConfig {
 }
 
 impl MmditConfig {
-    /// The paper's size (SPEC §4.3) for a given keyframe mode and text width.
+    /// The paper's size (docs/method.md §4.3) for a given keyframe mode and text width.
     pub fn paper(kf_mode: KfMode, text_dim: usize) -> Self {
         Self {
             width: 512,
@@ -89,7 +89,7 @@ impl MmditConfig {
         }
     }
 
-    /// Input channels per token: (T+1)(C+1) with mask channels, (T+1)·C without (SPEC §4.1).
+    /// Input channels per token: (T+1)(C+1) with mask channels, (T+1)·C without (docs/method.md §4.1).
     pub fn in_channels(&self) -> usize {
         let per_slot = self.channels + usize::from(self.kf_mode.has_mask_channels());
         (self.frames + 1) * per_slot
@@ -235,7 +235,7 @@ impl MmditConfig {
     }
 }
 
-/// Initialisation of one Linear layer (AAM code, SPEC §4.3).
+/// Initialisation of one Linear layer (AAM code, docs/method.md §4.3).
 #[derive(Clone, Copy)]
 enum LinearInit {
     /// PyTorch's default `U(±1/√fan_in)` for weight and bias (burn's default Linear init is the same).
@@ -280,7 +280,7 @@ fn modulate(x: Tensor<3>, shift: Tensor<3>, scale: Tensor<3>) -> Tensor<3> {
     x.clone() * scale + x + shift
 }
 
-/// Sinusoid of the raw flow time: `f_i = exp(−ln(10⁴)·i/256)`, output `[cos(τ f) ‖ sin(τ f)]` (SPEC §4.3).
+/// Sinusoid of the raw flow time: `f_i = exp(−ln(10⁴)·i/256)`, output `[cos(τ f) ‖ sin(τ f)]` (docs/method.md §4.3).
 ///
 /// # Shapes
 /// - tau: `[B]` (τ ∈ [0, 1], τ = 0 noise, τ = 1 data)
@@ -296,7 +296,7 @@ pub fn timestep_sinusoid(tau: Tensor<1>) -> Tensor<2> {
 }
 
 // ---------------------------------------------------------------------------------------------------------------
-// Token layout (SPEC §4.1, (R3))
+// Token layout (docs/method.md §4.1, (R3))
 
 /// Keyframe replacement `m ⊙ z_key + (1 − m) ⊙ x` — the first half of (R3), and of (R7) when `z_key` is noised.
 ///
@@ -369,7 +369,7 @@ pub fn merge_slots(x: Tensor<4>) -> Tensor<3> {
 // ---------------------------------------------------------------------------------------------------------------
 // Timestep embedder
 
-/// Sinusoid of τ → Linear(512 → 4W) → GELU → Linear(4W → W) (SPEC §4.3; no SiLU in front).
+/// Sinusoid of τ → Linear(512 → 4W) → GELU → Linear(4W → W) (docs/method.md §4.3; no SiLU in front).
 #[derive(Module, Debug)]
 pub struct TimestepEmbedder {
     fc1: Linear,
@@ -557,7 +557,7 @@ impl Mmdit {
         self.output_proj.forward(self.final_norm.forward(motion))
     }
 
-    /// The timestep embedder (exposed for the τ-direction test of SPEC §1.4).
+    /// The timestep embedder (exposed for the τ-direction test of docs/method.md §1.4).
     pub fn timestep_embedder(&self) -> &TimestepEmbedder {
         &self.time
     }

@@ -1,5 +1,5 @@
-//! Rectified flow with keyframes (SPEC §1.4, §4.2, §4.6, §5.1, §5.4): interpolant (R1), target (R2), loss (R5),
-//! ODE sampling (R6) with CFG, the sampling-time replacement baseline (R7)–(R8) and impute-until-τ* (R9).
+//! Rectified flow with keyframes (docs/method.md §1.4, §4.2, §4.6, §5.1, §5.4): interpolant (R1), target (R2), loss
+//! (R5), ODE sampling (R6) with CFG, the sampling-time replacement baseline (R7)–(R8) and impute-until-τ* (R9).
 //!
 //! **Convention, stated once:** τ = 0 is pure Gaussian noise, τ = 1 is data. X_τ = (1 − τ) ε + τ X₁, the target
 //! velocity is X₁ − ε, and sampling integrates from τ = 0 to τ = 1. This is the reverse of SD3's σ and of DDPM step
@@ -34,7 +34,7 @@ pub fn target_velocity(eps: Tensor<4>, x1: Tensor<4>) -> Tensor<4> {
     x1 - eps // (R2)
 }
 
-/// Distribution of the training time τ (SPEC §4.5 step 4, §8 X7).
+/// Distribution of the training time τ (docs/method.md §4.5 step 4, §8 X7).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TauSampler {
@@ -66,7 +66,7 @@ impl TauSampler {
     }
 }
 
-/// Which slots enter the loss (SPEC §4.2, `rf.loss_on_keyframes`).
+/// Which slots enter the loss (docs/method.md §4.2, `rf.loss_on_keyframes`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum KeyframeLoss {
@@ -103,7 +103,7 @@ pub fn impute_mask(mask: Tensor<2>, tau: Tensor<1>, tau_star: f64) -> Tensor<2> 
     mask * before
 }
 
-/// One training batch of the keyframe RF (SPEC §4.5), standardized latents.
+/// One training batch of the keyframe RF (docs/method.md §4.5), standardized latents.
 pub struct RfBatch {
     /// Shape latent z₀, `[B, P, C]`.
     pub z0: Tensor<3>,
@@ -172,7 +172,7 @@ pub fn rf_training_loss(
 // ---------------------------------------------------------------------------------------------------------------
 // Sampling
 
-/// ODE solver on a uniform grid (SPEC §4.6, §9.7).
+/// ODE solver on a uniform grid (docs/method.md §4.6, §9 item 7).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Solver {
@@ -182,7 +182,7 @@ pub enum Solver {
     Midpoint,
 }
 
-/// Noise that re-noises the keyframes of the replacement sampler (SPEC §5.1, §8 X9).
+/// Noise that re-noises the keyframes of the replacement sampler (docs/method.md §5.1, §8 X9).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ReplaceNoise {
@@ -342,7 +342,7 @@ pub fn mmdit_velocity(
     }
 }
 
-/// Samples trajectory latents with the MMDiT (SPEC §4.6): [`sample`] over [`mmdit_velocity`].
+/// Samples trajectory latents with the MMDiT (docs/method.md §4.6): [`sample`] over [`mmdit_velocity`].
 ///
 /// # Shapes
 /// - text: `[B, L, D_txt]`; eps: `[B, P, T, C]`; output `[B, P, T, C]`

@@ -1,4 +1,4 @@
-//! Parameter counts of a network per top-level submodule (checks SPEC §4.3 "≈ 78M trainable"; used by
+//! Parameter counts of a network per top-level submodule (checks docs/method.md §4.3 "≈ 78M trainable"; used by
 //! `any4d model summary`) and timings of the RF step and VAE encode+decode (used by `any4d bench model`).
 
 use burn::module::{Module, ModuleVisitor, Param};
@@ -144,7 +144,7 @@ pub fn time_vae_reconstruct(
     time_reconstruct(&cfg.init(device), batch, vertices, tokens, frames, iters, device)
 }
 
-/// Times sequence-wise DyMeshVAE (SPEC §3.5) encode + decode on the same synthetic clips as
+/// Times sequence-wise DyMeshVAE (docs/method.md §3.5) encode + decode on the same synthetic clips as
 /// [`time_vae_reconstruct`]; `cfg.frames` gives the clip length.
 ///
 /// # Errors

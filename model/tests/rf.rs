@@ -1,5 +1,5 @@
-//! Tests of the keyframe RF (SPEC §1.4 required tests, §4.1 layout, §4.3 backbone, §4.6 sampling, §5.1, §5.4),
-//! on tiny configs and the flex CPU backend. Tests that draw random numbers hold `SEED_LOCK`: the backend's
+//! Tests of the keyframe RF (docs/method.md §1.4 required tests, §4.1 layout, §4.3 backbone, §4.6 sampling, §5.1,
+//! §5.4), on tiny configs and the flex CPU backend. Tests that draw random numbers hold `SEED_LOCK`: the backend's
 //! seed is global, and the determinism test must not interleave with other draws.
 
 use std::sync::Mutex;
@@ -54,7 +54,7 @@ fn first_last_mask(b: usize, t: usize, device: &Device) -> Tensor<2> {
 }
 
 // ----------------------------------------------------------------------------------------------------------------
-// SPEC §1.4 (1): interpolant direction
+// docs/method.md §1.4 (1): interpolant direction
 
 #[test]
 fn interpolant_is_noise_at_zero_and_data_at_one() {
@@ -75,7 +75,7 @@ fn interpolant_is_noise_at_zero_and_data_at_one() {
 }
 
 // ----------------------------------------------------------------------------------------------------------------
-// SPEC §1.4 (2): the oracle velocity carries ε to x₁ with both solvers
+// docs/method.md §1.4 (2): the oracle velocity carries ε to x₁ with both solvers
 
 #[test]
 fn oracle_velocity_maps_noise_to_data_euler_and_midpoint() {
@@ -103,7 +103,7 @@ fn oracle_velocity_maps_noise_to_data_euler_and_midpoint() {
 }
 
 // ----------------------------------------------------------------------------------------------------------------
-// SPEC §1.4 (3): replacement weights the keyframe latent by τ
+// docs/method.md §1.4 (3): replacement weights the keyframe latent by τ
 
 #[test]
 fn replacement_noises_keyframes_to_the_state_level() {
@@ -189,7 +189,7 @@ fn fresh_replacement_noise_differs_from_fixed() {
 }
 
 // ----------------------------------------------------------------------------------------------------------------
-// SPEC §1.4 (4): the network receives τ, increasing from 0, never 1 − τ
+// docs/method.md §1.4 (4): the network receives τ, increasing from 0, never 1 − τ
 
 #[test]
 fn sampler_passes_tau_increasing_from_zero() {
@@ -235,7 +235,7 @@ fn sampler_passes_tau_increasing_from_zero() {
 }
 
 // ----------------------------------------------------------------------------------------------------------------
-// Layout (SPEC §4.1)
+// Layout (docs/method.md §4.1)
 
 #[test]
 fn channel_counts_at_paper_size() {

@@ -1,4 +1,4 @@
-//! Tests of the frame-wise mesh VAE and the sequence-wise DyMeshVAE (SPEC §3): shapes, padding invariance,
+//! Tests of the frame-wise mesh VAE and the sequence-wise DyMeshVAE (docs/method.md §3): shapes, padding invariance,
 //! isolated vertices, seeded determinism, gradient flow, overfitting one batch, parameter counts.
 //! Tiny configs on `Device::flex()`; tests share one lock because the flex RNG seed is process-global.
 

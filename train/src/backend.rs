@@ -1,6 +1,6 @@
-//! Compute backends picked at run time (issue 5 item 5): burn 0.22 selects the backend through the `Device`
+//! Compute backends picked at run time: burn 0.22 selects the backend through the `Device`
 //! value, so one binary carries the CPU backends (`flex`, `ndarray`) and, behind cargo features, the GPU ones
-//! (`vulkan`, `cuda`). Precision (SPEC §3.5, §4.7: FP32) is a device setting; bf16 only on cuda.
+//! (`vulkan`, `cuda`). Precision (docs/method.md §3.5, §4.7: FP32) is a device setting; bf16 only on cuda.
 
 use std::fmt;
 
@@ -27,7 +27,7 @@ pub enum Backend {
 #[serde(rename_all = "snake_case")]
 #[value(rename_all = "snake_case")]
 pub enum Precision {
-    /// 32-bit floats everywhere (SPEC §3.5, §4.7).
+    /// 32-bit floats everywhere (docs/method.md §3.5, §4.7).
     F32,
     /// bfloat16 (cuda only; asked for explicitly).
     Bf16,
@@ -95,7 +95,7 @@ pub fn check(backend: Backend, precision: Precision) -> Result<(), BackendError>
     Ok(())
 }
 
-#[allow(deprecated)] // burn-ndarray is deprecated in burn 0.22 but kept working (issue 5 item 5)
+#[allow(deprecated)] // burn-ndarray is deprecated in burn 0.22 but kept working
 fn base_device(backend: Backend) -> Result<Device, BackendError> {
     match backend {
         Backend::Flex => Ok(Device::flex()),

@@ -1,6 +1,6 @@
-//! Run configs (STYLE.md §4, issue 5 item 1): plain serde structs with `deny_unknown_fields` for the tables this
+//! Run configs : plain serde structs with `deny_unknown_fields` for the tables this
 //! crate owns (`[train]`, `[optim]`, `[device]`, …), and a strict key check of the model's burn `Config` under
-//! `[model]` (burn's derive accepts unknown keys silently). Every hyper-parameter comes from TOML; SPEC §3.5
+//! `[model]` (burn's derive accepts unknown keys silently). Every hyper-parameter comes from TOML; docs/method.md §3.5
 //! (VAE) and §4.7 (RF) give the paper values in `configs/{vae,rf}/paper.toml`.
 
 use std::path::Path;
@@ -15,7 +15,7 @@ use crate::error::{Result, TrainError};
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum Duration {
-    /// Passes over the training set (SPEC §3.5: 200 VAE, §4.7: 1000 RF); rounded up to whole steps.
+    /// Passes over the training set (docs/method.md §3.5: 200 VAE, §4.7: 1000 RF); rounded up to whole steps.
     Epochs(u64),
     /// A fixed number of optimiser steps (tests, benchmarks).
     Steps(u64),
@@ -35,11 +35,11 @@ impl Duration {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrainConfig {
-    /// Seed of initialisation, data order and every random draw (SPEC §3.5, §4.7: 666).
+    /// Seed of initialisation, data order and every random draw (docs/method.md §3.5, §4.7: 666).
     pub seed: u64,
     /// Training length.
     pub duration: Duration,
-    /// Global batch: examples per optimiser step (SPEC §1.1: 256).
+    /// Global batch: examples per optimiser step (docs/method.md §1.1: 256).
     pub batch_size: usize,
     /// Examples per forward/backward pass; `batch_size` must be a multiple (gradient accumulation).
     pub micro_batch: usize,
@@ -57,7 +57,7 @@ pub struct TrainConfig {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OptimConfig {
-    /// Constant learning rate (SPEC §3.5: 1e-4 VAE; §4.7: 2e-4 RF).
+    /// Constant learning rate (docs/method.md §3.5: 1e-4 VAE; §4.7: 2e-4 RF).
     pub lr: f64,
     /// AdamW β₁ (0.9 both).
     pub beta1: f32,
@@ -77,7 +77,7 @@ pub struct OptimConfig {
 pub struct DeviceConfig {
     /// Compute backend.
     pub backend: Backend,
-    /// Float precision (SPEC: FP32).
+    /// Float precision (the paper: FP32).
     pub precision: Precision,
 }
 

@@ -1,4 +1,4 @@
-//! Errors of the training crate: each names the file or field and the reason (STYLE.md quality bar).
+//! Errors of the training crate: each names the file or field and the reason.
 
 use std::path::PathBuf;
 

@@ -2,7 +2,7 @@
 //!
 //! Code map: [`config`] (run TOML), [`backend`] (runtime device), [`run_folder`] + [`checkpoint`] +
 //! [`data_order`] (append-only runs that resume exactly), [`loop_common`] (the shared loop), [`progress`],
-//! [`plot`], [`vae_loop`] (SPEC §3), [`rf_loop`] (SPEC §4),
+//! [`plot`], [`vae_loop`] (docs/method.md §3), [`rf_loop`] (docs/method.md §4),
 //! [`runs`] (loading trained VAE and RF runs).
 
 pub mod cli;

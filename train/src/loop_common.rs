@@ -1,6 +1,6 @@
-//! The training loop shared by the VAE (SPEC §3.3–3.5) and the RF (SPEC §4.5–4.7): gradient accumulation to the
-//! global batch, global-norm gradient clipping, AdamW at a constant learning rate, metrics, validation,
-//! checkpoints that resume exactly, Ctrl-C and the NaN/Inf guard (issue 5 items 1–3). What a step computes is
+//! The training loop shared by the VAE (docs/method.md §3.3–3.5) and the RF (docs/method.md §4.5–4.7): gradient
+//! accumulation to the global batch, global-norm gradient clipping, AdamW at a constant learning rate, metrics,
+//! validation, checkpoints that resume exactly, Ctrl-C and the NaN/Inf guard. What a step computes is
 //! an [`Objective`].
 
 use std::path::{Path, PathBuf};
@@ -412,7 +412,7 @@ fn guard(value: f64, step: u64, what: &str, last_good: &Option<PathBuf>) -> Resu
 }
 
 /// Scales `grads` so that their global L2 norm over `model`'s parameters is at most `max_norm` (PyTorch's
-/// `clip_grad_norm_`, SPEC §3.5/§4.7 "gradient clip 1.0"); returns the clipped gradients and the norm before.
+/// `clip_grad_norm_`, docs/method.md §3.5/§4.7 "gradient clip 1.0"); returns the clipped gradients and the norm before.
 pub fn clip_global_norm<M: Module>(model: &M, mut grads: GradientsParams, max_norm: f64) -> (GradientsParams, f64) {
     struct SquaredNorm<'a> {
         grads: &'a GradientsParams,

@@ -1,4 +1,4 @@
-//! Data-parallel training on several devices of one machine (issue 5 item 6): the shared loop of
+//! Data-parallel training on several devices of one machine: the shared loop of
 //! [`crate::loop_common`] with each step's micro-batches spread over the devices, using burn 0.22.1's own
 //! multi-device mechanisms, chosen by [`Strategy`]:
 //! - main-device (burn-train's `MultiDeviceOptim::OptimMainDevice`): every worker forks the model onto its device
@@ -312,8 +312,8 @@ fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
 }
 
 /// Starts a new VAE run with `cfg`, data-parallel as `parallel` says (`--devices`, `--strategy`); returns the
-/// run folder and the outcome. A finished run writes `latent_stats.json` (SPEC §3.4) as the single-device path
-/// does.
+/// run folder and the outcome. A finished run writes `latent_stats.json` (docs/method.md §3.4) as the single-device
+/// path does.
 pub fn train_vae_data_parallel(
     cfg: &VaeRunConfig,
     opts: &VaeRunOptions,
@@ -398,7 +398,7 @@ where
         let json = serde_json::to_vec_pretty(&StoredLatentStats { step: *steps, stats })
             .map_err(|e| TrainError::Other(format!("serialise latent stats: {e}")))?;
         write_atomic(&run.path(LATENT_STATS_FILE), &json)?;
-        run.log(&format!("latent statistics (SPEC §3.4) of step {steps}: {stats:?}"))?;
+        run.log(&format!("latent statistics (docs/method.md §3.4) of step {steps}: {stats:?}"))?;
     }
     Ok(outcome)
 }

@@ -1,6 +1,6 @@
-//! Loss-curve PNG of a run (issue 5 item 3): every `metrics.csv` loss column (diagnostics such as the RF's
-//! keyframe fraction left out, and the total when it equals the single term) and the validation loss against the step, on a log₁₀ y axis, drawn with the
-//! evaluation crate's plotter (`any4d_eval::plot`, no system fonts).
+//! Loss-curve PNG of a run: every `metrics.csv` loss column (diagnostics such as the RF's
+//! keyframe fraction left out, and the total when it equals the single term) and the validation loss against the step,
+//! on a log₁₀ y axis, drawn with the evaluation crate's plotter (`any4d_eval::plot`, no system fonts).
 
 use std::path::Path;
 

@@ -35,7 +35,7 @@ pub struct QuickstartOptions {
     pub clips: usize,
     /// Seed of the procedural clips.
     pub seed: u64,
-    /// Largest vertex count of the procedural clips (SPEC filter 512..=4096; small is fast).
+    /// Largest vertex count of the procedural clips (the paper's filter 512..=4096; small is fast).
     pub max_vertices: usize,
     /// Optimiser steps of the VAE (the tiny preset's when `None`).
     pub vae_steps: Option<u64>,

@@ -1,5 +1,5 @@
-//! Loading trained runs for evaluation, sampling and the quickstart (issue 5): a VAE run (its resolved config,
-//! newest checkpoint and the SPEC §3.4 latent statistics of that checkpoint) and an RF run (config, newest
+//! Loading trained runs for evaluation, sampling and the quickstart: a VAE run (its resolved config,
+//! newest checkpoint and the docs/method.md §3.4 latent statistics of that checkpoint) and an RF run (config, newest
 //! checkpoint, the scratch tokenizer and the record of the VAE run it was trained on). Errors name the run folder
 //! and the missing or bad file.
 
@@ -21,7 +21,7 @@ use crate::vae_loop::{LATENT_STATS_FILE, StoredLatentStats, VaeModelConfig, VaeR
 /// File in an RF run folder naming the VAE run (and its checkpoint step) whose latents trained it.
 pub const VAE_RUN_FILE: &str = "vae_run.json";
 
-/// A trained mesh VAE of either kind (SPEC §8 A3).
+/// A trained mesh VAE of either kind (docs/method.md §8 A3).
 #[derive(Debug, Clone)]
 pub enum VaeModel {
     /// The frame-wise VAE (the method's).
@@ -35,7 +35,7 @@ pub enum VaeModel {
 pub struct LoadedVae {
     /// The network with the newest checkpoint's parameters.
     pub model: VaeModel,
-    /// SPEC §3.4 statistics of that checkpoint.
+    /// docs/method.md §3.4 statistics of that checkpoint.
     pub stats: LatentStats,
     /// The run's resolved config.
     pub config: VaeRunConfig,

@@ -1,7 +1,7 @@
-//! VAE training (SPEC §3.3–3.5; issue 5 item 1): `any4d train vae`. Loss (V1)–(V3) from the model crate,
-//! the shared loop of `loop_common`, then the latent statistics of SPEC §3.4 over the training set, stored
+//! VAE training (docs/method.md §3.3–3.5): `any4d train vae`. Loss (V1)–(V3) from the model crate,
+//! the shared loop of `loop_common`, then the latent statistics of docs/method.md §3.4 over the training set, stored
 //! next to the VAE checkpoint (`latent_stats.json`). Both the frame-wise VAE and the sequence-wise DyMeshVAE
-//! ablation (SPEC §8 A3: `vae.kind`) train here.
+//! ablation (docs/method.md §8 A3: `vae.kind`) train here.
 
 use std::path::{Path, PathBuf};
 
@@ -21,14 +21,14 @@ use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, StopFlag};
 use crate::progress::ProgressMode;
 use crate::run_folder::{RunFolder, write_atomic};
 
-/// File in the VAE run folder with the SPEC §3.4 statistics of its final checkpoint.
+/// File in the VAE run folder with the docs/method.md §3.4 statistics of its final checkpoint.
 pub const LATENT_STATS_FILE: &str = "latent_stats.json";
 
-/// Which mesh VAE (SPEC §8 A3).
+/// Which mesh VAE (docs/method.md §8 A3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum VaeKind {
-    /// Frame-wise VAE (SPEC §3.2; the method's).
+    /// Frame-wise VAE (docs/method.md §3.2; the method's).
     Framewise,
     /// Sequence-wise DyMeshVAE (AnimateAnyMesh; ablation).
     Sequencewise,
@@ -40,10 +40,10 @@ pub enum VaeKind {
 pub struct VaeSection {
     /// Which VAE the `[model]` table configures.
     pub kind: VaeKind,
-    /// Frames of each clip in a training micro-batch: 0 = all T (SPEC §3.5); k ≥ 2 = frame 0 (the reference) and
-    /// k − 1 other frames drawn without replacement for each micro-batch. The frame-wise VAE encodes and decodes
-    /// frames independently (SPEC §3.1), so this trades frames per step for steps per second; the sequence-wise
-    /// VAE needs whole clips (0 only). Validation always uses every frame.
+    /// Frames of each clip in a training micro-batch: 0 = all T (docs/method.md §3.5); k ≥ 2 = frame 0 (the reference)
+    /// and k − 1 other frames drawn without replacement for each micro-batch. The frame-wise VAE encodes and decodes
+    /// frames independently (docs/method.md §3.1), so this trades frames per step for steps per second; the
+    /// sequence-wise VAE needs whole clips (0 only). Validation always uses every frame.
     pub train_frames: usize,
 }
 
@@ -167,7 +167,7 @@ pub fn load_clips(store: &Store, indices: &[usize], device: &Device) -> Result<(
     Ok((batch, items))
 }
 
-/// The VAE view of a clip batch: reference = frame 0 (SPEC §1.2).
+/// The VAE view of a clip batch: reference = frame 0 (docs/method.md §1.2).
 ///
 /// # Shapes
 /// - `batch.vertices`: `[B, T, N, 3]` → reference `[B, N, 3]`, frames `[B, T, N, 3]`
@@ -287,7 +287,7 @@ impl<V: MeshVae> Objective for VaeObjective<V> {
     }
 }
 
-/// SPEC §3.4: global mean/std of z₀ and of posterior-sampled trajectory latents over `indices` of `store`.
+/// docs/method.md §3.4: global mean/std of z₀ and of posterior-sampled trajectory latents over `indices` of `store`.
 pub fn latent_stats<V: MeshVae>(
     model: &V,
     store: &Store,
@@ -406,7 +406,7 @@ fn fit<V: MeshVae>(
         let json = serde_json::to_vec_pretty(&StoredLatentStats { step: *steps, stats })
             .map_err(|e| TrainError::Other(format!("serialise latent stats: {e}")))?;
         write_atomic(&run.path(LATENT_STATS_FILE), &json)?;
-        run.log(&format!("latent statistics (SPEC §3.4) of step {steps}: {stats:?}"))?;
+        run.log(&format!("latent statistics (docs/method.md §3.4) of step {steps}: {stats:?}"))?;
     }
     Ok(outcome)
 }

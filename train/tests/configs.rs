@@ -1,5 +1,5 @@
 //! Every TOML in `configs/` and `experiments/` parses as a complete run config: no unknown keys, no missing
-//! keys, values in range (STYLE.md §4). Also checks that a typo anywhere, `[model]` included, is rejected.
+//! keys, values in range . Also checks that a typo anywhere, `[model]` included, is rejected.
 
 use std::path::{Path, PathBuf};
 

@@ -1,4 +1,4 @@
-//! The real `any4d` binary interrupted mid-run (issue 5, "survive being killed"), driven as a child process:
+//! The real `any4d` binary interrupted mid-run, driven as a child process:
 //! `kill -9` leaves a readable run folder that loses at most the step in progress and, resumed, ends with the
 //! same parameters as an uninterrupted run; a new run with the same name never touches the killed run's folder;
 //! Ctrl-C saves a checkpoint, exits with 130 and resumes to completion.

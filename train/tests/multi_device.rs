@@ -1,4 +1,4 @@
-//! Data-parallel training (issue 5 item 6, `any4d_train::multi_device`): on a deterministic toy regression,
+//! Data-parallel training (`any4d_train::multi_device`): on a deterministic toy regression,
 //! two CPU worker devices give the parameters of the single-device loop with the same global batch (within
 //! float-summation tolerance); a tiny VAE trains over `flex,flex` with finite losses; `--devices` parsing
 //! rejects bad entries with a message naming them.

@@ -1,7 +1,7 @@
-//! The keyframe RF loop on a tiny frozen VAE (SPEC §4.5, §5.4; issue 5 item 1): a short run lowers (R5), keyframe
+//! The keyframe RF loop on a tiny frozen VAE (docs/method.md §4.5, §5.4): a short run lowers (R5), keyframe
 //! masks follow the sampler (k ≤ k_max, k = 0 drawn; no keyframes for `none`/`replace_noised`), `impute_until`
 //! trains on noisy keyframes, resume is bitwise equal to straight training (validation sampling on), `load_rf_run`
-//! round-trips, validation sampling (issue 5 item 4) writes seeded `samples.csv` rows at its steps for every
+//! round-trips, validation sampling writes seeded `samples.csv` rows at its steps for every
 //! `kf_mode` without touching the training streams, and mismatched configs or incomplete run folders give errors
 //! naming the field or file. One tiny VAE run on
 //! procedural clips is shared by all tests.

@@ -1,4 +1,4 @@
-//! `any4d bench train` (issue 5 "Performance"): training throughput of a run preset on each backend. An RF preset
+//! `any4d bench train`: training throughput of a run preset on each backend. An RF preset
 //! (`configs/rf/*.toml`) times the RF training step at the preset's size on random standardised latents — no VAE
 //! run and no store needed — and reports model FLOP/s (optionally as a fraction of a given peak); a VAE preset
 //! (`configs/vae/*.toml`) trains on a store through `train_vae` and reads the throughput from `metrics.csv`.

@@ -1,5 +1,5 @@
-//! `any4d data …` and `any4d bench data`: parse arguments, call `any4d_data` (SPEC §2: clip files, the dataset
-//! store, inspection, contact sheets; the throughput benchmark of import + normalise (D1)–(D3) + FPS).
+//! `any4d data …` and `any4d bench data`: parse arguments, call `any4d_data` (docs/method.md §2: clip files, the
+//! dataset store, inspection, contact sheets; the throughput benchmark of import + normalise (D1)–(D3) + FPS).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -40,7 +40,7 @@ pub struct ConvertArgs {
     pub input: PathBuf,
     /// Output clip; the extension picks the format.
     pub output: PathBuf,
-    /// Normalise by frame 0 (SPEC (D1)–(D3)).
+    /// Normalise by frame 0 (docs/method.md (D1)–(D3)).
     #[arg(long)]
     pub normalize: bool,
     /// Weld vertices closer than EPS before writing.

@@ -1,4 +1,5 @@
-//! `any4d eval …` and `any4d bench metrics`: parse arguments, call `any4d_eval`. Metrics follow SPEC §6.1–§6.2.
+//! `any4d eval …` and `any4d bench metrics`: parse arguments, call `any4d_eval`. Metrics follow docs/method.md
+//! §6.1–§6.2.
 
 use std::path::PathBuf;
 use std::process::{Command, ExitCode};
@@ -14,7 +15,7 @@ use rayon::prelude::*;
 
 #[derive(Subcommand, Debug)]
 pub enum EvalCmd {
-    /// Score a predicted clip against its ground truth: RMSE, Chamfer, DTW, jerk, … (SPEC §6.2).
+    /// Score a predicted clip against its ground truth: RMSE, Chamfer, DTW, jerk, … (docs/method.md §6.2).
     Metrics(MetricsArgs),
     /// Run one paper table's protocol: per-clip parquet, Markdown/CSV summary, strips and plots.
     Run(Box<super::eval_run::RunArgs>),
@@ -34,7 +35,7 @@ pub enum OutputFormat {
 /// Coordinate frame of the metrics.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CoordinatesArg {
-    /// Normalise both clips by ground-truth frame 0, (D1)–(D3) (SPEC §6.1).
+    /// Normalise both clips by ground-truth frame 0, (D1)–(D3) (docs/method.md §6.1).
     Normalise,
     /// Use the files' coordinates as they are.
     AsGiven,

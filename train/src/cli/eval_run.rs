@@ -1,4 +1,4 @@
-//! `any4d eval run` and `any4d eval render`: one command per paper table (SPEC §6–§7), learned methods built
+//! `any4d eval run` and `any4d eval render`: one command per paper table (docs/method.md §6–§7), learned methods built
 //! from run folders by `crate::evaluate`.
 
 use std::path::PathBuf;
@@ -74,31 +74,31 @@ pub struct RunArgs {
     /// Second VAE run for table 5.
     #[arg(long)]
     pub vae_b: Option<PathBuf>,
-    /// Clips in the manifest (SPEC §6.1: 100).
+    /// Clips in the manifest (docs/method.md §6.1: 100).
     #[arg(long, default_value_t = 100)]
     pub clips: usize,
-    /// Noise seeds; several give mean ± 95 % CI (SPEC §8 X8).
+    /// Noise seeds; several give mean ± 95 % CI (docs/method.md §8 X8).
     #[arg(long, value_delimiter = ',', default_value = "42")]
     pub seeds: Vec<u64>,
-    /// Keyframe placement of table 1: random, every_<r> or bernoulli_<p> (SPEC §8 X4).
+    /// Keyframe placement of table 1: random, every_<r> or bernoulli_<p> (docs/method.md §8 X4).
     #[arg(long, default_value = "random")]
     pub placement: String,
     /// Reuse a manifest instead of drawing one.
     #[arg(long)]
     pub manifest: Option<PathBuf>,
-    /// Stage-2 reference of table 2 (SPEC §7, A8).
+    /// Stage-2 reference of table 2 (docs/method.md §7, A8).
     #[arg(long, value_enum, default_value_t = OverlapArg::Gt)]
     pub overlap_source: OverlapArg,
     /// Items whose predictions are exported and drawn as strips.
     #[arg(long, default_value_t = 4)]
     pub export: usize,
-    /// ODE grid points (SPEC §4.6: 64).
+    /// ODE grid points (docs/method.md §4.6: 64).
     #[arg(long, default_value_t = 64)]
     pub n_grid: usize,
-    /// ODE solver (SPEC §4.6: midpoint).
+    /// ODE solver (docs/method.md §4.6: midpoint).
     #[arg(long, value_enum, default_value_t = SolverArg::Midpoint)]
     pub solver: SolverArg,
-    /// Classifier-free guidance weight (SPEC §9 item 9: 1.0).
+    /// Classifier-free guidance weight (docs/method.md §9 item 9: 1.0).
     #[arg(long, default_value_t = 1.0)]
     pub guidance: f64,
     /// Table 4: vertex counts timed.

@@ -1,6 +1,6 @@
 //! `any4d model …` and `any4d bench model`: parameter counts of the network a config describes, and RF
-//! forward+backward (SPEC §4.3) and VAE encode+decode (SPEC §3.2, §3.5) time per clip, optionally beside
-//! AnimateAnyMesh's PyTorch networks run by `scripts/bench_torch_reference.py` on the same shapes and thread
+//! forward+backward (docs/method.md §4.3) and VAE encode+decode (docs/method.md §3.2, §3.5) time per clip, optionally
+//! beside AnimateAnyMesh's PyTorch networks run by `scripts/bench_torch_reference.py` on the same shapes and thread
 //! count. Parses arguments and the `[model]` table, calls `any4d_model::summary`.
 
 use std::path::{Path, PathBuf};

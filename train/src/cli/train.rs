@@ -15,9 +15,9 @@ use crate::vae_loop::{VaeRunConfig, VaeRunOptions, resume_vae, train_vae};
 
 #[derive(Subcommand, Debug)]
 pub enum TrainCmd {
-    /// Train the mesh VAE (SPEC §3): `--config configs/vae/<preset>.toml --data STORE`.
+    /// Train the mesh VAE (docs/method.md §3): `--config configs/vae/<preset>.toml --data STORE`.
     Vae(VaeArgs),
-    /// Train the keyframe rectified flow on a frozen VAE (SPEC §4).
+    /// Train the keyframe rectified flow on a frozen VAE (docs/method.md §4).
     Rf(RfArgs),
 }
 

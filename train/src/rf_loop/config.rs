@@ -14,7 +14,7 @@ use crate::error::{Result, TrainError, io_err};
 use super::VALID_SAMPLE_KEYFRAMES;
 use super::network::RfModelConfig;
 
-/// How the keyframe set of a training sample is drawn (SPEC §4.5, §5.4, §8 X3).
+/// How the keyframe set of a training sample is drawn (docs/method.md §4.5, §5.4, §8 X3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum KfSampler {
@@ -24,7 +24,7 @@ pub enum KfSampler {
     Scenemi,
 }
 
-/// Which VAE latent trains the RF (SPEC §3.4: statistics over posterior samples).
+/// Which VAE latent trains the RF (docs/method.md §3.4: statistics over posterior samples).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LatentDraw {
@@ -51,32 +51,32 @@ pub enum LatentCache {
 pub struct RfSection {
     /// Keyframe sampler in training.
     pub kf_sampler: KfSampler,
-    /// Largest k of the random sampler (SPEC §4.5: 5).
+    /// Largest k of the random sampler (docs/method.md §4.5: 5).
     pub k_max: usize,
-    /// τ distribution (SPEC §4.5 step 4: uniform; AAM: cosmap).
+    /// τ distribution (docs/method.md §4.5 step 4: uniform; AAM: cosmap).
     pub tau_sampler: TauSampler,
-    /// Which slots enter (R5) (SPEC §4.2: all).
+    /// Which slots enter (R5) (docs/method.md §4.2: all).
     pub keyframe_loss: KeyframeLoss,
-    /// τ* of (R9) for `kf_mode = "impute_until"` (SPEC §5.4: 0.98).
+    /// τ* of (R9) for `kf_mode = "impute_until"` (docs/method.md §5.4: 0.98).
     pub tau_star: f64,
-    /// Std of the keyframe vertex noise per unit l ~ U(0, 1) for `impute_until` (SPEC §5.4: 0.02).
+    /// Std of the keyframe vertex noise per unit l ~ U(0, 1) for `impute_until` (docs/method.md §5.4: 0.02).
     pub keyframe_noise: f64,
-    /// Probability of dropping the caption for CFG (SPEC §4.4: 0.1).
+    /// Probability of dropping the caption for CFG (docs/method.md §4.4: 0.1).
     pub text_dropout: f64,
     /// Posterior sample or mean as the RF's target latent.
     pub latent: LatentDraw,
     /// Frozen-VAE latents cached in memory or encoded per batch.
     pub latent_cache: LatentCache,
-    /// Validation sampling (issue 5 item 4) at every validation whose step is a multiple of this, and at the
+    /// Validation sampling at every validation whose step is a multiple of this, and at the
     /// last step; 0 = off. A multiple of `train.valid_every`.
     pub valid_sample_every: u64,
     /// VAL clips sampled (the first ones in store order, the same every time).
     pub valid_sample_clips: usize,
-    /// Grid points over [0, 1] of the validation sampler (SPEC §4.6: 64, midpoint solver).
+    /// Grid points over [0, 1] of the validation sampler (docs/method.md §4.6: 64, midpoint solver).
     pub valid_sample_grid: usize,
 }
 
-/// Which caption encoder the RF trains with (SPEC §4.4).
+/// Which caption encoder the RF trains with (docs/method.md §4.4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TextEncoderKind {
@@ -97,7 +97,7 @@ pub struct TextSection {
     pub layers: usize,
     /// Attention heads; must divide `model.text_dim`.
     pub heads: usize,
-    /// Tokens L per caption (SPEC §1.1: 77).
+    /// Tokens L per caption (docs/method.md §1.1: 77).
     pub max_len: usize,
 }
 

@@ -1,4 +1,4 @@
-//! Frozen-VAE latents of the clips (SPEC §3.4, §4.1): encoded once into host memory or per micro-batch.
+//! Frozen-VAE latents of the clips (docs/method.md §3.4, §4.1): encoded once into host memory or per micro-batch.
 
 use any4d_data::store::Store;
 use any4d_model::frame_vae::FrameVae;

@@ -1,4 +1,4 @@
-//! The trained network (MMDiT + scratch caption encoder) and the keyframe masks of SPEC §4.5, §5.4.
+//! The trained network (MMDiT + scratch caption encoder) and the keyframe masks of docs/method.md §4.5, §5.4.
 
 use any4d_data::keyframes::{KeyframeStrategy, sample_keyframes};
 use any4d_model::mmdit::{KfMode, Mmdit, MmditConfig};
@@ -31,7 +31,7 @@ impl RfModelConfig {
     }
 }
 
-/// What the RF run trains: the MMDiT v_θ (R4) and, jointly, the scratch caption encoder (SPEC §4.4).
+/// What the RF run trains: the MMDiT v_θ (R4) and, jointly, the scratch caption encoder (docs/method.md §4.4).
 #[derive(Module, Debug)]
 pub struct RfModel {
     /// The keyframe-conditioned velocity network.
@@ -60,7 +60,7 @@ impl RfModel {
 }
 
 // ---------------------------------------------------------------------------------------------------------------
-// Keyframe masks (SPEC §4.5, §5.4)
+// Keyframe masks (docs/method.md §4.5, §5.4)
 
 /// The keyframe mask m of one training window of `frames` frames (true = observed keyframe): `Random` draws
 /// k ~ U{0..=k_max} and a uniform k-subset (§4.5 steps 1–2); `Scenemi` draws k ~ U{2..=T} with the first and last

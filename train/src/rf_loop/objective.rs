@@ -1,4 +1,4 @@
-//! The RF objective (R5) with its batches, CFG text dropout and validation sampling (issue 5 item 4).
+//! The RF objective (R5) with its batches, CFG text dropout and validation sampling.
 
 use std::path::Path;
 use std::sync::Arc;
@@ -77,7 +77,7 @@ pub struct RfObjective {
     samples_run: Option<RunFolder>,
 }
 
-/// Mean scores of one validation-sampling round (SPEC §6 (E1)–(E3), normalised frame of each clip's frame 0).
+/// Mean scores of one validation-sampling round (docs/method.md §6 (E1)–(E3), normalised frame of each clip's frame 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ValidSampleScores {
     /// VAL clips sampled.
@@ -171,10 +171,10 @@ impl RfObjective {
 
     /// Completes the first `rf.valid_sample_clips` VAL clips with `model` (inference mode, on the inference
     /// `device`) and scores them: keyframes [`VALID_SAMPLE_KEYFRAMES`] from a fixed seed, the eval crate's
-    /// [`RfSampler`] on an `rf.valid_sample_grid`-point midpoint grid with CFG weight 1 (SPEC §4.6: (R3) for
+    /// [`RfSampler`] on an `rf.valid_sample_grid`-point midpoint grid with CFG weight 1 (docs/method.md §4.6: (R3) for
     /// `input_mask`, the replacement sampler (R7)–(R8) for `replace_noised` and `none`, (R9) with `rf.tau_star`
-    /// for `impute_until`), keyframes replaced by the ground truth, then (E1)–(E3) of SPEC §6 against the clip.
-    /// Every draw is seeded from `train.seed`, so the same network gives the same scores; the training RNG
+    /// for `impute_until`), keyframes replaced by the ground truth, then (E1)–(E3) of docs/method.md §6 against the
+    /// clip. Every draw is seeded from `train.seed`, so the same network gives the same scores; the training RNG
     /// streams are untouched (the loop reseeds the device before every step). `None` without VAL clips.
     pub fn validation_samples(&self, model: &RfModel, device: &Device) -> Result<Option<ValidSampleScores>> {
         let n = self.cfg.rf.valid_sample_clips.min(self.valid_len());
@@ -283,7 +283,7 @@ impl RfObjective {
             .sum()
     }
 
-    /// Builds the batch of positions `indices` of `subset`: z = μ + σξ or μ (`rf.latent`), standardized (SPEC
+    /// Builds the batch of positions `indices` of `subset`: z = μ + σξ or μ (`rf.latent`), standardized (docs/method.md
     /// §3.4), token-major; keyframe masks ([`draw_keyframe_mask`]); keyframe latents (Z itself, or the encoded
     /// noisy keyframes of §5.4 for `impute_until`); captions through the text model; keep_txt; ε; τ.
     /// Host draws (masks, keep_txt, keyframe noise) come from `rng`; ξ, ε and τ from the device stream.
@@ -345,7 +345,7 @@ impl RfObjective {
             }
             LatentDraw::Mean => mu,
         };
-        // SPEC §3.4: (z − mean)/std; VAE layout [B, T, P, C] → token-major [B, P, T, C].
+        // docs/method.md §3.4: (z − mean)/std; VAE layout [B, T, P, C] → token-major [B, P, T, C].
         let z = self.stats.standardize_motion(z.swap_dims(1, 2));
         let z0 = self.stats.standardize_shape(z0);
 
@@ -384,9 +384,10 @@ impl RfObjective {
         })
     }
 
-    /// SPEC §5.4 (SceneMI): keyframe vertices + i.i.d. N(0, (l · rf.keyframe_noise)²) with l ~ U(0, 1) per sample,
-    /// first and last frames clean, real vertices only; encoded by the frozen VAE (posterior mean, SPEC §9.16) and
-    /// standardized. Non-keyframe slots hold the clean frames' latents (unused: the mask hides them).
+    /// docs/method.md §5.4 (SceneMI): keyframe vertices + i.i.d. N(0, (l · rf.keyframe_noise)²) with l ~ U(0, 1) per
+    /// sample, first and last frames clean, real vertices only; encoded by the frozen VAE (posterior mean,
+    /// docs/method.md §9 item 16) and standardized. Non-keyframe slots hold the clean frames' latents (unused: the mask
+    /// hides them).
     ///
     /// # Shapes
     /// - mask: `B · T` row-major; output `[B, P, T, C]` on `device`
@@ -479,7 +480,7 @@ pub(super) fn open_store(data: &Path) -> Result<Store> {
     Store::open(data).map_err(|e| TrainError::Other(e.to_string()))
 }
 
-/// SPEC §4.1: the RF slots must match the VAE latents and the store windows.
+/// docs/method.md §4.1: the RF slots must match the VAE latents and the store windows.
 pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
     vae.frame_vae()?;
     let c = vae.latent_channels();
