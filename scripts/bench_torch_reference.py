@@ -44,8 +44,7 @@ import types
 import warnings
 
 SIZES = {
-    # Must match train/src/cli/model.rs (`BenchSize`) and MmditConfig::paper / FrameVaeConfig::new /
-    # DyMeshVaeConfig::new (paper) and their tiny() counterparts.
+    # Must match model/src/bench.rs (`BenchSizes::paper` / `BenchSizes::tiny`, checked by its test).
     "paper": {
         "rf": {"width": 512, "blocks": 12, "heads": 8, "frames": 16, "channels": 12, "text_dim": 768},
         "tokens": 512,

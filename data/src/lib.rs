@@ -4,6 +4,7 @@
 //! Preprocessing: welding, frame-0 normalisation (D1)–(D3), vertex filter, windows, FPS, padding.
 
 pub mod batch;
+pub mod bench;
 pub mod clip;
 pub mod error;
 pub mod formats;

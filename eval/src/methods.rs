@@ -160,6 +160,22 @@ impl Method for VertexMethod {
     }
 }
 
+/// The training-free methods by kind; RF kinds are an error here (the caller builds them from checkpoints).
+pub fn vertex_methods(kinds: &[MethodKind]) -> Result<Vec<Box<dyn Method>>> {
+    kinds
+        .iter()
+        .map(|k| match k {
+            MethodKind::Lerp => Ok(Box::new(VertexMethod(VertexBaseline::Linear)) as Box<dyn Method>),
+            MethodKind::StaticNearest => Ok(Box::new(VertexMethod(VertexBaseline::NearestKeyframe)) as Box<dyn Method>),
+            other => Err(DataError::new(
+                "methods",
+                other.label(),
+                "needs trained checkpoints (--rf / --baseline-rf / --vae)",
+            )),
+        })
+        .collect()
+}
+
 /// A trained generator of whole windows: encode the keyframes, sample, decode (docs/method.md §4.6, §5.1, §5.4). The
 /// model crate's samplers are wrapped in this by the caller that loads the checkpoints.
 pub trait WindowSampler {

@@ -555,16 +555,16 @@ pub enum Coordinates {
     AsGiven,
 }
 
-/// Options of the per-clip protocol.
+/// How one clip is scored: the coordinate frame of every metric and the frame rate of (E5).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Protocol {
+pub struct Scoring {
     /// Coordinate frame of every metric.
     pub coordinates: Coordinates,
     /// Frame rate r of (E5) (1 = per frame; 10 matches the 10 FPS renders).
     pub rate: f64,
 }
 
-impl Default for Protocol {
+impl Default for Scoring {
     fn default() -> Self {
         Self {
             coordinates: Coordinates::NormaliseByGtFrame0,
@@ -609,19 +609,19 @@ pub struct ClipMetrics {
     pub mean_vertex_error: f64,
 }
 
-/// [`evaluate_clip_with`] under the default protocol (normalise by GT frame 0, r = 1).
+/// [`evaluate_clip_with`] under the default scoring (normalise by GT frame 0, r = 1).
 pub fn evaluate_clip(pred: Motion, gt: Motion, keyframes: &[usize]) -> Result<ClipMetrics> {
-    evaluate_clip_with(pred, gt, keyframes, &Protocol::default())
+    evaluate_clip_with(pred, gt, keyframes, &Scoring::default())
 }
 
-/// Scores one clip by docs/method.md §6.1: coordinates per `protocol`, keyframe error (E7) before replacement, then
+/// Scores one clip by docs/method.md §6.1: coordinates per `scoring`, keyframe error (E7) before replacement, then
 /// keyframes replaced by ground truth, (E1)–(E3) over 𝒰 and (E5)–(E6) over the whole assembled sequence.
 ///
 /// # Shapes
 /// `pred`, `gt`: `[T, N, 3]` with T ≥ 4 (jerk); `keyframes`: indices into `0..T`.
-pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], protocol: &Protocol) -> Result<ClipMetrics> {
+pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], scoring: &Scoring) -> Result<ClipMetrics> {
     check_pair(pred, gt)?;
-    check_rate(protocol.rate)?;
+    check_rate(scoring.rate)?;
     if gt.frames < 4 {
         return Err(EvalError::TooFewFrames {
             metric: "jerk",
@@ -633,7 +633,7 @@ pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], protoco
     let keys = keyframe_set(keyframes, t)?;
     let scored = non_keyframes(t, &keys)?;
     let normalised;
-    let (pred, gt) = match protocol.coordinates {
+    let (pred, gt) = match scoring.coordinates {
         Coordinates::NormaliseByGtFrame0 => {
             normalised = normalise_by_gt(pred, gt)?;
             (Motion::new(&normalised.0, t, n)?, Motion::new(&normalised.1, t, n)?)
@@ -643,11 +643,8 @@ pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], protoco
     let keyframe_rmse = rmse(pred, gt, &keys)?; // (E7), before replacement
     let assembled_rows = replace_keyframes(pred, gt, &keys)?;
     let assembled = Motion::new(&assembled_rows, t, n)?;
-    let (jerk_p, jerk_g) = (jerk(assembled, protocol.rate)?, jerk(gt, protocol.rate)?);
-    let (accel_p, accel_g) = (
-        acceleration(assembled, protocol.rate)?,
-        acceleration(gt, protocol.rate)?,
-    );
+    let (jerk_p, jerk_g) = (jerk(assembled, scoring.rate)?, jerk(gt, scoring.rate)?);
+    let (accel_p, accel_g) = (acceleration(assembled, scoring.rate)?, acceleration(gt, scoring.rate)?);
     let (energy_p, energy_g) = (motion_energy(assembled)?, motion_energy(gt)?);
     Ok(ClipMetrics {
         rmse: rmse(assembled, gt, &scored)?,

@@ -8,11 +8,12 @@ use any4d_data::DataError;
 type Result<T, E = DataError> = std::result::Result<T, E>;
 
 /// Which mesh is the reference (local frame 0) of windows after the first (docs/method.md §7 step 4, §8 A8).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum OverlapSource {
     /// The ground-truth mesh at the shared frame, when that frame is a keyframe (default for keyframe methods);
     /// a shared frame that is not a keyframe falls back to the generated one.
+    #[default]
     GroundTruth,
     /// The previous window's output at the shared frame (autoregressive, default for the AAM reference).
     Generated,

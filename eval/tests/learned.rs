@@ -9,15 +9,15 @@ use any4d_data::Clip;
 use any4d_data::batch::PadTo;
 use any4d_data::fps::farthest_point_sampling;
 use any4d_data::preprocess::edges_from_faces;
-use any4d_eval::learned::{
-    LatentLerpSampler, LearnedModels, MeshCodec, MeshVae, RfSampler, VaeReconstructor, sampler_noise,
-};
+use any4d_eval::learned::{LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor, sampler_noise};
 use any4d_eval::methods::{Method, MethodKind, RfMethod, WindowSampler, hide_non_keyframes};
-use any4d_eval::run::Reconstructor;
+use any4d_eval::tables::reconstruction::Reconstructor;
+use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::dymesh_vae::DyMeshVaeConfig;
-use any4d_model::frame_vae::{EdgeList, FrameVaeConfig, Posterior, VaeBatch};
+use any4d_model::frame_vae::FrameVaeConfig;
 use any4d_model::latent_stats::LatentStats;
-use any4d_model::mmdit::{KfMode, MmditConfig};
+use any4d_model::mesh_vae::{EdgeList, Posterior, VaeBatch};
+use any4d_model::mmdit::{KeyframeConditioning, MmditConfig};
 use any4d_model::rectified_flow::{Conditioning, SampleOptions, sample_mmdit};
 use any4d_model::text::{TextBatch, TextEncoder, TextError};
 use burn::module::{ModuleMapper, Param};
@@ -111,24 +111,24 @@ fn stats() -> LatentStats {
 
 fn frame_codec(device: &Device, padding: PadTo) -> Arc<MeshCodec> {
     let vae = FrameVaeConfig::tiny().init(device).map(&mut WakeZeros);
-    Arc::new(MeshCodec::new(MeshVae::Frame(vae), P, padding, device.clone()).expect("codec"))
+    Arc::new(MeshCodec::new(AnyMeshVae::Framewise(vae), P, padding, device.clone()).expect("codec"))
 }
 
-fn models(codec: Arc<MeshCodec>, net_mode: KfMode, device: &Device) -> Arc<LearnedModels> {
+fn models(codec: Arc<MeshCodec>, net_mode: KeyframeConditioning, device: &Device) -> Arc<LearnedModels> {
     let cfg = MmditConfig {
         frames: T,
         channels: C,
-        kf_mode: net_mode,
+        conditioning: net_mode,
         ..MmditConfig::tiny()
     };
     let rf = cfg.init(device).map(&mut WakeZeros);
     Arc::new(LearnedModels::new(codec, rf, cfg, stats(), Box::new(ByteText)).expect("models"))
 }
 
-fn options(kf_mode: KfMode) -> SampleOptions {
+fn options(conditioning: KeyframeConditioning) -> SampleOptions {
     SampleOptions {
         n_grid: 4,
-        ..SampleOptions::paper(kf_mode)
+        ..SampleOptions::paper(conditioning)
     }
 }
 
@@ -153,8 +153,12 @@ fn slot(z: &[f32], f: usize) -> &[f32] {
 #[test]
 fn rf_sampler_gives_t_times_n_rows_deterministic_per_seed() {
     let device = Device::flex();
-    let m = models(frame_codec(&device, PadTo::BatchMax), KfMode::InputMask, &device);
-    let sampler = RfSampler::new(m, options(KfMode::InputMask), 1.0).unwrap();
+    let m = models(
+        frame_codec(&device, PadTo::BatchMax),
+        KeyframeConditioning::InputMask,
+        &device,
+    );
+    let sampler = RfSampler::new(m, options(KeyframeConditioning::InputMask), 1.0).unwrap();
     let gt = wave_clip();
     let keys = [0, 2, 3];
     let visible = hide_non_keyframes(&gt, &keys);
@@ -187,8 +191,8 @@ fn keyframe_slots_hold_the_keyframe_latents_after_sampling() {
     let all = codec.encode(&gt, &(0..T).collect::<Vec<_>>()).unwrap();
     let mu_all = floats(all.mu.clone());
     for (net, mode) in [
-        (KfMode::InputMask, KfMode::InputMask),
-        (KfMode::None, KfMode::ReplaceNoised),
+        (KeyframeConditioning::InputMask, KeyframeConditioning::InputMask),
+        (KeyframeConditioning::None, KeyframeConditioning::ReplaceNoised),
     ] {
         let sampler = RfSampler::new(models(codec.clone(), net, &device), options(mode), 1.0).unwrap();
         let visible = hide_non_keyframes(&gt, &keys);
@@ -233,7 +237,7 @@ fn zero_velocity_leaves_the_seeded_noise_de_standardized() {
         ..MmditConfig::tiny()
     };
     let m = Arc::new(LearnedModels::new(codec, cfg.init(&device), cfg, stats(), Box::new(ByteText)).unwrap());
-    let s = RfSampler::new(m, options(KfMode::InputMask), 1.0)
+    let s = RfSampler::new(m, options(KeyframeConditioning::InputMask), 1.0)
         .unwrap()
         .sample_latents(&wave_clip(), &[0, 3], "flag", 11)
         .unwrap();
@@ -263,7 +267,7 @@ fn sample_latents_match_a_hand_wired_sample_mmdit() {
     };
     let rf = cfg.init(&device).map(&mut WakeZeros);
     let m = Arc::new(LearnedModels::new(codec.clone(), rf.clone(), cfg, stats(), Box::new(ByteText)).unwrap());
-    let opts = options(KfMode::InputMask);
+    let opts = options(KeyframeConditioning::InputMask);
     let gt = wave_clip();
     let got = RfSampler::new(m, opts, 1.0)
         .unwrap()
@@ -287,16 +291,23 @@ fn sample_latents_match_a_hand_wired_sample_mmdit() {
 #[test]
 fn impute_until_samples_and_differs_from_input_mask() {
     let device = Device::flex();
-    let m = models(frame_codec(&device, PadTo::BatchMax), KfMode::InputMask, &device);
+    let m = models(
+        frame_codec(&device, PadTo::BatchMax),
+        KeyframeConditioning::InputMask,
+        &device,
+    );
     let gt = wave_clip();
     let keys = [0, 2, 3];
     let impute = MethodKind::ImputeUntil {
         tau_star: 0.5,
         keyframes: any4d_eval::methods::KeyframeNoise::Clean,
     };
-    let base = options(KfMode::InputMask);
+    let base = options(KeyframeConditioning::InputMask);
     let s = RfSampler::for_method(impute, m.clone(), base, 1.0).unwrap();
-    assert_eq!((s.options().kf_mode, s.options().tau_star), (KfMode::ImputeUntil, 0.5));
+    assert_eq!(
+        (s.options().conditioning, s.options().tau_star),
+        (KeyframeConditioning::ImputeUntil, 0.5)
+    );
     let a = s.sample_latents(&gt, &keys, "flag", 9).unwrap();
     let b = RfSampler::for_method(MethodKind::KeyframeRf, m.clone(), base, 1.0)
         .unwrap()
@@ -322,8 +333,13 @@ fn impute_until_samples_and_differs_from_input_mask() {
 #[test]
 fn rf_method_around_rf_sampler_returns_ground_truth_keyframes() {
     let device = Device::flex();
-    let m = models(frame_codec(&device, PadTo::BatchMax), KfMode::InputMask, &device);
-    let sampler = RfSampler::for_method(MethodKind::KeyframeRf, m, options(KfMode::InputMask), 1.0).unwrap();
+    let m = models(
+        frame_codec(&device, PadTo::BatchMax),
+        KeyframeConditioning::InputMask,
+        &device,
+    );
+    let sampler =
+        RfSampler::for_method(MethodKind::KeyframeRf, m, options(KeyframeConditioning::InputMask), 1.0).unwrap();
     let method = RfMethod::new(MethodKind::KeyframeRf, sampler).unwrap();
     let gt = wave_clip();
     let keys = [0, 3];
@@ -405,14 +421,14 @@ fn vae_reconstructors_match_the_model_reconstruct() {
             .unwrap()
             .concat()
     };
-    let f = rows(MeshCodec::new(MeshVae::Frame(frame.clone()), P, PadTo::BatchMax, device.clone()).unwrap());
+    let f = rows(MeshCodec::new(AnyMeshVae::Framewise(frame.clone()), P, PadTo::BatchMax, device.clone()).unwrap());
     assert!(max_diff(&f, &expect_frame) < 1e-5, "frame-wise (E4)");
-    let padded = rows(MeshCodec::new(MeshVae::Frame(frame), P, PadTo::Fixed(N + 7), device.clone()).unwrap());
+    let padded = rows(MeshCodec::new(AnyMeshVae::Framewise(frame), P, PadTo::Fixed(N + 7), device.clone()).unwrap());
     assert!(
         max_diff(&padded, &expect_frame) < 1e-4,
         "masked padded keys do not change the latents"
     );
-    let s = rows(MeshCodec::new(MeshVae::Sequence { vae: seq, frames: T }, P, PadTo::BatchMax, device).unwrap());
+    let s = rows(MeshCodec::new(AnyMeshVae::Sequencewise(seq), P, PadTo::BatchMax, device).unwrap());
     assert!(max_diff(&s, &expect_seq) < 1e-5, "sequence-wise (E4)");
 }
 
@@ -420,13 +436,21 @@ fn vae_reconstructors_match_the_model_reconstruct() {
 fn mismatched_parts_and_bad_windows_are_errors() {
     let device = Device::flex();
     let codec = frame_codec(&device, PadTo::BatchMax);
-    let m = models(codec.clone(), KfMode::InputMask, &device);
-    let e = RfSampler::new(m.clone(), options(KfMode::ReplaceNoised), 1.0)
+    let m = models(codec.clone(), KeyframeConditioning::InputMask, &device);
+    let e = RfSampler::new(m.clone(), options(KeyframeConditioning::ReplaceNoised), 1.0)
         .err()
         .expect("layout mismatch");
     assert!(e.to_string().contains("mask channels"), "{e}");
-    assert!(RfSampler::for_method(MethodKind::Lerp, m.clone(), options(KfMode::InputMask), 1.0).is_err());
-    let sampler = RfSampler::new(m, options(KfMode::InputMask), 1.0).unwrap();
+    assert!(
+        RfSampler::for_method(
+            MethodKind::Lerp,
+            m.clone(),
+            options(KeyframeConditioning::InputMask),
+            1.0
+        )
+        .is_err()
+    );
+    let sampler = RfSampler::new(m, options(KeyframeConditioning::InputMask), 1.0).unwrap();
     let gt = wave_clip();
     let e = sampler.sample(&gt, &[0, 7], "", 0).unwrap_err();
     assert!(e.to_string().contains("frame 7"), "{e}");
@@ -447,8 +471,7 @@ fn mismatched_parts_and_bad_windows_are_errors() {
         .expect("text width");
     assert!(e.to_string().contains("text_dim 16"), "{e}");
     let seq = DyMeshVaeConfig::tiny().with_frames(T).init(&device);
-    let seq_codec =
-        Arc::new(MeshCodec::new(MeshVae::Sequence { vae: seq, frames: T }, P, PadTo::BatchMax, device).unwrap());
+    let seq_codec = Arc::new(MeshCodec::new(AnyMeshVae::Sequencewise(seq), P, PadTo::BatchMax, device).unwrap());
     assert!(LatentLerpSampler::new(seq_codec.clone()).is_err());
     let e = seq_codec.encode(&gt, &[0, 3]).unwrap_err();
     assert!(e.to_string().contains("whole windows"), "{e}");
@@ -480,14 +503,14 @@ fn paper_size_window_timing() {
         .flat_map(|v| [[v, v + 1, v + s], [v + 1, v + s + 1, v + s]])
         .collect();
     let clip = Clip::new("big_offset0_0-16", vertices, t, n, faces, "flag", "test").unwrap();
-    let vae = FrameVaeConfig::new().init(&device);
-    let codec = Arc::new(MeshCodec::new(MeshVae::Frame(vae), 512, PadTo::BatchMax, device.clone()).unwrap());
-    let cfg = MmditConfig::paper(KfMode::InputMask, 8);
+    let vae = FrameVaeConfig::paper().init(&device);
+    let codec = Arc::new(MeshCodec::new(AnyMeshVae::Framewise(vae), 512, PadTo::BatchMax, device.clone()).unwrap());
+    let cfg = MmditConfig::paper(KeyframeConditioning::InputMask, 8);
     let rf = cfg.init(&device);
     let m = Arc::new(LearnedModels::new(codec.clone(), rf, cfg, stats(), Box::new(ByteText)).unwrap());
     let opts = SampleOptions {
         n_grid: 2,
-        ..SampleOptions::paper(KfMode::InputMask)
+        ..SampleOptions::paper(KeyframeConditioning::InputMask)
     };
     let sampler = RfSampler::new(m, opts, 1.0).unwrap();
     let keys = [0, 5, 15];

@@ -10,7 +10,7 @@ use burn::prelude::*;
 use burn::tensor::Distribution;
 use serde::{Deserialize, Serialize};
 
-use crate::mmdit::{KfMode, Mmdit, assemble_input, build_input, replace_keyframes, split_output};
+use crate::mmdit::{KeyframeConditioning, Mmdit, assemble_input, build_input, replace_keyframes, split_output};
 
 // ---------------------------------------------------------------------------------------------------------------
 // Training: interpolant, target, τ sampling, loss
@@ -124,10 +124,10 @@ pub struct RfBatch {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RfLossOptions {
     /// Keyframe mode of the network.
-    pub kf_mode: KfMode,
+    pub conditioning: KeyframeConditioning,
     /// Which slots enter (R5).
     pub keyframe_loss: KeyframeLoss,
-    /// τ* of (R9), used by `KfMode::ImputeUntil` only.
+    /// τ* of (R9), used by `KeyframeConditioning::ImputeUntil` only.
     pub tau_star: f64,
 }
 
@@ -144,18 +144,24 @@ pub fn rf_training_loss(
 ) -> Tensor<1> {
     let [_, _, frames, _] = batch.z.dims();
     let x_tau = interpolant(eps.clone(), batch.z.clone(), tau.clone()); // (R1)
-    let mask = match opts.kf_mode {
-        KfMode::InputMask => batch.mask.clone(),
-        KfMode::ImputeUntil => impute_mask(batch.mask.clone(), tau.clone(), opts.tau_star),
-        KfMode::ReplaceNoised | KfMode::None => batch.mask.zeros_like(),
+    let mask = match opts.conditioning {
+        KeyframeConditioning::InputMask => batch.mask.clone(),
+        KeyframeConditioning::ImputeUntil => impute_mask(batch.mask.clone(), tau.clone(), opts.tau_star),
+        KeyframeConditioning::ReplaceNoised | KeyframeConditioning::None => batch.mask.zeros_like(),
     };
-    let input = match opts.kf_mode {
+    let input = match opts.conditioning {
         // (R9): replacement before τ* only, but the mask channel carries m throughout.
-        KfMode::ImputeUntil => {
+        KeyframeConditioning::ImputeUntil => {
             let state = replace_keyframes(x_tau, batch.z_key.clone(), mask);
-            assemble_input(batch.z0.clone(), state, batch.mask.clone(), opts.kf_mode)
+            assemble_input(batch.z0.clone(), state, batch.mask.clone(), opts.conditioning)
         }
-        _ => build_input(batch.z0.clone(), x_tau, mask.clone(), batch.z_key.clone(), opts.kf_mode), // (R3)
+        _ => build_input(
+            batch.z0.clone(),
+            x_tau,
+            mask.clone(),
+            batch.z_key.clone(),
+            opts.conditioning,
+        ), // (R3)
     };
     let v = split_output(
         model.forward(input, batch.text.clone(), batch.keep_txt.clone(), tau),
@@ -200,20 +206,20 @@ pub struct SampleOptions {
     /// Solver.
     pub solver: Solver,
     /// How the keyframes enter: decides (R3), (R7) or (R9) and the input width.
-    pub kf_mode: KfMode,
-    /// Noise of (R7), for `KfMode::ReplaceNoised`.
+    pub conditioning: KeyframeConditioning,
+    /// Noise of (R7), for `KeyframeConditioning::ReplaceNoised`.
     pub replace_noise: ReplaceNoise,
-    /// τ* of (R9), for `KfMode::ImputeUntil`.
+    /// τ* of (R9), for `KeyframeConditioning::ImputeUntil`.
     pub tau_star: f64,
 }
 
 impl SampleOptions {
     /// Paper defaults: midpoint, 64 grid points, fixed replacement noise, τ* = 0.98.
-    pub fn paper(kf_mode: KfMode) -> Self {
+    pub fn paper(conditioning: KeyframeConditioning) -> Self {
         Self {
             n_grid: 64,
             solver: Solver::Midpoint,
-            kf_mode,
+            conditioning,
             replace_noise: ReplaceNoise::Fixed,
             tau_star: 0.98,
         }
@@ -238,27 +244,29 @@ pub struct Conditioning {
 /// - x: `[B, P, T, C]` ODE state; eps: `[B, P, T, C]` the initial noise; output `[B, P, in_channels]`
 pub fn sampler_input(cond: &Conditioning, x: Tensor<4>, eps: &Tensor<4>, tau: f64, opts: &SampleOptions) -> Tensor<3> {
     let (z0, mask) = (cond.z0.clone(), cond.mask.clone());
-    match opts.kf_mode {
-        KfMode::InputMask => build_input(z0, x, mask, cond.z_key.clone(), KfMode::InputMask), // (R3)
-        KfMode::ReplaceNoised => {
+    match opts.conditioning {
+        KeyframeConditioning::InputMask => {
+            build_input(z0, x, mask, cond.z_key.clone(), KeyframeConditioning::InputMask)
+        } // (R3)
+        KeyframeConditioning::ReplaceNoised => {
             let eps_key = match opts.replace_noise {
                 ReplaceNoise::Fixed => eps.clone(),
                 ReplaceNoise::Fresh => Tensor::random(eps.dims(), Distribution::Normal(0.0, 1.0), &eps.device()),
             };
             // (R7) keyframe latent noised to the state's level: (1 − τ) ε_key + τ Z_key
             let key_tau = eps_key.mul_scalar(1.0 - tau) + cond.z_key.clone().mul_scalar(tau);
-            build_input(z0, x, mask, key_tau, KfMode::ReplaceNoised)
+            build_input(z0, x, mask, key_tau, KeyframeConditioning::ReplaceNoised)
         }
-        KfMode::ImputeUntil => {
+        KeyframeConditioning::ImputeUntil => {
             // (R9) clean (or noisy-observed) keyframes imputed only while τ < τ*; the mask channel stays.
             let state = if tau < opts.tau_star {
                 replace_keyframes(x, cond.z_key.clone(), mask.clone())
             } else {
                 x
             };
-            assemble_input(z0, state, mask, KfMode::ImputeUntil)
+            assemble_input(z0, state, mask, KeyframeConditioning::ImputeUntil)
         }
-        KfMode::None => assemble_input(z0, x, mask, KfMode::None),
+        KeyframeConditioning::None => assemble_input(z0, x, mask, KeyframeConditioning::None),
     }
 }
 
@@ -301,9 +309,11 @@ where
             }
         };
     }
-    match opts.kf_mode {
-        KfMode::InputMask | KfMode::ReplaceNoised => replace_keyframes(x, cond.z_key.clone(), cond.mask.clone()),
-        KfMode::ImputeUntil | KfMode::None => x,
+    match opts.conditioning {
+        KeyframeConditioning::InputMask | KeyframeConditioning::ReplaceNoised => {
+            replace_keyframes(x, cond.z_key.clone(), cond.mask.clone())
+        }
+        KeyframeConditioning::ImputeUntil | KeyframeConditioning::None => x,
     }
 }
 

@@ -3,26 +3,18 @@
 
 use std::path::Path;
 
+use any4d_data::keyframes::TrainingKeyframes;
 use any4d_model::mmdit::MmditConfig;
 use any4d_model::rectified_flow::{KeyframeLoss, RfLossOptions, TauSampler};
 use any4d_model::text::scratch::ScratchTextConfig;
 use serde::{Deserialize, Serialize};
 
-use crate::config::{DeviceConfig, OptimConfig, TrainConfig, parse_strict, to_toml};
-use crate::error::{Result, TrainError, io_err};
+use crate::config::resolve::{self, ConfigSource, Files, Override};
+use crate::config::{DeviceConfig, OptimConfig, TrainConfig, to_toml};
+use crate::error::{Result, TrainError};
 
 use super::VALID_SAMPLE_KEYFRAMES;
 use super::network::RfModelConfig;
-
-/// How the keyframe set of a training sample is drawn (docs/method.md §4.5, §5.4, §8 X3).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum KfSampler {
-    /// k ~ Unif{0..=k_max}, a uniform k-subset of the T frames (paper, k_max = 5).
-    Random,
-    /// SceneMI: k ~ Unif{2..=T}, first and last always included.
-    Scenemi,
-}
 
 /// Which VAE latent trains the RF (docs/method.md §3.4: statistics over posterior samples).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -50,14 +42,14 @@ pub enum LatentCache {
 #[serde(deny_unknown_fields)]
 pub struct RfSection {
     /// Keyframe sampler in training.
-    pub kf_sampler: KfSampler,
+    pub kf_sampler: TrainingKeyframes,
     /// Largest k of the random sampler (docs/method.md §4.5: 5).
     pub k_max: usize,
     /// τ distribution (docs/method.md §4.5 step 4: uniform; AAM: cosmap).
     pub tau_sampler: TauSampler,
     /// Which slots enter (R5) (docs/method.md §4.2: all).
     pub keyframe_loss: KeyframeLoss,
-    /// τ* of (R9) for `kf_mode = "impute_until"` (docs/method.md §5.4: 0.98).
+    /// τ* of (R9) for `conditioning = "impute_until"` (docs/method.md §5.4: 0.98).
     pub tau_star: f64,
     /// Std of the keyframe vertex noise per unit l ~ U(0, 1) for `impute_until` (docs/method.md §5.4: 0.02).
     pub keyframe_noise: f64,
@@ -120,9 +112,10 @@ pub struct RfRunConfig {
 }
 
 impl RfRunConfig {
-    /// Parses and validates an RF run config; unknown or missing keys anywhere are errors naming `file`.
-    pub fn parse(text: &str, file: &Path) -> Result<Self> {
-        let cfg: RfRunConfig = parse_strict(text, file)?;
+    /// Parses and validates a resolved RF run config; unknown or missing keys anywhere are errors naming `file` and
+    /// the dotted key.
+    pub fn from_table(table: toml::Table, file: &Path) -> Result<Self> {
+        let cfg: RfRunConfig = resolve::from_table(table, file)?;
         let bad = |reason: String| TrainError::Config {
             path: file.to_path_buf(),
             reason,
@@ -149,7 +142,7 @@ impl RfRunConfig {
                 rf.k_max, cfg.model.frames
             )));
         }
-        if rf.kf_sampler == KfSampler::Scenemi && cfg.model.frames < 2 {
+        if rf.kf_sampler == TrainingKeyframes::Scenemi && cfg.model.frames < 2 {
             return Err(bad(format!(
                 "rf.kf_sampler = \"scenemi\" keeps the first and last frames: needs model.frames ≥ 2, got {}",
                 cfg.model.frames
@@ -196,10 +189,19 @@ impl RfRunConfig {
         Ok(cfg)
     }
 
-    /// Reads a config file.
-    pub fn load(file: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(file).map_err(io_err("read config", file))?;
-        Self::parse(&text, file)
+    /// Parses the text of `file` (its `extends` chain read from the file system).
+    pub fn parse(text: &str, file: &Path) -> Result<Self> {
+        Self::from_table(resolve::resolve_text(&Files, text, file)?, file)
+    }
+
+    /// Reads `file` from `source` with its `extends` chain and `overrides`.
+    pub fn load_with(source: &dyn ConfigSource, file: &Path, overrides: &[Override]) -> Result<Self> {
+        Self::from_table(resolve::resolve(source, file, overrides)?, file)
+    }
+
+    /// Reads a config file with `overrides` (`--set`).
+    pub fn load(file: &Path, overrides: &[Override]) -> Result<Self> {
+        Self::load_with(&Files, file, overrides)
     }
 
     /// The fully resolved config as TOML.
@@ -224,7 +226,7 @@ impl RfRunConfig {
     /// The options of (R5) for this config.
     pub fn loss_options(&self) -> RfLossOptions {
         RfLossOptions {
-            kf_mode: self.model.kf_mode,
+            conditioning: self.model.conditioning,
             keyframe_loss: self.rf.keyframe_loss,
             tau_star: self.rf.tau_star,
         }

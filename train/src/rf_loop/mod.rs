@@ -7,24 +7,28 @@
 //! and its transformer is trained jointly with the MMDiT ([`RfModel`]). Run config: `configs/rf/*.toml`
 //! (`[model]`, `[rf]`, `[text]`, `[train]`, `[optim]`, `[device]`).
 //!
-//! Validation: (R5) on the VAL split at every validation (`valid.csv`) and, every
-//! `rf.valid_sample_every` steps and at the end, a few VAL clips completed by the current network through the eval
-//! crate's [`RfSampler`] (docs/method.md §4.6) and scored with (E1)–(E3) of docs/method.md §6 (`samples.csv`, see
-//! [`RfObjective::validation_samples`]).
+//! Files: `config.rs` (the TOML), `network.rs` (MMDiT + caption encoder), `latents.rs` (frozen-VAE latents),
+//! `batcher.rs` ([`RfBatcher`]: the batches), `objective.rs` ([`RfObjective`]: (R5) and validation),
+//! `validation.rs` (validation samples: a few VAL clips completed by the current network through the eval crate's
+//! sampler, docs/method.md §4.6, and scored with (E1)–(E3), `samples.csv`), `run.rs` (`train rf`, `--resume`).
 
 use any4d_data::keyframes::KeyframeStrategy;
 
+mod batcher;
 mod config;
 mod latents;
 mod network;
 mod objective;
 mod run;
+mod validation;
 
+pub use batcher::*;
 pub use config::*;
 pub use latents::*;
 pub use network::*;
 pub use objective::*;
 pub use run::*;
+pub use validation::*;
 
 /// Names of the loss terms in `metrics.csv` / `valid.csv`: (R5) and the fraction of keyframe slots (m = 1).
 pub const RF_TERMS: [&str; 2] = ["rf", KF_FRAC_TERM];

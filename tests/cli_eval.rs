@@ -145,7 +145,7 @@ fn bad_keyframes_and_missing_files_fail() {
 
 #[test]
 fn bench_metrics_runs_on_tiny_clips() {
-    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/metrics_reference.py");
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/metrics_reference.py");
     let args = [
         "bench",
         "metrics",
