@@ -52,7 +52,7 @@ impl DyMeshVaeConfig {
 
     /// Checks the sizes; the error names the field.
     pub fn validate(&self) -> Result<(), String> {
-        if self.frames == 0 || self.offset_freqs == 0 || !(self.kl_weight >= 0.0) {
+        if self.frames == 0 || self.offset_freqs == 0 || self.kl_weight.is_nan() || self.kl_weight < 0.0 {
             return Err(format!(
                 "model.frames and model.offset_freqs must be positive and model.kl_weight non-negative, got {}, {} \
                  and {}",

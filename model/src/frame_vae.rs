@@ -38,7 +38,7 @@ impl FrameVaeConfig {
 
     /// Checks the sizes; the error names the field.
     pub fn validate(&self) -> Result<(), String> {
-        if self.offset_freqs == 0 || !(self.kl_weight >= 0.0) {
+        if self.offset_freqs == 0 || self.kl_weight.is_nan() || self.kl_weight < 0.0 {
             return Err(format!(
                 "model.offset_freqs must be positive and model.kl_weight non-negative, got {} and {}",
                 self.offset_freqs, self.kl_weight

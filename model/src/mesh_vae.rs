@@ -211,7 +211,7 @@ impl MeshVaeBodyConfig {
                 return Err(format!("model.body.{name} must be positive, got 0"));
             }
         }
-        if !(self.logvar_min < self.logvar_max) {
+        if self.logvar_min.is_nan() || self.logvar_max.is_nan() || self.logvar_min >= self.logvar_max {
             return Err(format!(
                 "model.body.logvar_min ({}) must be below logvar_max ({})",
                 self.logvar_min, self.logvar_max

@@ -266,14 +266,14 @@ fn print_ours(args: &BenchArgs, sz: &BenchSizes, ours: &ModelTimings, threads: u
 }
 
 /// One network's result in the PyTorch reference's JSON.
-#[derive(serde::Deserialize)]
+#[derive(Debug, serde::Deserialize)]
 struct TorchNet {
     median_ms: f64,
     params: usize,
 }
 
 /// What `scripts/bench_torch_reference.py --json` prints.
-#[derive(serde::Deserialize)]
+#[derive(Debug, serde::Deserialize)]
 struct TorchReference {
     torch: String,
     threads: usize,
@@ -355,7 +355,6 @@ echo"#,
         );
         let parsed = run_torch_reference(&args(&script), &aam, 3)
             .expect("runs")
-            .ok()
             .expect("available");
         assert_eq!(parsed.torch, "tiny");
         assert_eq!(parsed.threads, 3);
@@ -375,8 +374,7 @@ echo"#,
         let (tmp, _aam, script) = setup("exit 0\n");
         let why = run_torch_reference(&args(&script), tmp.path(), 1)
             .expect("runs")
-            .err()
-            .expect("unavailable");
+            .expect_err("unavailable");
         assert!(why.0.contains("not an AnimateAnyMesh checkout"), "{why:?}");
     }
 }

@@ -244,8 +244,7 @@ mod tests {
         let other = tmp.path().join("other.toml");
         std::fs::write(&other, "[train]\nseed = 1\n").expect("write");
         let err = RunConfig::load(&other, &[])
-            .err()
-            .expect("neither RF nor VAE")
+            .expect_err("neither RF nor VAE")
             .to_string();
         assert!(err.contains("other.toml") && err.contains("neither an RF"), "{err}");
     }

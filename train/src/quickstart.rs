@@ -230,3 +230,30 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
 fn report_p(data: &Path) -> Result<usize> {
     Ok(any4d_data::store::Store::open(data)?.p())
 }
+
+#[cfg(test)]
+mod tests {
+    use any4d_model::mmdit::KeyframeConditioning;
+
+    use super::*;
+
+    #[test]
+    fn the_embedded_presets_resolve_as_the_repository_files_do() {
+        let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+        for name in ["configs/rf/tiny.toml", "configs/rf/baseline_tiny.toml"] {
+            let embedded = RfRunConfig::load_with(&PRESETS, Path::new(name), &[]).expect(name);
+            assert_eq!(
+                embedded,
+                RfRunConfig::load(&root.join(name), &[]).expect(name),
+                "{name}"
+            );
+        }
+        let baseline = RfRunConfig::load_with(&PRESETS, Path::new("configs/rf/baseline_tiny.toml"), &[]).unwrap();
+        assert_eq!(baseline.model.conditioning, KeyframeConditioning::ReplaceNoised);
+        let vae = VaeRunConfig::load_with(&PRESETS, Path::new("configs/vae/tiny.toml"), &[]).unwrap();
+        assert_eq!(
+            vae,
+            VaeRunConfig::load(&root.join("configs/vae/tiny.toml"), &[]).unwrap()
+        );
+    }
+}
