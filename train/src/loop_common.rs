@@ -339,12 +339,13 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
         let sums = losses.sums;
         let (grads, grad_norm) = clip_global_norm(&model, grads, optim_cfg.grad_clip);
         guard(grad_norm, step, "gradient norm", &last_ckpt)?;
-        model = optim.step(optim_cfg.lr, model, grads);
+        let lr = optim_cfg.schedule.lr(optim_cfg.lr, step, total_steps);
+        model = optim.step(lr, model, grads);
         state.step = step;
 
         let secs = t0.elapsed().as_secs_f64();
         let mut row = sums.clone();
-        row.extend([optim_cfg.lr, grad_norm, 1.0 / secs, cfg.batch_size as f64 / secs]);
+        row.extend([lr, grad_norm, 1.0 / secs, cfg.batch_size as f64 / secs]);
         run.append_metrics(step, &row)?;
         bar.step(step, sums[n_terms], secs);
 

@@ -57,12 +57,51 @@ pub struct TrainConfig {
     pub progress_every_secs: f64,
 }
 
-/// The `[optim]` table: AdamW with global-norm gradient clipping and a constant learning rate.
+/// How the learning rate moves over a run.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum LrSchedule {
+    /// `lr` at every step (the paper's VAE and RF).
+    Constant,
+    /// Linear warm-up from 0 to `lr` over `warmup_steps`, then a half cosine from `lr` down to
+    /// `final_fraction · lr` at the last step of the run.
+    WarmupCosine {
+        /// Steps of the linear warm-up.
+        warmup_steps: u64,
+        /// Learning rate at the last step as a fraction of `lr`, in [0, 1].
+        final_fraction: f64,
+    },
+}
+
+impl LrSchedule {
+    /// Learning rate of optimiser step `step` (1-based) of a `total`-step run with peak `lr`.
+    pub fn lr(self, lr: f64, step: u64, total: u64) -> f64 {
+        match self {
+            LrSchedule::Constant => lr,
+            LrSchedule::WarmupCosine {
+                warmup_steps,
+                final_fraction,
+            } => {
+                if step <= warmup_steps {
+                    return lr * step as f64 / warmup_steps.max(1) as f64;
+                }
+                let span = total.saturating_sub(warmup_steps).max(1) as f64;
+                let progress = ((step - warmup_steps) as f64 / span).min(1.0);
+                let cosine = 0.5 * (1.0 + (std::f64::consts::PI * progress).cos());
+                lr * (final_fraction + (1.0 - final_fraction) * cosine)
+            }
+        }
+    }
+}
+
+/// The `[optim]` table: AdamW with global-norm gradient clipping and a learning-rate schedule.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OptimConfig {
-    /// Constant learning rate (docs/method.md §3.5: 1e-4 VAE; §4.7: 2e-4 RF).
+    /// Peak learning rate (docs/method.md §3.5: 1e-4 VAE; §4.7: 2e-4 RF, both constant).
     pub lr: f64,
+    /// Schedule of the learning rate around `lr` (paper: constant).
+    pub schedule: LrSchedule,
     /// AdamW β₁ (0.9 both).
     pub beta1: f32,
     /// AdamW β₂ (0.999 VAE, 0.99 RF).
@@ -135,13 +174,19 @@ impl OptimConfig {
             && (0.0..1.0).contains(&self.beta2)
             && self.weight_decay >= 0.0
             && self.eps > 0.0
-            && self.grad_clip > 0.0;
+            && self.grad_clip > 0.0
+            && match self.schedule {
+                LrSchedule::Constant => true,
+                LrSchedule::WarmupCosine { final_fraction, .. } => (0.0..=1.0).contains(&final_fraction),
+            };
         if ok {
             Ok(())
         } else {
             Err(TrainError::Config {
                 path: file.to_path_buf(),
-                reason: format!("optim: out of range (need lr>0, 0≤β<1, wd≥0, eps>0, grad_clip>0): {self:?}"),
+                reason: format!(
+                    "optim: out of range (need lr>0, 0≤β<1, wd≥0, eps>0, grad_clip>0, final_fraction in [0, 1]): {self:?}"
+                ),
             })
         }
     }
@@ -228,6 +273,7 @@ progress_every_secs = 5.0
 
 [optim]
 lr = 1e-4
+schedule = "constant"
 beta1 = 0.9
 beta2 = 0.999
 weight_decay = 1e-4
@@ -271,5 +317,35 @@ precision = "f32"
         run.optim.grad_clip = 0.0;
         assert!(run.optim.validate(p).is_err());
         assert_eq!(Duration::Epochs(2).steps(10, 4), 5);
+        run.optim.grad_clip = 1.0;
+        run.optim.schedule = LrSchedule::WarmupCosine {
+            warmup_steps: 2,
+            final_fraction: 1.5,
+        };
+        assert!(run.optim.validate(p).unwrap_err().to_string().contains("final_fraction"));
+    }
+
+    #[test]
+    fn warmup_cosine_rises_linearly_then_falls_to_its_floor() {
+        let s = LrSchedule::WarmupCosine {
+            warmup_steps: 4,
+            final_fraction: 0.1,
+        };
+        let lrs: Vec<f64> = (1..=14).map(|step| s.lr(2.0, step, 14)).collect();
+        assert_eq!(&lrs[..4], &[0.5, 1.0, 1.5, 2.0]);
+        assert!(lrs[4..].windows(2).all(|w| w[1] < w[0]), "{lrs:?}");
+        assert!((lrs[13] - 0.2).abs() < 1e-12, "{lrs:?}");
+        // Half way through the cosine: the mean of peak and floor.
+        assert!((s.lr(2.0, 9, 14) - 1.1).abs() < 1e-12);
+        assert_eq!(LrSchedule::Constant.lr(2.0, 7, 14), 2.0);
+        let parsed: Run = parse_strict(
+            &TEXT.replace(
+                "schedule = \"constant\"",
+                "schedule = { warmup_cosine = { warmup_steps = 4, final_fraction = 0.1 } }",
+            ),
+            Path::new("t.toml"),
+        )
+        .unwrap();
+        assert_eq!(parsed.optim.schedule, s);
     }
 }

@@ -224,6 +224,7 @@ pub fn toy_configs(steps: u64) -> (TrainConfig, OptimConfig) {
     };
     let optim = OptimConfig {
         lr: 1e-2,
+        schedule: any4d_train::config::LrSchedule::Constant,
         beta1: 0.9,
         beta2: 0.99,
         weight_decay: 0.01,
