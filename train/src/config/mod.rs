@@ -322,7 +322,13 @@ precision = "f32"
             warmup_steps: 2,
             final_fraction: 1.5,
         };
-        assert!(run.optim.validate(p).unwrap_err().to_string().contains("final_fraction"));
+        assert!(
+            run.optim
+                .validate(p)
+                .unwrap_err()
+                .to_string()
+                .contains("final_fraction")
+        );
     }
 
     #[test]
