@@ -168,3 +168,26 @@ fn set_overrides_apply_after_extends_and_reject_unknown_keys() {
         .to_string();
     assert!(err.contains("rf.k_max"), "{err}");
 }
+
+#[test]
+fn run_folders_written_before_the_renames_still_load() {
+    // VAE run folders once held the body's keys flat under [model], with `pad_keys = "Masked"`.
+    let vae = root().join("configs/vae/tiny.toml");
+    let text = std::fs::read_to_string(&vae).unwrap();
+    let header = "\n# The encoder/decoder body both mesh VAEs share (model/src/mesh_vae.rs).\n[model.body]\n";
+    assert!(text.contains(header));
+    let flat = text.replace(header, "\n").replace("\"masked\"", "\"Masked\"");
+    assert_eq!(
+        VaeRunConfig::parse(&flat, &vae).unwrap(),
+        VaeRunConfig::parse(&text, &vae).unwrap()
+    );
+    // RF run folders once named the keyframe conditioning `kf_mode`.
+    let rf = root().join("configs/rf/tiny.toml");
+    let text = std::fs::read_to_string(&rf).unwrap();
+    let old = text.replace("conditioning = ", "kf_mode = ");
+    assert_ne!(old, text);
+    assert_eq!(
+        RfRunConfig::parse(&old, &rf).unwrap(),
+        RfRunConfig::parse(&text, &rf).unwrap()
+    );
+}
