@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Reference for `any4d bench data`: read DyMesh .bin clips with pickle.load, normalise them by frame 0 (SPEC §2.3,
-(D1)-(D3)) with numpy and run farthest point sampling on normalised frame 0 (SPEC §2.5) with a vectorised numpy loop,
+"""Reference for `any4d bench data`: read DyMesh .bin clips with pickle.load, normalise them by frame 0 (docs/method.md §2.3,
+(D1)-(D3)) with numpy and run farthest point sampling on normalised frame 0 (docs/method.md §2.5) with a vectorised numpy loop,
 on one core.
 
 Usage: python3 scripts/bench_data_reference.py DIR [--p 512]

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """PyTorch reference for `any4d bench model`: times AnimateAnyMesh's own networks on CPU on the same shapes as ours
-(SPEC §4.3 rectified-flow MMDiT, SPEC §3.2 frame-wise VAE, SPEC §3.5 sequence-wise DyMeshVAE).
+(docs/method.md §4.3 rectified-flow MMDiT, docs/method.md §3.2 frame-wise VAE, docs/method.md §3.5 sequence-wise DyMeshVAE).
 
 Usage: python3 scripts/bench_torch_reference.py --aam DIR [--size paper|tiny] [--batch B] [--iters K]
                                                [--threads N] [--json]
@@ -14,7 +14,7 @@ from DIR and timed:
   text tower is not built or timed: as on our side, the (B, L, 768) text states are a random input, passed through
   AAM's clip_token_mlp, the keep mask, the time MLP and `_forward_cogx` (what `DyMeshMMDiT.forward` does after
   CLIP).
-- vae_framewise: DyMeshVAE's modules built at SPEC §3.2 sizes (d 128, C 12, 8 + 8 blocks, 8 heads × 64, per-frame
+- vae_framewise: DyMeshVAE's modules built at docs/method.md §3.2 sizes (d 128, C 12, 8 + 8 blocks, 8 heads × 64, per-frame
   offset input of 3 values) and driven frame-wise as our FrameVae does: the shape stream once per clip, every
   frame's motion stream pooled with the same attention map (the value streams of all frames concatenated along
   the head channels, AAM's own v_cat trick widened to T frames), posterior mean, under torch.no_grad.
@@ -44,8 +44,7 @@ import types
 import warnings
 
 SIZES = {
-    # Must match train/src/cli/model.rs (`BenchSize`) and MmditConfig::paper / FrameVaeConfig::new /
-    # DyMeshVaeConfig::new (paper) and their tiny() counterparts.
+    # Must match model/src/bench.rs (`BenchSizes::paper` / `BenchSizes::tiny`, checked by its test).
     "paper": {
         "rf": {"width": 512, "blocks": 12, "heads": 8, "frames": 16, "channels": 12, "text_dim": 768},
         "tokens": 512,
@@ -150,7 +149,7 @@ def n_params(module):
 def bench_rf(torch, transformer, util, size, batch, iters):
     """(R4)-(R5) forward + backward of AAM's DyMeshMMDiT with our channel counts."""
     cfg, p_tok, l_txt = size["rf"], size["tokens"], size["text_len"]
-    in_ch = (cfg["frames"] + 1) * (cfg["channels"] + 1)  # input_mask layout, SPEC §4.1
+    in_ch = (cfg["frames"] + 1) * (cfg["channels"] + 1)  # input_mask layout, docs/method.md §4.1
     out_ch = cfg["frames"] * cfg["channels"]
     model = transformer.DyMeshMMDiT(
         device="cpu",
@@ -229,7 +228,7 @@ def shared_map_attention(torch, pre, q_stream, k_stream, v1_stream, v2_stream):
 
 
 def framewise_reconstruct(torch, vae, reference, frames, adj, idx):
-    """SPEC §3.2 encode + decode with AAM's modules (posterior mean).
+    """docs/method.md §3.2 encode + decode with AAM's modules (posterior mean).
 
     Shapes: reference (B, N, 3), frames (B, T, N, 3), adj (B, N, N), idx (B, P) -> (B, T, N, 3).
     """

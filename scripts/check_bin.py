@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Load a DyMesh .bin written by any4d with real pickle + numpy and print what it holds (SPEC §2.1).
+"""Load a DyMesh .bin written by any4d with real pickle + numpy and print what it holds (docs/method.md §2.1).
 
 Usage: python3 scripts/check_bin.py PATH
 Prints one line per key, e.g. `vertices ndarray float32 (2, 3, 3) C`, then `ok`. Exits 1 if PATH is not a dict

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Write the clip-format test fixtures of the data crate (SPEC §2.1) into data/tests/fixtures/.
+"""Write the clip-format test fixtures of the data crate (docs/method.md §2.1) into data/tests/fixtures/.
 
 bin/   DyMesh-style pickles made by real `pickle` + `numpy`: good ones (protocols 2/4/5, float32 Fortran order,
        big-endian, float16, bytes caption, ...) and bad ones (hostile globals, truncated, wrong rank, ...).

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reference fixtures for the text encoders of any4d (model/src/text/*.rs, SPEC §4.4). numpy + safetensors only.
+"""Reference fixtures for the text encoders of any4d (model/src/text/*.rs, docs/method.md §4.4). numpy + safetensors only.
 
   python3 scripts/make_text_fixtures.py clip [OUT]       tiny random CLIP text tower in HF naming + a tiny
                                                           tokenizer.json + states computed here with numpy

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Independent numpy + scipy reference for the evaluation metrics of SPEC §6.1-§6.2 ((E1)-(E3), (E5)-(E7)).
+"""Independent numpy + scipy reference for the evaluation metrics of docs/method.md §6.1-§6.2 ((E1)-(E3), (E5)-(E7)).
 
 Written separately from eval/src/metrics.rs so the Rust test compares two implementations, not one.
 
@@ -67,7 +67,7 @@ def mean_diff_norm(x, order, scale):
 
 
 def evaluate(pred, gt, keyframes, rate=1.0):
-    """All metrics of one clip by SPEC §6.1; pred, gt float32 [T, N, 3]."""
+    """All metrics of one clip by docs/method.md §6.1; pred, gt float32 [T, N, 3]."""
     pn, gn = normalise_by_gt(pred, gt)
     p, g = pn.astype(np.float64), gn.astype(np.float64)
     frames = g.shape[0]

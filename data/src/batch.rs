@@ -1,5 +1,5 @@
 //! burn integration of the dataset store: a `Dataset` of stored clips and a `Batcher` that pads vertices and
-//! builds the masks of SPEC §1.3 / §2.4 (loader output of SPEC §2.1).
+//! builds the masks of docs/method.md §1.3 / §2.4 (loader output of docs/method.md §2.1).
 
 use std::sync::Arc;
 
@@ -67,7 +67,7 @@ impl Dataset<ClipItem> for ClipDataset {
 pub enum PadTo {
     /// The largest N_v of the batch.
     BatchMax,
-    /// A fixed N (SPEC §2.4: N_max = 4096); a clip with more vertices is an error.
+    /// A fixed N (docs/method.md §2.4: N_max = 4096); a clip with more vertices is an error.
     Fixed(usize),
 }
 
@@ -76,13 +76,13 @@ pub enum PadTo {
 pub struct ClipBatch {
     /// Normalised vertices, zero for padded rows. `[B, T, N, 3]`.
     pub vertices: Tensor<4>,
-    /// True for the first N_v rows of each clip (SPEC §1.3). `[B, N]`.
+    /// True for the first N_v rows of each clip (docs/method.md §1.3). `[B, N]`.
     pub vmask: Tensor<2, Bool>,
-    /// FPS indices into the vertex axis (SPEC §2.5). `[B, P]`.
+    /// FPS indices into the vertex axis (docs/method.md §2.5). `[B, P]`.
     pub fps: Tensor<2, Int>,
     /// N_v per clip. `[B]`.
     pub n_real: Vec<usize>,
-    /// Undirected, deduplicated mesh edges per clip (SPEC §2.1), indices `< N_v`.
+    /// Undirected, deduplicated mesh edges per clip (docs/method.md §2.1), indices `< N_v`.
     pub edges: Vec<Vec<[u32; 2]>>,
     /// Captions ("" = unconditional). `[B]`.
     pub captions: Vec<String>,
@@ -136,7 +136,7 @@ impl ClipBatcher {
                     ),
                 ));
             }
-            let (v, m) = pad_vertices(&c.vertices, c.n_vertices, t, n_max).map_err(|e| e.at(&c.id))?; // SPEC §2.4
+            let (v, m) = pad_vertices(&c.vertices, c.n_vertices, t, n_max).map_err(|e| e.at(&c.id))?; // §2.4
             vertices.extend(v);
             vmask.extend(m);
             fps.extend(item.fps.iter().map(|&i| i64::from(i)));

@@ -1,4 +1,4 @@
-//! The clip record (SPEC §2.1): vertices `[T, N, 3]` f32, fixed faces `[M, 3]`, caption, source.
+//! The clip record (docs/method.md §2.1): vertices `[T, N, 3]` f32, fixed faces `[M, 3]`, caption, source.
 
 use crate::error::{DataError, Result};
 
@@ -63,8 +63,8 @@ impl Clip {
         object_uid(&self.id)
     }
 
-    /// Checks SPEC §2.1 invariants: T ≥ 2, N ≥ 3, `vertices.len() == T·N`, finite coordinates, 0 ≤ face index < N.
-    /// The error names the source and the field.
+    /// Checks docs/method.md §2.1 invariants: T ≥ 2, N ≥ 3, `vertices.len() == T·N`, finite coordinates, 0 ≤ face index
+    /// < N. The error names the source and the field.
     pub fn validate(&self) -> Result<()> {
         let err = |field: &str, reason: String| Err(DataError::new(&self.source, field, reason));
         if self.frames < 2 {

@@ -1,4 +1,4 @@
-//! Farthest point sampling of the P latent tokens on the reference frame (SPEC §2.5).
+//! Farthest point sampling of the P latent tokens on the reference frame (docs/method.md §2.5).
 //!
 //! Squared Euclidean distance, start index 0, ties to the lowest index: deterministic, so the indices can be
 //! cached in the dataset. O(N · P) time, O(N) memory, f32 structure-of-arrays for a cache-friendly inner loop.

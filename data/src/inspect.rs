@@ -1,5 +1,5 @@
-//! Summaries of a dataset store (its `index.parquet`, SPEC §2.2) or of one clip file (SPEC §2.1), as a text table
-//! or JSON.
+//! Summaries of a dataset store (its `index.parquet`, docs/method.md §2.2) or of one clip file (docs/method.md §2.1),
+//! as a text table or JSON.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -12,9 +12,9 @@ use crate::error::{DataError, Result};
 use crate::formats::{self, Format};
 use crate::store::{CLIPS_FILE, IndexRow, Split, Status, read_index};
 
-/// Lower edge of the vertex histogram (SPEC §2.2 filter).
+/// Lower edge of the vertex histogram (docs/method.md §2.2 filter).
 pub const HIST_MIN: u32 = 512;
-/// Upper edge of the vertex histogram (SPEC §2.2 filter, inclusive).
+/// Upper edge of the vertex histogram (docs/method.md §2.2 filter, inclusive).
 pub const HIST_MAX: u32 = 4096;
 /// Bins between [`HIST_MIN`] and [`HIST_MAX`].
 pub const HIST_BINS: u32 = 8;

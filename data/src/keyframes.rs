@@ -1,7 +1,10 @@
-//! Keyframe samplers: which frames of a T-frame window are observed (SPEC §1.3 masks, §4.5 training, §6.1 eval).
+//! Keyframe selection, the one home of the concept: which frames of a T-frame window are observed
+//! (docs/method.md §1.3 masks, §4.5 training, §5.4 SceneMI, §6.1 and §8 X4 evaluation). [`KeyframeStrategy`] draws
+//! one mask; [`TrainingKeyframes`] is the RF config's choice of strategy (`rf.kf_sampler`); [`Placement`] is the
+//! evaluation protocol's, stored in manifests.
 //!
 //! **Mask polarity (stated once, tested once): 1 / `true` = frame f is an observed keyframe whose clean latent is
-//! given; 0 / `false` = frame f is generated.** This is the `m` of SPEC §1.3; the RF input is
+//! given; 0 / `false` = frame f is generated.** This is the `m` of docs/method.md §1.3; the RF input is
 //! `m ⊙ clean + (1 − m) ⊙ state` (R3).
 //!
 //! Every sampler is deterministic given its generator, and [`keyframe_mask_batch`] derives its generator from a
@@ -9,6 +12,7 @@
 
 use rand::Rng;
 use rand::seq::SliceRandom;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{DataError, Result};
 use crate::rng::{DataRng, rng};
@@ -20,11 +24,14 @@ pub const KEYFRAME_STREAM: u64 = 0x6b66;
 /// How the keyframe set 𝒦 ⊂ {0..T−1} is chosen.
 #[derive(Debug, Clone, PartialEq)]
 pub enum KeyframeStrategy {
-    /// RF training (SPEC §4.5): k ~ Unif{0..=k_max}, then a uniform k-subset of {0..T−1} without replacement;
+    /// RF training (docs/method.md §4.5): k ~ Unif{0..=k_max}, then a uniform k-subset of {0..T−1} without replacement;
     /// first and last frames are not forced. The paper uses k_max = 5; k = 0 is the keyframe-free case.
     Random { k_max: usize },
-    /// Evaluation (SPEC §6.1): {0, T−1} ∪ K_x distinct frames drawn from {1..T−2}. For one generator state the
-    /// sets are nested across K_x: the set for K_x is a subset of the set for K_x + 1.
+    /// SceneMI's training sampler (docs/method.md §5.4): k ~ Unif{2..=T}, first and last frames always included,
+    /// the other k − 2 drawn uniformly from the inner frames (T ≥ 2).
+    Scenemi,
+    /// Evaluation (docs/method.md §6.1): {0, T−1} ∪ K_x distinct frames drawn from {1..T−2}. For one generator state
+    /// the sets are nested across K_x: the set for K_x is a subset of the set for K_x + 1.
     FirstLastPlus(usize),
     /// Every r-th frame: f ∈ 𝒦 iff f mod r = 0 (r ≥ 1). The last frame is included only when r divides T − 1.
     Uniform(usize),
@@ -35,7 +42,7 @@ pub enum KeyframeStrategy {
 }
 
 impl KeyframeStrategy {
-    /// The training default of SPEC §4.5: `Random { k_max: 5 }`.
+    /// The training default of docs/method.md §4.5: `Random { k_max: 5 }`.
     pub const PAPER_TRAINING: KeyframeStrategy = KeyframeStrategy::Random { k_max: 5 };
 
     /// Checks that the strategy can be sampled for windows of `t` frames. Call it when a config is loaded:
@@ -47,6 +54,8 @@ impl KeyframeStrategy {
         }
         match self {
             Self::Random { .. } => Ok(()),
+            Self::Scenemi if t < 2 => err(format!("first and last frames need T ≥ 2, got T = {t}")),
+            Self::Scenemi => Ok(()),
             Self::FirstLastPlus(kx) => {
                 if t < 2 {
                     return err(format!("first and last frames need T ≥ 2, got T = {t}"));
@@ -85,10 +94,21 @@ pub fn sample_keyframes(strategy: &KeyframeStrategy, t: usize, rng: &mut impl Rn
     let mut mask = vec![false; t];
     match strategy {
         KeyframeStrategy::Random { k_max } => {
-            // SPEC §4.5 step 1: k ~ Unif{0..=k_max} (capped at T), step 2: uniform subset without replacement.
+            // docs/method.md §4.5 step 1: k ~ Unif{0..=k_max} (capped at T), step 2: uniform subset without
+            // replacement.
             let k = rng.random_range(0..=*k_max).min(t);
             let mut frames: Vec<usize> = (0..t).collect();
             let (chosen, _) = frames.partial_shuffle(rng, k);
+            for &f in chosen.iter() {
+                mask[f] = true;
+            }
+        }
+        KeyframeStrategy::Scenemi => {
+            mask[0] = true;
+            mask[t - 1] = true;
+            let k = rng.random_range(2..=t);
+            let mut inner: Vec<usize> = (1..t - 1).collect();
+            let (chosen, _) = inner.partial_shuffle(rng, k - 2);
             for &f in chosen.iter() {
                 mask[f] = true;
             }
@@ -97,7 +117,7 @@ pub fn sample_keyframes(strategy: &KeyframeStrategy, t: usize, rng: &mut impl Rn
             mask[0] = true;
             mask[t - 1] = true;
             // A full shuffle of the inner frames consumes the same draws for every K_x, so taking a prefix of it
-            // makes the sets nested across K_x (SPEC §6.1).
+            // makes the sets nested across K_x (docs/method.md §6.1).
             let mut inner: Vec<usize> = (1..t - 1).collect();
             inner.shuffle(rng);
             for &f in &inner[..*kx] {
@@ -137,6 +157,131 @@ pub fn keyframe_mask_batch(strategy: &KeyframeStrategy, b: usize, t: usize, seed
         .flat_map(|_| sample_keyframes(strategy, t, &mut r))
         .map(|m| if m { 1.0 } else { 0.0 })
         .collect()
+}
+
+/// How the RF draws the keyframes of a training window: the `rf.kf_sampler` key (docs/method.md §4.5, §8 X3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrainingKeyframes {
+    /// k ~ Unif{0..=k_max}, a uniform k-subset of the T frames (the paper, k_max = 5).
+    Random,
+    /// SceneMI: k ~ Unif{2..=T}, first and last always included.
+    Scenemi,
+}
+
+impl TrainingKeyframes {
+    /// The strategy that draws one training mask, with `k_max` for [`TrainingKeyframes::Random`].
+    pub fn strategy(self, k_max: usize) -> KeyframeStrategy {
+        match self {
+            TrainingKeyframes::Random => KeyframeStrategy::Random { k_max },
+            TrainingKeyframes::Scenemi => KeyframeStrategy::Scenemi,
+        }
+    }
+}
+
+/// Where the keyframes of a test window sit (docs/method.md §6.1, §8 X4). First and last frames are always keyframes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum Placement {
+    /// K_x = 0..=k_extra_max extra frames drawn without replacement from {1..T−2}, nested across K_x (ours).
+    Random { k_extra_max: usize },
+    /// Every r-th frame: {0, r, 2r, …} ∪ {T−1}.
+    EveryR { r: usize },
+    /// Each interior frame independently with probability p.
+    Bernoulli { p: f32 },
+    /// Keyframes every `stride` frames, e.g. {0, 15, 30} for the 31-frame rollout (docs/method.md §7).
+    Stride { stride: usize },
+}
+
+impl Default for Placement {
+    fn default() -> Self {
+        Placement::PAPER
+    }
+}
+
+impl Placement {
+    /// The paper's short-horizon placement: first and last plus K_x = 0..3 random frames.
+    pub const PAPER: Placement = Placement::Random { k_extra_max: 3 };
+
+    /// Short label for tables and file names: `random`, `every_4`, `bernoulli_0.25`, `stride_15`.
+    pub fn label(&self) -> String {
+        match self {
+            Placement::Random { .. } => "random".into(),
+            Placement::EveryR { r } => format!("every_{r}"),
+            Placement::Bernoulli { p } => format!("bernoulli_{p}"),
+            Placement::Stride { stride } => format!("stride_{stride}"),
+        }
+    }
+
+    /// Parses a label of [`Placement::label`] (`random` is [`Placement::PAPER`]); `Err` says what is expected.
+    pub fn parse(text: &str) -> std::result::Result<Self, String> {
+        if text == "random" {
+            return Ok(Placement::PAPER);
+        }
+        let number = |rest: &str, what: &str| format!("placement {text}: {what} ({rest:?} is not one)");
+        if let Some(r) = text.strip_prefix("every_") {
+            return r
+                .parse()
+                .map(|r| Placement::EveryR { r })
+                .map_err(|_| number(r, "r must be a whole number"));
+        }
+        if let Some(p) = text.strip_prefix("bernoulli_") {
+            return p
+                .parse()
+                .map(|p| Placement::Bernoulli { p })
+                .map_err(|_| number(p, "p must be a number in (0, 1)"));
+        }
+        Err(format!("placement {text}: expected random, every_<r> or bernoulli_<p>"))
+    }
+
+    /// Checks that the placement fits windows of `frames` frames; `Err` says why not.
+    pub fn check(self, frames: usize) -> std::result::Result<(), String> {
+        if frames < 2 {
+            return Err(format!("frames = {frames}, at least 2 are needed"));
+        }
+        match self {
+            Placement::Random { k_extra_max } if k_extra_max > frames - 2 => Err(format!(
+                "k_extra_max = {k_extra_max} exceeds the {} interior frames",
+                frames - 2
+            )),
+            Placement::EveryR { r: 0 } | Placement::Stride { stride: 0 } => Err("the step must be at least 1".into()),
+            Placement::Bernoulli { p } if !(0.0..=1.0).contains(&p) => Err(format!("p = {p} is outside [0, 1]")),
+            _ => Ok(()),
+        }
+    }
+
+    /// Number of keyframe sets per item: one per K_x for `Random`, one otherwise.
+    pub fn sets(self) -> usize {
+        match self {
+            Placement::Random { k_extra_max } => k_extra_max + 1,
+            _ => 1,
+        }
+    }
+
+    /// The keyframe sets of the item at position `pos` of a manifest drawn with `seed` (sorted frame indices, first
+    /// and last forced); each item has its own generator stream, so items are independent, and the `Random` sets
+    /// are nested across K_x.
+    ///
+    /// # Panics
+    /// If [`Placement::check`] fails for `frames` (manifests check it first).
+    pub fn keyframe_sets(self, frames: usize, seed: u64, pos: u64) -> Vec<Vec<usize>> {
+        let item_rng = rng(seed, 1 + pos);
+        let draw = |strategy: KeyframeStrategy| {
+            // A fresh copy of the item's generator per set: FirstLastPlus sets are then nested across K_x.
+            let mask = sample_keyframes(&strategy, frames, &mut item_rng.clone());
+            let mut set: Vec<usize> = (0..frames).filter(|&f| mask[f] || f == 0 || f == frames - 1).collect();
+            set.dedup();
+            set
+        };
+        match self {
+            Placement::Random { k_extra_max } => (0..=k_extra_max)
+                .map(|k| draw(KeyframeStrategy::FirstLastPlus(k)))
+                .collect(),
+            Placement::EveryR { r } => vec![draw(KeyframeStrategy::Uniform(r))],
+            Placement::Stride { stride } => vec![draw(KeyframeStrategy::Uniform(stride))],
+            Placement::Bernoulli { p } => vec![draw(KeyframeStrategy::Bernoulli(p))],
+        }
+    }
 }
 
 #[cfg(test)]
@@ -219,6 +364,46 @@ mod tests {
         let b = keyframe_mask_batch(&KeyframeStrategy::Bernoulli(0.5), 64, 16, 7);
         let frac = b.iter().sum::<f32>() / b.len() as f32;
         assert!((0.4..0.6).contains(&frac), "{frac}");
+    }
+
+    #[test]
+    fn scenemi_keeps_the_ends_and_draws_k_from_2_to_t() {
+        let mut r = rng(5, 2);
+        let mut hist = [0usize; 9];
+        for _ in 0..4000 {
+            let m = TrainingKeyframes::Scenemi.strategy(5);
+            let m = sample_keyframes(&m, 8, &mut r);
+            assert!(m[0] && m[7], "{m:?}");
+            hist[count(&m)] += 1;
+        }
+        // k ~ Unif{2..=8}: 7 values, about 571 each of 4000.
+        assert_eq!(hist[..2], [0, 0]);
+        assert!(hist[2..].iter().all(|&n| (450..=700).contains(&n)), "{hist:?}");
+        assert!(KeyframeStrategy::Scenemi.check(1).is_err());
+    }
+
+    #[test]
+    fn placements_parse_their_labels_and_draw_nested_sets() {
+        for p in [
+            Placement::PAPER,
+            Placement::EveryR { r: 4 },
+            Placement::Bernoulli { p: 0.25 },
+        ] {
+            assert_eq!(Placement::parse(&p.label()), Ok(p));
+        }
+        assert!(Placement::parse("every_x").unwrap_err().contains("whole number"));
+        assert!(Placement::parse("sometimes").unwrap_err().contains("expected random"));
+        let sets = Placement::PAPER.keyframe_sets(16, 42, 3);
+        assert_eq!(sets.len(), Placement::PAPER.sets());
+        for (k, w) in sets.windows(2).enumerate() {
+            assert!(w[0].iter().all(|f| w[1].contains(f)), "K_x {k} not nested: {sets:?}");
+        }
+        assert_eq!(
+            Placement::Stride { stride: 15 }.keyframe_sets(31, 42, 0),
+            vec![vec![0, 15, 30]]
+        );
+        assert!(Placement::Random { k_extra_max: 15 }.check(16).is_err());
+        assert!(Placement::EveryR { r: 0 }.check(16).is_err());
     }
 
     #[test]

@@ -1,9 +1,10 @@
-//! Clips in and out, preprocessing, the dataset store and burn batches (SPEC §2).
+//! Clips in and out, preprocessing, the dataset store and burn batches (docs/method.md §2).
 //!
 //! Formats: DyMesh `.bin` (restricted unpickler, never executes), OBJ sequences, glTF/GLB.
 //! Preprocessing: welding, frame-0 normalisation (D1)–(D3), vertex filter, windows, FPS, padding.
 
 pub mod batch;
+pub mod bench;
 pub mod clip;
 pub mod error;
 pub mod formats;

@@ -1,4 +1,4 @@
-//! Preprocessing of clips (SPEC §2.2–2.6): welding, frame-0 normalisation (D1)–(D3), the vertex filter,
+//! Preprocessing of clips (docs/method.md §2.2–2.6): welding, frame-0 normalisation (D1)–(D3), the vertex filter,
 //! training windows, zero padding and the undirected edge list of the neighbour attention.
 //!
 //! Normalisation convention, stated once: every clip (or window) is expressed in the frame of its **first frame**:
@@ -87,7 +87,7 @@ pub fn weld(clip: &Clip, eps: f32) -> Clip {
     }
 }
 
-/// The frame-0 normalisation of SPEC §2.3: `x̄ = (x − center) / scale`.
+/// The frame-0 normalisation of docs/method.md §2.3: `x̄ = (x − center) / scale`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Normalization {
     /// Frame-0 bounding-box centre c (D1).
@@ -151,7 +151,7 @@ pub fn normalize(clip: &Clip) -> (Clip, Normalization) {
     (out, norm)
 }
 
-/// The vertex-count filter of SPEC §2.2, bounds inclusive.
+/// The vertex-count filter of docs/method.md §2.2, bounds inclusive.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VertexFilter {
     /// Smallest accepted vertex count (inclusive).
@@ -185,9 +185,10 @@ impl VertexFilter {
     }
 }
 
-/// Windows of `len` frames every `stride` frames (SPEC §2.6). An id in the AAM form
-/// `<uid>_offset<k>_<s>-<e>` keeps that form with the window's own frame range (`<uid>_offset<k>_<s+start>-<s+start+len−1>`,
-/// so consecutive windows sharing a frame pair up for the long-horizon protocol, SPEC §2.7); other ids get `_w<start>`.
+/// Windows of `len` frames every `stride` frames (docs/method.md §2.6). An id in the AAM form
+/// `<uid>_offset<k>_<s>-<e>` keeps that form with the window's own frame range
+/// (`<uid>_offset<k>_<s+start>-<s+start+len−1>`, so consecutive windows sharing a frame pair up for the long-horizon
+/// protocol, docs/method.md §2.7); other ids get `_w<start>`.
 ///
 /// A clip of exactly `len` frames gives itself unchanged (same id); a shorter clip gives none. Windows are
 /// **not** normalised here: callers normalise each window by its own first frame ([`normalize`]).
@@ -229,7 +230,7 @@ fn window_id(id: &str, start: usize, len: usize) -> String {
     aam.unwrap_or_else(|| format!("{id}_w{start}"))
 }
 
-/// Zero-pad normalised vertices to `n_max` rows per frame (SPEC §2.4) and build the vertex mask.
+/// Zero-pad normalised vertices to `n_max` rows per frame (docs/method.md §2.4) and build the vertex mask.
 ///
 /// `frames` holds `t · n_real` frame-major rows. Errors (path "pad_vertices", field "vertices"; callers
 /// relabel with [`DataError::at`]) if `n_real > n_max` or the row count is not `t · n_real`.

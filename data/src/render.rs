@@ -1,4 +1,4 @@
-//! Contact sheets of clips (any4d issue 3, item 7): a z-buffered triangle rasteriser with flat Lambert shading and
+//! Contact sheets of clips: a z-buffered triangle rasteriser with flat Lambert shading and
 //! a fixed orthographic camera framed on all frames, so that motion shows as movement between tiles.
 
 use std::path::Path;

@@ -1,4 +1,4 @@
-//! Clip file formats against fixtures made by `scripts/make_fixtures.py` (real pickle + numpy) (SPEC §2.1).
+//! Clip file formats against fixtures made by `scripts/make_fixtures.py` (real pickle + numpy) (docs/method.md §2.1).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -1,5 +1,5 @@
-//! The dataset store end to end (SPEC §2.1–§2.5): import, re-import, split by object, corruption, synth, inspect,
-//! burn batches.
+//! The dataset store end to end (docs/method.md §2.1–§2.5): import, re-import, split by object, corruption, synth,
+//! inspect, burn batches.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -1,4 +1,4 @@
-//! Non-learned completion baselines (SPEC §5.2, (L1)): linear interpolation between consecutive keyframes in
+//! Non-learned completion baselines (docs/method.md §5.2, (L1)): linear interpolation between consecutive keyframes in
 //! vertex space, the static nearest keyframe, and the same interpolation over latent arrays (`lerp_space =
 //! "latent"`; the caller decodes the result).
 

@@ -1,4 +1,4 @@
-//! Trained networks on the evaluation protocol (SPEC §4.6, §5.1, §5.2 `lerp_space = "latent"`, §5.4, §6.1,
+//! Trained networks on the evaluation protocol (docs/method.md §4.6, §5.1, §5.2 `lerp_space = "latent"`, §5.4, §6.1,
 //! (E4)): one window (batch 1) is encoded with the mesh VAE, completed by the keyframe RF ((R3)–(R6)), the
 //! replacement baseline ((R7)–(R8)), impute-until-τ* ((R9)) or latent interpolation ((L1) on z), and decoded.
 //!
@@ -13,10 +13,10 @@ use any4d_data::fps::farthest_point_sampling;
 use any4d_data::preprocess::{edges_from_faces, pad_vertices};
 use any4d_data::rng::{Rng, rng};
 use any4d_data::{Clip, DataError};
-use any4d_model::dymesh_vae::DyMeshVae;
-use any4d_model::frame_vae::{EdgeList, FrameVae, MeshVaeModel, VaeEncoding};
+use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::latent_stats::LatentStats;
-use any4d_model::mmdit::{KfMode, Mmdit, MmditConfig, replace_keyframes};
+use any4d_model::mesh_vae::{EdgeList, MeshVae, VaeEncoding};
+use any4d_model::mmdit::{KeyframeConditioning, Mmdit, MmditConfig, replace_keyframes};
 use any4d_model::rectified_flow::{Conditioning, SampleOptions, sample_mmdit};
 use any4d_model::text::TextEncoder;
 use burn::prelude::*;
@@ -24,20 +24,12 @@ use burn::tensor::TensorData;
 
 use crate::baselines::lerp_latents;
 use crate::methods::{MethodKind, Request, WindowSampler};
-use crate::run::Reconstructor;
+use crate::tables::reconstruction::Reconstructor;
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
 
 /// RNG stream of the sampler's initial noise ε (distinct from the keyframe-noise stream of `methods.rs`).
 const NOISE_STREAM: u64 = 0x7266_6570; // "rfep"
-
-/// A trained mesh VAE of either kind (SPEC §3.5).
-pub enum MeshVae {
-    /// Frame-wise VAE: one trajectory latent per frame, `[B, T, P, C]`.
-    Frame(FrameVae),
-    /// Sequence-wise DyMeshVAE built for `frames` frames: one latent per clip, `[B, 1, P, C]`.
-    Sequence { vae: DyMeshVae, frames: usize },
-}
 
 /// Batch-1 tensors of one window for a mesh VAE.
 struct VaeInput {
@@ -71,10 +63,10 @@ pub struct WindowEncoding {
     pub id: String,
 }
 
-/// A mesh VAE applied to single normalised windows: FPS on frame 0 (SPEC §2.5), edges from faces, padding
-/// (SPEC §2.4), encode, decode, and the real rows back.
+/// A mesh VAE applied to single normalised windows: FPS on frame 0 (docs/method.md §2.5), edges from faces, padding
+/// (docs/method.md §2.4), encode, decode, and the real rows back.
 pub struct MeshCodec {
-    vae: MeshVae,
+    vae: AnyMeshVae,
     tokens: usize,
     padding: PadTo,
     device: Device,
@@ -85,7 +77,7 @@ impl MeshCodec {
     /// [`farthest_point_sampling`] returns, its points repeated cyclically). `padding`: `PadTo::BatchMax` = the
     /// window's own N_v (enough for a VAE with masked padded keys), `PadTo::Fixed(4096)` for an AAM-style VAE
     /// that attends to padding. Give the VAE without autodiff (`model.valid()`).
-    pub fn new(vae: MeshVae, tokens: usize, padding: PadTo, device: Device) -> Result<Self> {
+    pub fn new(vae: AnyMeshVae, tokens: usize, padding: PadTo, device: Device) -> Result<Self> {
         if tokens == 0 {
             return Err(DataError::new("mesh codec", "tokens", "P must be positive"));
         }
@@ -96,7 +88,7 @@ impl MeshCodec {
                 "a fixed vertex axis must be positive",
             ));
         }
-        if let MeshVae::Sequence { frames: 0, .. } = vae {
+        if vae.clip_frames() == Some(0) {
             return Err(DataError::new(
                 "mesh codec",
                 "frames",
@@ -112,7 +104,7 @@ impl MeshCodec {
     }
 
     /// The VAE.
-    pub fn vae(&self) -> &MeshVae {
+    pub fn vae(&self) -> &AnyMeshVae {
         &self.vae
     }
 
@@ -175,9 +167,9 @@ impl MeshCodec {
                 "nothing to encode: no frame was given",
             ));
         }
-        if let MeshVae::Sequence { frames: t, .. } = &self.vae {
+        if let Some(t) = self.vae.clip_frames() {
             let all: Vec<usize> = (0..clip.frames).collect();
-            if clip.frames != *t || frames != all.as_slice() {
+            if clip.frames != t || frames != all.as_slice() {
                 return Err(DataError::new(
                     &clip.id,
                     "frames",
@@ -191,12 +183,9 @@ impl MeshCodec {
         }
         let input = self.input(clip, frames)?;
         let reference = input.reference.clone();
-        let VaeEncoding { e0, z0, mu, .. } = match &self.vae {
-            MeshVae::Frame(vae) => vae.encode(input.reference, input.frames, input.vmask, input.fps, &input.edges),
-            MeshVae::Sequence { vae, .. } => {
-                vae.encode(input.reference, input.frames, input.vmask, input.fps, &input.edges)
-            }
-        };
+        let VaeEncoding { e0, z0, mu, .. } =
+            self.vae
+                .encode(input.reference, input.frames, input.vmask, input.fps, &input.edges);
         Ok(WindowEncoding {
             e0,
             reference,
@@ -209,8 +198,8 @@ impl MeshCodec {
         })
     }
 
-    /// Decodes trajectory latents against the encoded reference: x̂ = x̄₀ + offsets (SPEC §3.2 "Output"), real
-    /// rows only.
+    /// Decodes trajectory latents against the encoded reference: x̂ = x̄₀ + offsets (docs/method.md §3.2 "Output"),
+    /// real rows only.
     ///
     /// # Shapes
     /// `z`: `[1, G, P, C]` raw latents (frame-wise: G frames in order; sequence-wise: G = 1); returns
@@ -225,10 +214,9 @@ impl MeshCodec {
                 format!("shape {:?} does not match the encoding's [1, G, {p}, {c}]", z.dims()),
             ));
         }
-        let x = match &self.vae {
-            MeshVae::Frame(vae) => vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z),
-            MeshVae::Sequence { vae, .. } => vae.decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z),
-        };
+        let x = self
+            .vae
+            .decode(enc.e0.clone(), enc.reference.clone(), enc.z0.clone(), z);
         real_rows(x, enc.n_real, &enc.id)
     }
 
@@ -246,8 +234,8 @@ impl MeshCodec {
     /// The frame-wise VAE, or an error naming `what` needs it.
     fn require_frame_wise(&self, what: &str) -> Result<()> {
         match self.vae {
-            MeshVae::Frame(_) => Ok(()),
-            MeshVae::Sequence { .. } => Err(DataError::new(
+            AnyMeshVae::Framewise(_) => Ok(()),
+            AnyMeshVae::Sequencewise(_) => Err(DataError::new(
                 what,
                 "vae",
                 "needs the frame-wise VAE (one latent per frame), got the sequence-wise DyMeshVAE",
@@ -345,8 +333,8 @@ pub fn sampler_noise(seed: u64, dims: [usize; 4], device: &Device) -> Tensor<4> 
 }
 
 /// One trained RF checkpoint with everything it samples with: the frame-wise VAE (in a [`MeshCodec`], shareable
-/// with [`LatentLerpSampler`]), the MMDiT and its config, the latent statistics of SPEC §3.4 and the text encoder
-/// (the scratch encoder is trained jointly with the RF, so it comes from the same checkpoint).
+/// with [`LatentLerpSampler`]), the MMDiT and its config, the latent statistics of docs/method.md §3.4 and the text
+/// encoder (the scratch encoder is trained jointly with the RF, so it comes from the same checkpoint).
 pub struct LearnedModels {
     codec: Arc<MeshCodec>,
     rf: Mmdit,
@@ -376,7 +364,7 @@ impl LearnedModels {
                 format!(
                     "the network takes {} input channels, its config ({:?}, T = {}, C = {}) gives {}",
                     rf.in_channels(),
-                    rf_config.kf_mode,
+                    rf_config.conditioning,
                     rf_config.frames,
                     rf_config.channels,
                     rf_config.in_channels()
@@ -442,7 +430,7 @@ pub struct SampledWindow {
     pub latents: Tensor<4>,
 }
 
-/// An RF method's window sampler (SPEC §4.6): keyframe latents = posterior mean μ, standardized; ε from the
+/// An RF method's window sampler (docs/method.md §4.6): keyframe latents = posterior mean μ, standardized; ε from the
 /// seed; [`sample_mmdit`] with the mode's input rule ((R3) ours, (R7)–(R8) baseline, (R9) impute-until-τ*);
 /// de-standardize; decode every frame with E₀ of the reference.
 pub struct RfSampler {
@@ -452,19 +440,19 @@ pub struct RfSampler {
 }
 
 impl RfSampler {
-    /// `options.kf_mode` must match the network's input layout (mask channels or not); `guidance` is the CFG
+    /// `options.conditioning` must match the network's input layout (mask channels or not); `guidance` is the CFG
     /// weight w (1.0 in the paper: one conditional branch). ε comes from the seed ([`sampler_noise`]); only
     /// `ReplaceNoise::Fresh` also draws from the device RNG, so it is reproducible only if the device is seeded.
     pub fn new(models: Arc<LearnedModels>, options: SampleOptions, guidance: f64) -> Result<Self> {
         let bad = |field: &str, reason: String| Err(DataError::new("rf sampler", field, reason));
-        let net = models.rf_config.kf_mode;
-        if options.kf_mode.has_mask_channels() != net.has_mask_channels() {
+        let net = models.rf_config.conditioning;
+        if options.conditioning.has_mask_channels() != net.has_mask_channels() {
             return bad(
-                "kf_mode",
+                "conditioning",
                 format!(
                     "sampling with {:?} needs a network {} mask channels, but it was built for {net:?}",
-                    options.kf_mode,
-                    if options.kf_mode.has_mask_channels() {
+                    options.conditioning,
+                    if options.conditioning.has_mask_channels() {
                         "with"
                     } else {
                         "without"
@@ -499,10 +487,10 @@ impl RfSampler {
         base: SampleOptions,
         guidance: f64,
     ) -> Result<Self> {
-        let (kf_mode, tau_star) = match kind {
-            MethodKind::KeyframeRf => (KfMode::InputMask, base.tau_star),
-            MethodKind::ReplacementRf => (KfMode::ReplaceNoised, base.tau_star),
-            MethodKind::ImputeUntil { tau_star, .. } => (KfMode::ImputeUntil, f64::from(tau_star)),
+        let (conditioning, tau_star) = match kind {
+            MethodKind::KeyframeRf => (KeyframeConditioning::InputMask, base.tau_star),
+            MethodKind::ReplacementRf => (KeyframeConditioning::ReplaceNoised, base.tau_star),
+            MethodKind::ImputeUntil { tau_star, .. } => (KeyframeConditioning::ImputeUntil, f64::from(tau_star)),
             other => {
                 return Err(DataError::new(
                     "rf sampler",
@@ -512,7 +500,7 @@ impl RfSampler {
             }
         };
         let options = SampleOptions {
-            kf_mode,
+            conditioning,
             tau_star,
             ..base
         };
@@ -572,17 +560,12 @@ impl RfSampler {
         };
         let [_, p, c] = first.z0.dims();
         let b = windows.len();
-        let cat3 = |f: &dyn Fn(&(WindowEncoding, Tensor<4>, Vec<f32>)) -> Tensor<3>| {
-            Tensor::cat(windows.iter().map(f).collect(), 0)
-        };
-        let cat4 = |f: &dyn Fn(&(WindowEncoding, Tensor<4>, Vec<f32>)) -> Tensor<4>| {
-            Tensor::cat(windows.iter().map(f).collect(), 0)
-        };
         let masks: Vec<f32> = windows.iter().flat_map(|(_, _, m)| m.iter().copied()).collect();
         let mask_t: Tensor<2> = Tensor::from_data(TensorData::new(masks, [b, t]), &device);
-        let keyframe_latents = cat4(&|(_, k, _)| k.clone()); // [B, T, P, C], raw μ
+        let keyframe_latents = Tensor::cat(windows.iter().map(|(_, k, _)| k.clone()).collect(), 0); // [B, T, P, C], raw μ
+        let z0 = Tensor::cat(windows.iter().map(|(e, _, _)| e.z0.clone()).collect(), 0); // [B, P, C]
         let cond = Conditioning {
-            z0: m.stats.standardize_shape(cat3(&|(e, _, _)| e.z0.clone())),
+            z0: m.stats.standardize_shape(z0),
             z_key: m.stats.standardize_motion(keyframe_latents.clone()).swap_dims(1, 2), // [B, P, T, C]
             mask: mask_t.clone(),
         };
@@ -602,8 +585,11 @@ impl RfSampler {
         );
         let x1 = sample_mmdit(&m.rf, &cond, text, eps, self.guidance, &self.options); // (R6)
         let mut latents = m.stats.destandardize_motion(x1); // [B, P, T, C]
-        if matches!(self.options.kf_mode, KfMode::InputMask | KfMode::ReplaceNoised) {
-            // SPEC §4.6: keyframe slots are Z_key; done on raw latents so they are μ exactly.
+        if matches!(
+            self.options.conditioning,
+            KeyframeConditioning::InputMask | KeyframeConditioning::ReplaceNoised
+        ) {
+            // docs/method.md §4.6: keyframe slots are Z_key; done on raw latents so they are μ exactly.
             latents = replace_keyframes(latents, keyframe_latents.swap_dims(1, 2), mask_t);
         }
         let latents = latents.swap_dims(1, 2); // [B, T, P, C]
@@ -634,7 +620,7 @@ impl WindowSampler for RfSampler {
     }
 }
 
-/// (L1) in latent space (SPEC §5.2, `lerp_space = "latent"`): the keyframes' posterior means are interpolated
+/// (L1) in latent space (docs/method.md §5.2, `lerp_space = "latent"`): the keyframes' posterior means are interpolated
 /// between consecutive keyframes, then every frame is decoded. Frames 0 and T − 1 must be keyframes.
 pub struct LatentLerpSampler {
     codec: Arc<MeshCodec>,

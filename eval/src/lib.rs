@@ -1,6 +1,7 @@
-//! Evaluation (SPEC §5–§7): metrics as pure functions, baselines, the long-horizon rollout, paper tables.
+//! Evaluation (docs/method.md §5–§7): metrics as pure functions, baselines, the long-horizon rollout, paper tables.
 
 pub mod baselines;
+pub mod bench;
 pub mod learned;
 pub mod methods;
 pub mod metrics;
@@ -8,5 +9,4 @@ pub mod plot;
 pub mod protocol;
 pub mod render;
 pub mod rollout;
-pub mod run;
 pub mod tables;

@@ -1,5 +1,5 @@
-//! Completion methods on one protocol (SPEC §5, §6.1): every method fills the non-keyframes of a normalised clip
-//! through the same [`Method::complete`] call, so all are scored identically on the same manifest.
+//! Completion methods on one protocol (docs/method.md §5, §6.1): every method fills the non-keyframes of a normalised
+//! clip through the same [`Method::complete`] call, so all are scored identically on the same manifest.
 //!
 //! Methods: keyframe-conditioned RF (ours, (R3)–(R6)), non-keyframe RF with sampling-time replacement (the
 //! paper's Baseline, (R7)–(R8)), SceneMI-style impute-until-τ* with clean or noisy keyframes ((R9), §5.4), linear
@@ -17,12 +17,13 @@ use crate::metrics::{ClipMetrics, Motion, evaluate_clip, replace_keyframes};
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
 
-/// Standard deviation of the SceneMI keyframe noise at level l = 1, normalised units (SPEC §5.4: std l · 0.02).
+/// Standard deviation of the SceneMI keyframe noise at level l = 1, normalised units (docs/method.md §5.4: std l ·
+/// 0.02).
 pub const KEYFRAME_NOISE_STD: f32 = 0.02;
 /// RNG stream of the keyframe noise, distinct from the sampler's streams.
 const KEYFRAME_NOISE_STREAM: u64 = 0x6e6f_6973;
 
-/// Which keyframes a method is given (SPEC §5.4: evaluate with clean keyframes and noisy ones at l = 1).
+/// Which keyframes a method is given (docs/method.md §5.4: evaluate with clean keyframes and noisy ones at l = 1).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", tag = "kind")]
 pub enum KeyframeNoise {
@@ -130,7 +131,8 @@ pub trait Method {
     fn kind(&self) -> MethodKind;
 
     /// Predict every frame of `clip` from its keyframes. `clip` is in the normalised frame of its frame 0
-    /// (SPEC §1.5); only the frames listed in `keyframes` may be read (callers pass [`hide_non_keyframes`] output).
+    /// (docs/method.md §1.5); only the frames listed in `keyframes` may be read (callers pass [`hide_non_keyframes`]
+    /// output).
     /// `seed` fixes the sampler noise.
     ///
     /// # Shapes
@@ -180,8 +182,24 @@ impl Method for VertexMethod {
     }
 }
 
-/// A trained generator of whole windows: encode the keyframes, sample, decode (SPEC §4.6, §5.1, §5.4). The model
-/// crate's samplers are wrapped in this by the caller that loads the checkpoints.
+/// The training-free methods by kind; RF kinds are an error here (the caller builds them from checkpoints).
+pub fn vertex_methods(kinds: &[MethodKind]) -> Result<Vec<Box<dyn Method>>> {
+    kinds
+        .iter()
+        .map(|k| match k {
+            MethodKind::Lerp => Ok(Box::new(VertexMethod(VertexBaseline::Linear)) as Box<dyn Method>),
+            MethodKind::StaticNearest => Ok(Box::new(VertexMethod(VertexBaseline::NearestKeyframe)) as Box<dyn Method>),
+            other => Err(DataError::new(
+                "methods",
+                other.label(),
+                "needs trained checkpoints (--rf / --baseline-rf / --vae)",
+            )),
+        })
+        .collect()
+}
+
+/// A trained generator of whole windows: encode the keyframes, sample, decode (docs/method.md §4.6, §5.1, §5.4). The
+/// model crate's samplers are wrapped in this by the caller that loads the checkpoints.
 pub trait WindowSampler {
     /// Predict every frame of a normalised window from its keyframes.
     ///
@@ -200,7 +218,7 @@ pub trait WindowSampler {
 
 /// An RF method (ours, the replacement baseline or impute-until-τ*) around its sampler: it adds SceneMI keyframe
 /// noise first when its kind asks for it and returns the decoded sample as it is, keyframe frames included. The
-/// evaluation assembly of SPEC §4.6 ("keyframe frames are replaced by ground-truth meshes") is the scorer's job
+/// evaluation assembly of docs/method.md §4.6 ("keyframe frames are replaced by ground-truth meshes") is the scorer's job
 /// ([`evaluate_clip`]), after it has measured the keyframe error (E7) on the raw output.
 pub struct RfMethod<S> {
     kind: MethodKind,
@@ -280,7 +298,7 @@ impl<S: WindowSampler> Method for RfMethod<S> {
 }
 
 /// A copy of `clip` in which every non-keyframe is replaced by frame 0 (the reference mesh), so a method cannot
-/// read ground truth it is not given. Frame 0 is always known: it is the reference mesh (SPEC §1.2).
+/// read ground truth it is not given. Frame 0 is always known: it is the reference mesh (docs/method.md §1.2).
 pub fn hide_non_keyframes(clip: &Clip, keyframes: &[usize]) -> Clip {
     let mut out = clip.clone();
     let reference = clip.frame(0).to_vec();
@@ -290,7 +308,8 @@ pub fn hide_non_keyframes(clip: &Clip, keyframes: &[usize]) -> Clip {
     out
 }
 
-/// SceneMI keyframe noise (SPEC §5.4): each interior keyframe's vertices + i.i.d. N(0, (level · 0.02)²), drawn from
+/// SceneMI keyframe noise (docs/method.md §5.4): each interior keyframe's vertices + i.i.d. N(0, (level · 0.02)²),
+/// drawn from
 /// `rng(seed, KEYFRAME_NOISE_STREAM)`; frames 0 and T − 1 stay clean. Box–Muller from uniform draws.
 pub fn noisy_keyframes(clip: &Clip, keyframes: &[usize], level: f32, seed: u64) -> Clip {
     let mut out = clip.clone();
@@ -309,11 +328,11 @@ pub fn noisy_keyframes(clip: &Clip, keyframes: &[usize], level: f32, seed: u64) 
     out
 }
 
-/// One scored generation: the method's prediction and its metrics (SPEC §6.1 assembly and (E1)–(E7)).
+/// One scored generation: the method's prediction and its metrics (docs/method.md §6.1 assembly and (E1)–(E7)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scored {
     /// The completed window `[T, N]` rows: the method's output with the keyframe frames replaced by the ground truth
-    /// (SPEC §4.6 assembly; (E7) was measured on the output before that).
+    /// (docs/method.md §4.6 assembly; (E7) was measured on the output before that).
     pub prediction: Vec<[f32; 3]>,
     pub metrics: ClipMetrics,
 }

@@ -1,5 +1,6 @@
-//! Evaluation metrics (SPEC §6.2, (E1)–(E7)) as pure functions over vertex sequences, and the per-clip protocol of
-//! SPEC §6.1: normalise by ground-truth frame 0 ((D1)–(D3)), replace keyframes with ground truth, score 𝒰.
+//! Evaluation metrics (docs/method.md §6.2, (E1)–(E7)) as pure functions over vertex sequences, and the per-clip
+//! protocol of docs/method.md §6.1: normalise by ground-truth frame 0 ((D1)–(D3)), replace keyframes with ground truth,
+//! score 𝒰.
 //!
 //! Every metric reads f32 vertices and accumulates in f64. Sequences are frame-major `[T, N, 3]` slices
 //! (vertex `v` of frame `f` at `f * N + v`), wrapped in [`Motion`] so frame and vertex counts travel with them.
@@ -209,7 +210,7 @@ pub fn rmse(pred: Motion, gt: Motion, frames: &[usize]) -> Result<f64> {
     Ok((sum / (3 * pairs) as f64).sqrt()) // (E1)
 }
 
-/// (E1) as printed in P-Eq. 15 with the implicit average: `mae_elem = 1/(U·V·3) Σ |p − g|` (SPEC §9 item 13).
+/// (E1) as printed in P-Eq. 15 with the implicit average: `mae_elem = 1/(U·V·3) Σ |p − g|` (docs/method.md §9 item 13).
 ///
 /// # Shapes
 /// `pred`, `gt`: `[T, N, 3]`; `frames`: `[U]`.
@@ -220,7 +221,7 @@ pub fn mae_elem(pred: Motion, gt: Motion, frames: &[usize]) -> Result<f64> {
     Ok(sum / (3 * pairs) as f64)
 }
 
-/// Mean per-vertex Euclidean error `1/(U·V) Σ ‖p − g‖₂`: the quantity in the bounds of SPEC §9 item 14.
+/// Mean per-vertex Euclidean error `1/(U·V) Σ ‖p − g‖₂`: the quantity in the bounds of docs/method.md §9 item 14.
 ///
 /// # Shapes
 /// `pred`, `gt`: `[T, N, 3]`; `frames`: `[U]`.
@@ -327,7 +328,7 @@ impl DtwPath {
 }
 
 /// Dynamic time warping between two point sequences with local cost ‖a_i − b_j‖₂, steps (1,0), (0,1), (1,1), and
-/// minimum **summed** cost. Backtracking breaks ties: diagonal, then (i − 1, j), then (i, j − 1) (SPEC (E3)).
+/// minimum **summed** cost. Backtracking breaks ties: diagonal, then (i − 1, j), then (i, j − 1) (docs/method.md (E3)).
 ///
 /// # Shapes
 /// `a`: `[n, 3]`, `b`: `[m, 3]`.
@@ -491,7 +492,7 @@ pub fn vae_reconstruction(decoded: Motion, input: Motion) -> Result<Reconstructi
 }
 
 /// Sorted, deduplicated keyframes, checked against `frames`. An empty set is an error: the protocol always keeps
-/// frames 0 and T − 1 (SPEC §6.1, §9 item 21).
+/// frames 0 and T − 1 (docs/method.md §6.1, §9 item 21).
 pub fn keyframe_set(keyframes: &[usize], frames: usize) -> Result<Vec<usize>> {
     check_frames("keyframe", keyframes, frames)?;
     let mut set = keyframes.to_vec();
@@ -500,7 +501,7 @@ pub fn keyframe_set(keyframes: &[usize], frames: usize) -> Result<Vec<usize>> {
     Ok(set)
 }
 
-/// The scored frames 𝒰 = {0..T − 1} \ 𝒦 (SPEC §6.1), ascending. Errors when every frame is a keyframe.
+/// The scored frames 𝒰 = {0..T − 1} \ 𝒦 (docs/method.md §6.1), ascending. Errors when every frame is a keyframe.
 pub fn non_keyframes(frames: usize, keyframes: &[usize]) -> Result<Vec<usize>> {
     let set = keyframe_set(keyframes, frames)?;
     let scored: Vec<usize> = (0..frames).filter(|f| set.binary_search(f).is_err()).collect();
@@ -512,7 +513,7 @@ pub fn non_keyframes(frames: usize, keyframes: &[usize]) -> Result<Vec<usize>> {
     Ok(scored)
 }
 
-/// The assembled sequence: the prediction with its keyframes replaced by ground truth (SPEC §6.1).
+/// The assembled sequence: the prediction with its keyframes replaced by ground truth (docs/method.md §6.1).
 ///
 /// # Shapes
 /// `pred`, `gt`: `[T, N, 3]`; returns `[T * N]` rows.
@@ -527,7 +528,7 @@ pub fn replace_keyframes(pred: Motion, gt: Motion, keyframes: &[usize]) -> Resul
     Ok(out)
 }
 
-/// Normalises prediction and ground truth with (D1)–(D3) computed from ground-truth frame 0 (SPEC §6.1).
+/// Normalises prediction and ground truth with (D1)–(D3) computed from ground-truth frame 0 (docs/method.md §6.1).
 ///
 /// # Shapes
 /// `pred`, `gt`: `[T, N, 3]`; returns both as `[T * N]` rows.
@@ -547,23 +548,23 @@ pub fn normalise_by_gt(pred: Motion, gt: Motion) -> Result<(Rows, Rows)> {
 /// Which coordinate frame the metrics are computed in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub enum Coordinates {
-    /// (D1)–(D3) from ground-truth frame 0, applied to both sequences (SPEC §6.1; the default).
+    /// (D1)–(D3) from ground-truth frame 0, applied to both sequences (docs/method.md §6.1; the default).
     #[default]
     NormaliseByGtFrame0,
     /// Use the coordinates as given (the caller has already normalised).
     AsGiven,
 }
 
-/// Options of the per-clip protocol.
+/// How one clip is scored: the coordinate frame of every metric and the frame rate of (E5).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Protocol {
+pub struct Scoring {
     /// Coordinate frame of every metric.
     pub coordinates: Coordinates,
     /// Frame rate r of (E5) (1 = per frame; 10 matches the 10 FPS renders).
     pub rate: f64,
 }
 
-impl Default for Protocol {
+impl Default for Scoring {
     fn default() -> Self {
         Self {
             coordinates: Coordinates::NormaliseByGtFrame0,
@@ -572,7 +573,7 @@ impl Default for Protocol {
     }
 }
 
-/// Every metric of one clip (SPEC §6.2), raw values (not × 100).
+/// Every metric of one clip (docs/method.md §6.2), raw values (not × 100).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ClipMetrics {
     /// (E1) RMSE over 𝒰.
@@ -603,23 +604,24 @@ pub struct ClipMetrics {
     pub energy_ratio: f64,
     /// (E7) RMSE on the keyframes of the prediction before ground-truth replacement.
     pub keyframe_rmse: f64,
-    /// Mean per-vertex Euclidean error over 𝒰 (SPEC §9 item 14 bounds: dtw ≤ this ≤ √3·rmse, chamfer ≤ 2·this).
+    /// Mean per-vertex Euclidean error over 𝒰 (docs/method.md §9 item 14 bounds: dtw ≤ this ≤ √3·rmse, chamfer ≤
+    /// 2·this).
     pub mean_vertex_error: f64,
 }
 
-/// [`evaluate_clip_with`] under the default protocol (normalise by GT frame 0, r = 1).
+/// [`evaluate_clip_with`] under the default scoring (normalise by GT frame 0, r = 1).
 pub fn evaluate_clip(pred: Motion, gt: Motion, keyframes: &[usize]) -> Result<ClipMetrics> {
-    evaluate_clip_with(pred, gt, keyframes, &Protocol::default())
+    evaluate_clip_with(pred, gt, keyframes, &Scoring::default())
 }
 
-/// Scores one clip by SPEC §6.1: coordinates per `protocol`, keyframe error (E7) before replacement, then keyframes
-/// replaced by ground truth, (E1)–(E3) over 𝒰 and (E5)–(E6) over the whole assembled sequence.
+/// Scores one clip by docs/method.md §6.1: coordinates per `scoring`, keyframe error (E7) before replacement, then
+/// keyframes replaced by ground truth, (E1)–(E3) over 𝒰 and (E5)–(E6) over the whole assembled sequence.
 ///
 /// # Shapes
 /// `pred`, `gt`: `[T, N, 3]` with T ≥ 4 (jerk); `keyframes`: indices into `0..T`.
-pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], protocol: &Protocol) -> Result<ClipMetrics> {
+pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], scoring: &Scoring) -> Result<ClipMetrics> {
     check_pair(pred, gt)?;
-    check_rate(protocol.rate)?;
+    check_rate(scoring.rate)?;
     if gt.frames < 4 {
         return Err(EvalError::TooFewFrames {
             metric: "jerk",
@@ -631,7 +633,7 @@ pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], protoco
     let keys = keyframe_set(keyframes, t)?;
     let scored = non_keyframes(t, &keys)?;
     let normalised;
-    let (pred, gt) = match protocol.coordinates {
+    let (pred, gt) = match scoring.coordinates {
         Coordinates::NormaliseByGtFrame0 => {
             normalised = normalise_by_gt(pred, gt)?;
             (Motion::new(&normalised.0, t, n)?, Motion::new(&normalised.1, t, n)?)
@@ -641,11 +643,8 @@ pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], protoco
     let keyframe_rmse = rmse(pred, gt, &keys)?; // (E7), before replacement
     let assembled_rows = replace_keyframes(pred, gt, &keys)?;
     let assembled = Motion::new(&assembled_rows, t, n)?;
-    let (jerk_p, jerk_g) = (jerk(assembled, protocol.rate)?, jerk(gt, protocol.rate)?);
-    let (accel_p, accel_g) = (
-        acceleration(assembled, protocol.rate)?,
-        acceleration(gt, protocol.rate)?,
-    );
+    let (jerk_p, jerk_g) = (jerk(assembled, scoring.rate)?, jerk(gt, scoring.rate)?);
+    let (accel_p, accel_g) = (acceleration(assembled, scoring.rate)?, acceleration(gt, scoring.rate)?);
     let (energy_p, energy_g) = (motion_energy(assembled)?, motion_energy(gt)?);
     Ok(ClipMetrics {
         rmse: rmse(assembled, gt, &scored)?,
@@ -666,7 +665,8 @@ pub fn evaluate_clip_with(pred: Motion, gt: Motion, keyframes: &[usize], protoco
     })
 }
 
-/// Field-wise mean over clips (SPEC §6.1: each metric per clip, then averaged; ratios are averaged per clip too).
+/// Field-wise mean over clips (docs/method.md §6.1: each metric per clip, then averaged; ratios are averaged per clip
+/// too).
 pub fn average(clips: &[ClipMetrics]) -> Result<ClipMetrics> {
     if clips.is_empty() {
         return Err(EvalError::NoClips);

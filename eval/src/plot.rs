@@ -1,4 +1,4 @@
-//! PNG drawing for result pictures (SPEC §6): an RGB canvas with lines, rectangles and a built-in 5×7 bitmap
+//! PNG drawing for result pictures (docs/method.md §6): an RGB canvas with lines, rectangles and a built-in 5×7 bitmap
 //! font, and a line plot with error bars (RMSE against K_x per method).
 
 use std::io::Cursor;

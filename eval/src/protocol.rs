@@ -1,50 +1,24 @@
-//! The evaluation protocol of SPEC §6.1: a manifest of fixed validation clips, nested keyframe sets per K_x
-//! (or every-r / Bernoulli-p placements, SPEC §8 X4) and noise seeds, shared by every method and saved as JSON.
-//! The items are read from a dataset store's validation split ([`StoreSource`]); 31-frame items join two
-//! clips that share a frame (SPEC §2.7).
+//! The evaluation protocol of docs/method.md §6.1: a manifest of fixed validation clips, nested keyframe sets per K_x
+//! (or every-r / Bernoulli-p placements, docs/method.md §8 X4) and noise seeds, shared by every method and saved as
+//! JSON. The items are read from a dataset store's validation split ([`StoreSource`]); 31-frame items join two
+//! clips that share a frame (docs/method.md §2.7).
 
 use std::path::Path;
 
-use any4d_data::keyframes::{KeyframeStrategy, sample_keyframes};
-use any4d_data::rng::{Rng, rng};
+use any4d_data::keyframes::Placement;
+use any4d_data::rng::{GOLDEN_GAMMA, Rng, rng, splitmix64};
 use any4d_data::store::{Split, Status, Store, StoredClip, read_index};
 use any4d_data::{Clip, DataError};
 use serde::{Deserialize, Serialize};
 
 /// Manifest format version written by [`Manifest::save`]; [`Manifest::load`] rejects any other.
 pub const MANIFEST_VERSION: u32 = 1;
-/// The manifest seed of SPEC §6.1.
+/// The manifest seed of docs/method.md §6.1.
 pub const MANIFEST_SEED: u64 = 42;
 /// Stream label for the clip draw, so it never shares draws with the keyframe draws (streams 1 + position).
 const CLIP_STREAM: u64 = 0;
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
-
-/// Where the keyframes of a test window sit (SPEC §6.1, §8 X4). First and last frames are always keyframes.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", tag = "kind")]
-pub enum Placement {
-    /// K_x = 0..=k_extra_max extra frames drawn without replacement from {1..T−2}, nested across K_x (ours).
-    Random { k_extra_max: usize },
-    /// Every r-th frame: {0, r, 2r, …} ∪ {T−1}.
-    EveryR { r: usize },
-    /// Each interior frame independently with probability p.
-    Bernoulli { p: f32 },
-    /// Keyframes every `stride` frames, e.g. {0, 15, 30} for the 31-frame rollout (SPEC §7).
-    Stride { stride: usize },
-}
-
-impl Placement {
-    /// Short label for tables and file names: `random`, `every_4`, `bernoulli_0.25`, `stride_15`.
-    pub fn label(&self) -> String {
-        match self {
-            Placement::Random { .. } => "random".into(),
-            Placement::EveryR { r } => format!("every_{r}"),
-            Placement::Bernoulli { p } => format!("bernoulli_{p}"),
-            Placement::Stride { stride } => format!("stride_{stride}"),
-        }
-    }
-}
 
 /// A clip of the dataset store: its index there and its id.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -55,7 +29,7 @@ pub struct ClipRef {
     pub id: String,
 }
 
-/// One evaluation item: a 16-frame clip, or two clips sharing their boundary frame (31 frames, SPEC §2.7).
+/// One evaluation item: a 16-frame clip, or two clips sharing their boundary frame (31 frames, docs/method.md §2.7).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ManifestClip {
     /// The clip, or the first clip of a long-horizon pair.
@@ -68,7 +42,7 @@ pub struct ManifestClip {
     pub keyframes: Vec<Vec<usize>>,
 }
 
-/// The fixed protocol: which clips, which keyframes, which noise seeds (SPEC §6.1).
+/// The fixed protocol: which clips, which keyframes, which noise seeds (docs/method.md §6.1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Manifest {
@@ -93,7 +67,7 @@ pub struct Manifest {
 /// What to draw in [`Manifest::build`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct ManifestOptions {
-    /// Number of items (100 in SPEC §6.1); fewer candidates is an error.
+    /// Number of items (100 in docs/method.md §6.1); fewer candidates is an error.
     pub n_clips: usize,
     /// Draw seed (42).
     pub seed: u64,
@@ -101,7 +75,7 @@ pub struct ManifestOptions {
     pub frames: usize,
     /// Keyframe placement.
     pub placement: Placement,
-    /// Base noise seeds (`[42]`; SPEC §8 X8: `[42, 43, 44, 45, 46]`).
+    /// Base noise seeds (`[42]`; docs/method.md §8 X8: `[42, 43, 44, 45, 46]`).
     pub seeds: Vec<u64>,
     /// Dataset description stored in the manifest.
     pub data: String,
@@ -116,7 +90,7 @@ impl ManifestOptions {
             n_clips: 100,
             seed: MANIFEST_SEED,
             frames: 16,
-            placement: Placement::Random { k_extra_max: 3 },
+            placement: Placement::PAPER,
             seeds: vec![MANIFEST_SEED],
             data: data.into(),
             split: "validation".into(),
@@ -156,7 +130,7 @@ impl Manifest {
                 ),
             ));
         }
-        check_placement(opts.placement, opts.frames).map_err(|r| bad("placement", r))?;
+        opts.placement.check(opts.frames).map_err(|r| bad("placement", r))?;
         if opts.seeds.is_empty() {
             return Err(bad("seeds", "at least one noise seed is needed".into()));
         }
@@ -173,7 +147,7 @@ impl Manifest {
             .map(|(pos, &c)| ManifestClip {
                 clip: candidates[c].clip.clone(),
                 next: candidates[c].next.clone(),
-                keyframes: draw_keyframes(opts.placement, opts.frames, opts.seed, pos as u64),
+                keyframes: opts.placement.keyframe_sets(opts.frames, opts.seed, pos as u64),
             })
             .collect();
         Ok(Self {
@@ -213,17 +187,14 @@ impl Manifest {
                 format!("is {}, this build reads {MANIFEST_VERSION}", self.version),
             );
         }
-        if let Err(r) = check_placement(self.placement, self.frames) {
+        if let Err(r) = self.placement.check(self.frames) {
             return bad("placement".into(), r);
         }
         if self.seeds.is_empty() {
             return bad("seeds".into(), "is empty".into());
         }
         for (i, item) in self.clips.iter().enumerate() {
-            let expected_sets = match self.placement {
-                Placement::Random { k_extra_max } => k_extra_max + 1,
-                _ => 1,
-            };
+            let expected_sets = self.placement.sets();
             if item.keyframes.len() != expected_sets {
                 return bad(
                     format!("clips[{i}].keyframes"),
@@ -263,49 +234,10 @@ impl Manifest {
     }
 }
 
-/// The noise seed of item `clip_index` under base seed `base` (SPEC §6.1: derived from (42, clip index)).
+/// The noise seed of item `clip_index` under base seed `base` (docs/method.md §6.1: derived from (42, clip index)).
 /// SplitMix64 of the pair, so neighbouring items and seeds get unrelated streams; the same for every K_x.
 pub fn noise_seed(base: u64, clip_index: usize) -> u64 {
-    let mut z = base.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (clip_index as u64).wrapping_add(0xD1B5_4A32_D192_ED03);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// Keyframe sets of one item (position `pos` in draw order; its own RNG stream, so items are independent),
-/// drawn with the data crate's samplers; first and last frames are forced for every placement.
-fn draw_keyframes(placement: Placement, frames: usize, seed: u64, pos: u64) -> Vec<Vec<usize>> {
-    let item_rng = rng(seed, 1 + pos);
-    let draw = |strategy: KeyframeStrategy| {
-        // A fresh copy of the item's generator per set: FirstLastPlus sets are then nested across K_x.
-        let mask = sample_keyframes(&strategy, frames, &mut item_rng.clone());
-        let mut set: Vec<usize> = (0..frames).filter(|&f| mask[f] || f == 0 || f == frames - 1).collect();
-        set.dedup();
-        set
-    };
-    match placement {
-        Placement::Random { k_extra_max } => (0..=k_extra_max)
-            .map(|k| draw(KeyframeStrategy::FirstLastPlus(k)))
-            .collect(),
-        Placement::EveryR { r } => vec![draw(KeyframeStrategy::Uniform(r))],
-        Placement::Stride { stride } => vec![draw(KeyframeStrategy::Uniform(stride))],
-        Placement::Bernoulli { p } => vec![draw(KeyframeStrategy::Bernoulli(p))],
-    }
-}
-
-fn check_placement(placement: Placement, frames: usize) -> std::result::Result<(), String> {
-    if frames < 2 {
-        return Err(format!("frames = {frames}, at least 2 are needed"));
-    }
-    match placement {
-        Placement::Random { k_extra_max } if k_extra_max > frames - 2 => Err(format!(
-            "k_extra_max = {k_extra_max} exceeds the {} interior frames",
-            frames - 2
-        )),
-        Placement::EveryR { r: 0 } | Placement::Stride { stride: 0 } => Err("the step must be at least 1".into()),
-        Placement::Bernoulli { p } if !(0.0..=1.0).contains(&p) => Err(format!("p = {p} is outside [0, 1]")),
-        _ => Ok(()),
-    }
+    splitmix64(base.wrapping_mul(GOLDEN_GAMMA) ^ (clip_index as u64).wrapping_add(0xD1B5_4A32_D192_ED03))
 }
 
 fn check_set(set: &[usize], frames: usize) -> std::result::Result<(), String> {
@@ -321,7 +253,7 @@ fn check_set(set: &[usize], frames: usize) -> std::result::Result<(), String> {
     Ok(())
 }
 
-/// Long-horizon candidates (SPEC §2.7): pairs of clips of one animation (same id up to the `_<start>-<end>`
+/// Long-horizon candidates (docs/method.md §2.7): pairs of clips of one animation (same id up to the `_<start>-<end>`
 /// tail) where the second starts 15 frames after the first, so they share the first clip's last frame.
 /// Ids that do not follow the AAM form `<uid>_offset<k>_<start>-<end>` are skipped.
 pub fn long_horizon_pairs(clips: &[ClipRef]) -> Vec<Candidate> {
@@ -387,7 +319,7 @@ impl StoreSource {
     }
 
     /// Evaluation candidates: single validation clips when the store's clips are long enough for `frames`,
-    /// otherwise pairs of clips sharing their boundary frame (SPEC §2.7).
+    /// otherwise pairs of clips sharing their boundary frame (docs/method.md §2.7).
     pub fn candidates(&self, frames: usize) -> Vec<Candidate> {
         if self.store.frames() >= frames {
             self.val
@@ -453,7 +385,7 @@ fn first_frames(clip: &Clip, frames: usize) -> Result<Clip> {
     )
 }
 
-/// Two consecutive windows sharing a frame → one sequence without the duplicate (SPEC §2.7), in absolute
+/// Two consecutive windows sharing a frame → one sequence without the duplicate (docs/method.md §2.7), in absolute
 /// coordinates (each stored window is normalised by its own frame 0; the stored (c, s) undo that).
 fn join_shared_frame(a: &StoredClip, b: &StoredClip, dir: &Path) -> Result<Clip> {
     let (mut a_abs, mut b_abs) = (a.clip.clone(), b.clip.clone());

@@ -1,6 +1,6 @@
-//! Result pictures (SPEC §6): a PNG strip per clip with the ground truth above and the prediction below, one column
-//! per frame, keyframe columns framed and labelled. Frames are drawn by the data crate's rasteriser from one fixed
-//! orthographic three-quarter view framed on both sequences, so motion and errors are visible at one scale.
+//! Result pictures (docs/method.md §6): a PNG strip per clip with the ground truth above and the prediction below, one
+//! column per frame, keyframe columns framed and labelled. Frames are drawn by the data crate's rasteriser from one
+//! fixed orthographic three-quarter view framed on both sequences, so motion and errors are visible at one scale.
 
 use std::path::Path;
 
@@ -105,7 +105,8 @@ pub fn write_strip(gt: &Clip, pred: &Clip, keyframes: &[usize], opts: &StripOpti
     strip_canvas(gt, pred, keyframes, opts)?.save_png(path)
 }
 
-/// A file format for exported predictions (SPEC §6.3: per-frame meshes for the external Blender/VBench pipeline).
+/// A file format for exported predictions (docs/method.md §6.3: per-frame meshes for the external Blender/VBench
+/// pipeline).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ExportFormat {
     /// DyMesh pickle `.bin`.

@@ -1,4 +1,4 @@
-//! Long-horizon generation (SPEC §7, P-Eq. 18–21): 16-frame windows every 15 frames sharing one frame,
+//! Long-horizon generation (docs/method.md §7, P-Eq. 18–21): 16-frame windows every 15 frames sharing one frame,
 //! each re-normalised by its overlap frame (H1)–(H2), generated, de-normalised (H3) and stitched half-open (H4).
 //!
 //! Generic over a window generator, so any completion method (or a test double) drives it.
@@ -7,12 +7,13 @@ use any4d_data::DataError;
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
 
-/// Which mesh is the reference (local frame 0) of windows after the first (SPEC §7 step 4, §8 A8).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+/// Which mesh is the reference (local frame 0) of windows after the first (docs/method.md §7 step 4, §8 A8).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum OverlapSource {
     /// The ground-truth mesh at the shared frame, when that frame is a keyframe (default for keyframe methods);
     /// a shared frame that is not a keyframe falls back to the generated one.
+    #[default]
     GroundTruth,
     /// The previous window's output at the shared frame (autoregressive, default for the AAM reference).
     Generated,
@@ -80,7 +81,7 @@ pub struct WindowFrame {
 }
 
 impl WindowFrame {
-    /// The identity (stage 1 works in the global frame directly, SPEC §7 step 1).
+    /// The identity (stage 1 works in the global frame directly, docs/method.md §7 step 1).
     pub const IDENTITY: WindowFrame = WindowFrame {
         center: [0.0; 3],
         scale: 1.0,
@@ -156,7 +157,7 @@ pub struct Rollout {
     pub frames: Vec<WindowFrame>,
 }
 
-/// Run the windowed rollout of SPEC §7 over a ground-truth sequence in the global normalised frame.
+/// Run the windowed rollout of docs/method.md §7 over a ground-truth sequence in the global normalised frame.
 ///
 /// `keyframes` are global frame indices (e.g. {0, 15, 30}); each window receives those inside it, re-indexed,
 /// plus its local frame 0. `captions` holds one prompt per window, or one prompt for all windows.
@@ -207,7 +208,7 @@ where
     let mut stats = Vec::with_capacity(starts.len());
     for (w, &start) in starts.iter().enumerate() {
         // The window's reference mesh: ground truth for stage 1 and for a ground-truth overlap at a keyframe,
-        // otherwise the frame the previous window generated (SPEC §7 steps 2 and 4).
+        // otherwise the frame the previous window generated (docs/method.md §7 steps 2 and 4).
         let from_gt = w == 0 || (spec.overlap_source == OverlapSource::GroundTruth && keyframes.contains(&start));
         let reference = if from_gt { frame(gt, start) } else { frame(&out, start) };
         let stat = if w == 0 {

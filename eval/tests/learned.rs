@@ -1,4 +1,4 @@
-//! Learned methods on the evaluation protocol (SPEC §4.6, §5.1, §5.2 latent lerp, §5.4, (E4)): shapes, seed
+//! Learned methods on the evaluation protocol (docs/method.md §4.6, §5.1, §5.2 latent lerp, §5.4, (E4)): shapes, seed
 //! determinism, keyframe latents kept exactly, ground-truth keyframes after assembly, latent lerp, VAE rows. Tiny
 //! untrained networks on `Device::flex()`; their zero-initialised layers are woken with noise so that every
 //! network output depends on its input.
@@ -9,17 +9,17 @@ use any4d_data::Clip;
 use any4d_data::batch::PadTo;
 use any4d_data::fps::farthest_point_sampling;
 use any4d_data::preprocess::edges_from_faces;
-use any4d_eval::learned::{
-    LatentLerpSampler, LearnedModels, MeshCodec, MeshVae, RfSampler, VaeReconstructor, sampler_noise,
-};
+use any4d_eval::learned::{LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor, sampler_noise};
 use any4d_eval::methods::{
     Method, MethodKind, Request, RfMethod, WindowSampler, complete_and_score, hide_non_keyframes,
 };
-use any4d_eval::run::Reconstructor;
+use any4d_eval::tables::reconstruction::Reconstructor;
+use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::dymesh_vae::DyMeshVaeConfig;
-use any4d_model::frame_vae::{EdgeList, FrameVaeConfig, Posterior, VaeBatch};
+use any4d_model::frame_vae::FrameVaeConfig;
 use any4d_model::latent_stats::LatentStats;
-use any4d_model::mmdit::{KfMode, MmditConfig};
+use any4d_model::mesh_vae::{EdgeList, Posterior, VaeBatch};
+use any4d_model::mmdit::{KeyframeConditioning, MmditConfig};
 use any4d_model::rectified_flow::{Conditioning, SampleOptions, sample_mmdit};
 use any4d_model::text::{TextBatch, TextEncoder, TextError};
 use burn::module::{ModuleMapper, Param};
@@ -113,24 +113,24 @@ fn stats() -> LatentStats {
 
 fn frame_codec(device: &Device, padding: PadTo) -> Arc<MeshCodec> {
     let vae = FrameVaeConfig::tiny().init(device).map(&mut WakeZeros);
-    Arc::new(MeshCodec::new(MeshVae::Frame(vae), P, padding, device.clone()).expect("codec"))
+    Arc::new(MeshCodec::new(AnyMeshVae::Framewise(vae), P, padding, device.clone()).expect("codec"))
 }
 
-fn models(codec: Arc<MeshCodec>, net_mode: KfMode, device: &Device) -> Arc<LearnedModels> {
+fn models(codec: Arc<MeshCodec>, net_mode: KeyframeConditioning, device: &Device) -> Arc<LearnedModels> {
     let cfg = MmditConfig {
         frames: T,
         channels: C,
-        kf_mode: net_mode,
+        conditioning: net_mode,
         ..MmditConfig::tiny()
     };
     let rf = cfg.init(device).map(&mut WakeZeros);
     Arc::new(LearnedModels::new(codec, rf, cfg, stats(), Box::new(ByteText)).expect("models"))
 }
 
-fn options(kf_mode: KfMode) -> SampleOptions {
+fn options(conditioning: KeyframeConditioning) -> SampleOptions {
     SampleOptions {
         n_grid: 4,
-        ..SampleOptions::paper(kf_mode)
+        ..SampleOptions::paper(conditioning)
     }
 }
 
@@ -155,8 +155,12 @@ fn slot(z: &[f32], f: usize) -> &[f32] {
 #[test]
 fn rf_sampler_gives_t_times_n_rows_deterministic_per_seed() {
     let device = Device::flex();
-    let m = models(frame_codec(&device, PadTo::BatchMax), KfMode::InputMask, &device);
-    let sampler = RfSampler::new(m, options(KfMode::InputMask), 1.0).unwrap();
+    let m = models(
+        frame_codec(&device, PadTo::BatchMax),
+        KeyframeConditioning::InputMask,
+        &device,
+    );
+    let sampler = RfSampler::new(m, options(KeyframeConditioning::InputMask), 1.0).unwrap();
     let gt = wave_clip();
     let keys = [0, 2, 3];
     let visible = hide_non_keyframes(&gt, &keys);
@@ -183,8 +187,8 @@ fn rf_sampler_gives_t_times_n_rows_deterministic_per_seed() {
 fn a_batch_of_requests_samples_what_each_request_samples_alone() {
     let device = Device::flex();
     for (net, mode) in [
-        (KfMode::InputMask, KfMode::InputMask),
-        (KfMode::ReplaceNoised, KfMode::ReplaceNoised),
+        (KeyframeConditioning::InputMask, KeyframeConditioning::InputMask),
+        (KeyframeConditioning::ReplaceNoised, KeyframeConditioning::ReplaceNoised),
     ] {
         let m = models(frame_codec(&device, PadTo::BatchMax), net, &device);
         let sampler = RfSampler::new(m, options(mode), 1.0).unwrap();
@@ -236,8 +240,8 @@ fn keyframe_slots_hold_the_keyframe_latents_after_sampling() {
     let all = codec.encode(&gt, &(0..T).collect::<Vec<_>>()).unwrap();
     let mu_all = floats(all.mu.clone());
     for (net, mode) in [
-        (KfMode::InputMask, KfMode::InputMask),
-        (KfMode::None, KfMode::ReplaceNoised),
+        (KeyframeConditioning::InputMask, KeyframeConditioning::InputMask),
+        (KeyframeConditioning::None, KeyframeConditioning::ReplaceNoised),
     ] {
         let sampler = RfSampler::new(models(codec.clone(), net, &device), options(mode), 1.0).unwrap();
         let visible = hide_non_keyframes(&gt, &keys);
@@ -273,7 +277,7 @@ fn keyframe_slots_hold_the_keyframe_latents_after_sampling() {
 #[test]
 fn zero_velocity_leaves_the_seeded_noise_de_standardized() {
     // An untouched MMDiT has a zero-initialised output layer: v = 0, so X₁ = X₀ = ε (τ = 0 is noise) and the
-    // non-keyframe latents are ε · std + mean of the motion statistics (SPEC §3.4, §4.6).
+    // non-keyframe latents are ε · std + mean of the motion statistics (docs/method.md §3.4, §4.6).
     let device = Device::flex();
     let codec = frame_codec(&device, PadTo::BatchMax);
     let cfg = MmditConfig {
@@ -282,7 +286,7 @@ fn zero_velocity_leaves_the_seeded_noise_de_standardized() {
         ..MmditConfig::tiny()
     };
     let m = Arc::new(LearnedModels::new(codec, cfg.init(&device), cfg, stats(), Box::new(ByteText)).unwrap());
-    let s = RfSampler::new(m, options(KfMode::InputMask), 1.0)
+    let s = RfSampler::new(m, options(KeyframeConditioning::InputMask), 1.0)
         .unwrap()
         .sample_latents(&wave_clip(), &[0, 3], "flag", 11)
         .unwrap();
@@ -312,7 +316,7 @@ fn sample_latents_match_a_hand_wired_sample_mmdit() {
     };
     let rf = cfg.init(&device).map(&mut WakeZeros);
     let m = Arc::new(LearnedModels::new(codec.clone(), rf.clone(), cfg, stats(), Box::new(ByteText)).unwrap());
-    let opts = options(KfMode::InputMask);
+    let opts = options(KeyframeConditioning::InputMask);
     let gt = wave_clip();
     let got = RfSampler::new(m, opts, 1.0)
         .unwrap()
@@ -336,16 +340,23 @@ fn sample_latents_match_a_hand_wired_sample_mmdit() {
 #[test]
 fn impute_until_samples_and_differs_from_input_mask() {
     let device = Device::flex();
-    let m = models(frame_codec(&device, PadTo::BatchMax), KfMode::InputMask, &device);
+    let m = models(
+        frame_codec(&device, PadTo::BatchMax),
+        KeyframeConditioning::InputMask,
+        &device,
+    );
     let gt = wave_clip();
     let keys = [0, 2, 3];
     let impute = MethodKind::ImputeUntil {
         tau_star: 0.5,
         keyframes: any4d_eval::methods::KeyframeNoise::Clean,
     };
-    let base = options(KfMode::InputMask);
+    let base = options(KeyframeConditioning::InputMask);
     let s = RfSampler::for_method(impute, m.clone(), base, 1.0).unwrap();
-    assert_eq!((s.options().kf_mode, s.options().tau_star), (KfMode::ImputeUntil, 0.5));
+    assert_eq!(
+        (s.options().conditioning, s.options().tau_star),
+        (KeyframeConditioning::ImputeUntil, 0.5)
+    );
     let a = s.sample_latents(&gt, &keys, "flag", 9).unwrap();
     let b = RfSampler::for_method(MethodKind::KeyframeRf, m.clone(), base, 1.0)
         .unwrap()
@@ -371,8 +382,13 @@ fn impute_until_samples_and_differs_from_input_mask() {
 #[test]
 fn rf_method_returns_decoded_keyframes_and_scoring_assembles_ground_truth_ones() {
     let device = Device::flex();
-    let m = models(frame_codec(&device, PadTo::BatchMax), KfMode::InputMask, &device);
-    let sampler = RfSampler::for_method(MethodKind::KeyframeRf, m, options(KfMode::InputMask), 1.0).unwrap();
+    let m = models(
+        frame_codec(&device, PadTo::BatchMax),
+        KeyframeConditioning::InputMask,
+        &device,
+    );
+    let sampler =
+        RfSampler::for_method(MethodKind::KeyframeRf, m, options(KeyframeConditioning::InputMask), 1.0).unwrap();
     let method = RfMethod::new(MethodKind::KeyframeRf, sampler).unwrap();
     let gt = wave_clip();
     let keys = [0, 3];
@@ -462,14 +478,14 @@ fn vae_reconstructors_match_the_model_reconstruct() {
             .unwrap()
             .concat()
     };
-    let f = rows(MeshCodec::new(MeshVae::Frame(frame.clone()), P, PadTo::BatchMax, device.clone()).unwrap());
+    let f = rows(MeshCodec::new(AnyMeshVae::Framewise(frame.clone()), P, PadTo::BatchMax, device.clone()).unwrap());
     assert!(max_diff(&f, &expect_frame) < 1e-5, "frame-wise (E4)");
-    let padded = rows(MeshCodec::new(MeshVae::Frame(frame), P, PadTo::Fixed(N + 7), device.clone()).unwrap());
+    let padded = rows(MeshCodec::new(AnyMeshVae::Framewise(frame), P, PadTo::Fixed(N + 7), device.clone()).unwrap());
     assert!(
         max_diff(&padded, &expect_frame) < 1e-4,
         "masked padded keys do not change the latents"
     );
-    let s = rows(MeshCodec::new(MeshVae::Sequence { vae: seq, frames: T }, P, PadTo::BatchMax, device).unwrap());
+    let s = rows(MeshCodec::new(AnyMeshVae::Sequencewise(seq), P, PadTo::BatchMax, device).unwrap());
     assert!(max_diff(&s, &expect_seq) < 1e-5, "sequence-wise (E4)");
 }
 
@@ -477,13 +493,21 @@ fn vae_reconstructors_match_the_model_reconstruct() {
 fn mismatched_parts_and_bad_windows_are_errors() {
     let device = Device::flex();
     let codec = frame_codec(&device, PadTo::BatchMax);
-    let m = models(codec.clone(), KfMode::InputMask, &device);
-    let e = RfSampler::new(m.clone(), options(KfMode::ReplaceNoised), 1.0)
+    let m = models(codec.clone(), KeyframeConditioning::InputMask, &device);
+    let e = RfSampler::new(m.clone(), options(KeyframeConditioning::ReplaceNoised), 1.0)
         .err()
         .expect("layout mismatch");
     assert!(e.to_string().contains("mask channels"), "{e}");
-    assert!(RfSampler::for_method(MethodKind::Lerp, m.clone(), options(KfMode::InputMask), 1.0).is_err());
-    let sampler = RfSampler::new(m, options(KfMode::InputMask), 1.0).unwrap();
+    assert!(
+        RfSampler::for_method(
+            MethodKind::Lerp,
+            m.clone(),
+            options(KeyframeConditioning::InputMask),
+            1.0
+        )
+        .is_err()
+    );
+    let sampler = RfSampler::new(m, options(KeyframeConditioning::InputMask), 1.0).unwrap();
     let gt = wave_clip();
     let e = sampler.sample(&gt, &[0, 7], "", 0).unwrap_err();
     assert!(e.to_string().contains("frame 7"), "{e}");
@@ -504,8 +528,7 @@ fn mismatched_parts_and_bad_windows_are_errors() {
         .expect("text width");
     assert!(e.to_string().contains("text_dim 16"), "{e}");
     let seq = DyMeshVaeConfig::tiny().with_frames(T).init(&device);
-    let seq_codec =
-        Arc::new(MeshCodec::new(MeshVae::Sequence { vae: seq, frames: T }, P, PadTo::BatchMax, device).unwrap());
+    let seq_codec = Arc::new(MeshCodec::new(AnyMeshVae::Sequencewise(seq), P, PadTo::BatchMax, device).unwrap());
     assert!(LatentLerpSampler::new(seq_codec.clone()).is_err());
     let e = seq_codec.encode(&gt, &[0, 3]).unwrap_err();
     assert!(e.to_string().contains("whole windows"), "{e}");
@@ -537,14 +560,14 @@ fn paper_size_window_timing() {
         .flat_map(|v| [[v, v + 1, v + s], [v + 1, v + s + 1, v + s]])
         .collect();
     let clip = Clip::new("big_offset0_0-16", vertices, t, n, faces, "flag", "test").unwrap();
-    let vae = FrameVaeConfig::new().init(&device);
-    let codec = Arc::new(MeshCodec::new(MeshVae::Frame(vae), 512, PadTo::BatchMax, device.clone()).unwrap());
-    let cfg = MmditConfig::paper(KfMode::InputMask, 8);
+    let vae = FrameVaeConfig::paper().init(&device);
+    let codec = Arc::new(MeshCodec::new(AnyMeshVae::Framewise(vae), 512, PadTo::BatchMax, device.clone()).unwrap());
+    let cfg = MmditConfig::paper(KeyframeConditioning::InputMask, 8);
     let rf = cfg.init(&device);
     let m = Arc::new(LearnedModels::new(codec.clone(), rf, cfg, stats(), Box::new(ByteText)).unwrap());
     let opts = SampleOptions {
         n_grid: 2,
-        ..SampleOptions::paper(KfMode::InputMask)
+        ..SampleOptions::paper(KeyframeConditioning::InputMask)
     };
     let sampler = RfSampler::new(m, opts, 1.0).unwrap();
     let keys = [0, 5, 15];

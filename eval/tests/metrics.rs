@@ -1,25 +1,23 @@
-//! Tests of the evaluation metrics (SPEC §6.1–§6.2) and the non-learned baselines (SPEC §5.2): hand-worked cases,
-//! properties (SPEC §9 item 14 bounds), malformed input, and a reference test against
+//! Tests of the evaluation metrics (docs/method.md §6.1–§6.2) and the non-learned baselines (docs/method.md §5.2):
+//! hand-worked cases, properties (docs/method.md §9 item 14 bounds), malformed input, and a reference test against
 //! `scripts/metrics_reference.py` (numpy + scipy), whose output is committed in `tests/fixtures/`.
 
+use any4d_data::rng::{GOLDEN_GAMMA, splitmix64};
 use any4d_eval::baselines::{VertexBaseline, lerp_latents};
 use any4d_eval::metrics::{
-    ClipMetrics, Coordinates, EvalError, Motion, Protocol, acceleration, average, centroid_dtw, chamfer, chamfer_sets,
+    ClipMetrics, Coordinates, EvalError, Motion, Scoring, acceleration, average, centroid_dtw, chamfer, chamfer_sets,
     dtw_path, evaluate_clip, evaluate_clip_with, jerk, mae_elem, mean_vertex_error, motion_energy, non_keyframes,
     replace_keyframes, rmse, vae_reconstruction,
 };
 use serde::Deserialize;
 
-/// splitmix64: a tiny deterministic generator so the property tests need no extra dependency.
+/// SplitMix64 (the workspace's one, `any4d_data::rng::splitmix64`) as a tiny deterministic generator.
 struct Gen(u64);
 
 impl Gen {
     fn next_f32(&mut self) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
+        self.0 = self.0.wrapping_add(GOLDEN_GAMMA);
+        let z = splitmix64(self.0);
         (z >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
     }
 
@@ -214,7 +212,7 @@ fn assert_bounds(m: &ClipMetrics) {
 
 #[test]
 fn spec_bounds_hold_on_random_inputs() {
-    // SPEC §9 item 14: DTW ≤ mean per-vertex error ≤ √3·RMSE, Chamfer ≤ 2·mean per-vertex error.
+    // docs/method.md §9 item 14: DTW ≤ mean per-vertex error ≤ √3·RMSE, Chamfer ≤ 2·mean per-vertex error.
     for seed in 0..12u64 {
         let noise = [0.01, 0.3, 2.0][seed as usize % 3];
         let (pred, gt) = random_clip(100 + seed, 16, 30, noise);
@@ -247,7 +245,7 @@ fn normalisation_uses_ground_truth_frame_zero() {
         assert!(close(a, b, 1e-5), "{a} vs {b}");
     }
     // …while the as-given coordinates scale with it.
-    let as_given = Protocol {
+    let as_given = Scoring {
         coordinates: Coordinates::AsGiven,
         rate: 1.0,
     };
@@ -323,7 +321,7 @@ fn malformed_input_names_what_differs() {
             frames: 3
         }
     );
-    let bad_rate = Protocol {
+    let bad_rate = Scoring {
         coordinates: Coordinates::AsGiven,
         rate: 0.0,
     };
@@ -434,11 +432,11 @@ fn matches_numpy_scipy_reference() {
     for case in &fixture.cases {
         let (pred, gt) = (to_f32(&case.pred), to_f32(&case.gt));
         let (p, g) = (motion(&pred, case.frames), motion(&gt, case.frames));
-        let protocol = Protocol {
+        let scoring = Scoring {
             coordinates: Coordinates::NormaliseByGtFrame0,
             rate: case.rate,
         };
-        let got = evaluate_clip_with(p, g, &case.keyframes, &protocol).unwrap();
+        let got = evaluate_clip_with(p, g, &case.keyframes, &scoring).unwrap();
         let (got_v, want_v) = (
             serde_json::to_value(got).unwrap(),
             serde_json::to_value(case.expected).unwrap(),

@@ -1,11 +1,13 @@
-//! Protocol tests (SPEC §6.1): the manifest is deterministic, nested, validated on load; methods see only keyframes.
+//! Protocol tests (docs/method.md §6.1): the manifest is deterministic, nested, validated on load; methods see only
+//! keyframes.
 
 use any4d_data::Clip;
+use any4d_data::keyframes::Placement;
 use any4d_eval::baselines::VertexBaseline;
 use any4d_eval::methods::{
     KeyframeNoise, Method, MethodKind, VertexMethod, complete_and_score, hide_non_keyframes, noisy_keyframes,
 };
-use any4d_eval::protocol::{Candidate, ClipRef, Manifest, ManifestOptions, Placement, long_horizon_pairs, noise_seed};
+use any4d_eval::protocol::{Candidate, ClipRef, Manifest, ManifestOptions, long_horizon_pairs, noise_seed};
 
 fn candidates(n: usize) -> Vec<Candidate> {
     (0..n)

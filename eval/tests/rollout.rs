@@ -1,4 +1,4 @@
-//! Long-horizon rollout tests (SPEC §7, (H1)–(H4)): window layout, stitching without a duplicated frame 15,
+//! Long-horizon rollout tests (docs/method.md §7, (H1)–(H4)): window layout, stitching without a duplicated frame 15,
 //! normalisation round trip, overlap source, hidden frames, seam jerk.
 
 use std::cell::RefCell;

@@ -4,10 +4,11 @@
 use std::collections::BTreeMap;
 
 use any4d_eval::plot::{Canvas, PALETTE, Series, WHITE, line_plot, nice_ticks};
-use any4d_eval::tables::{
-    ClipRecord, TableHeader, TableKind, TimingRecord, csv, markdown, mean_ci95, median, summarize, timing_tables,
-    write_clip_parquet,
+use any4d_eval::tables::short_horizon::LAYOUT as TABLE1;
+use any4d_eval::tables::summary::{
+    ClipRecord, TableHeader, TimingRecord, csv, markdown, mean_ci95, summarize, timing_tables, write_clip_parquet,
 };
+use any4d_model::bench::median;
 use polars::prelude::{ParquetReader, SerReader};
 
 fn record(method: &str, k: usize, seed: u64, item: usize, rmse: f64) -> ClipRecord {
@@ -71,14 +72,14 @@ fn summary_averages_clips_per_seed_then_seeds() {
         record("lerp", 0, 42, 0, 0.1),
         record("keyframe_rf", 1, 42, 0, 0.01),
     ];
-    let rows = summarize(&records, TableKind::Table1).unwrap();
+    let rows = summarize(&records, &TABLE1).unwrap();
     let labels: Vec<(&str, usize)> = rows.iter().map(|r| (r.method.as_str(), r.k_extra)).collect();
     assert_eq!(labels, vec![("keyframe_rf", 0), ("keyframe_rf", 1), ("lerp", 0)]);
     let rmse = rows[0].values[0];
     assert!((rmse.mean - 0.04).abs() < 1e-12 && rmse.n == 2 && rows[0].clips == 2);
     assert!((rmse.ci95.unwrap() - 12.706 * (0.0002f64).sqrt() / 2f64.sqrt()).abs() < 1e-9);
 
-    let md = markdown(TableKind::Table1, &rows, &header());
+    let md = markdown(&TABLE1, &rows, &header());
     for needle in [
         "scratch",
         "runs/rf-1/checkpoints/step_100",
@@ -98,7 +99,7 @@ fn summary_averages_clips_per_seed_then_seeds() {
         "one seed, no interval:\n{md}"
     );
 
-    let text = csv(TableKind::Table1, &rows, &header());
+    let text = csv(&TABLE1, &rows, &header());
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(lines.len(), 4);
     let cols = lines[0].split(',').count();
@@ -117,7 +118,7 @@ fn summary_averages_clips_per_seed_then_seeds() {
 fn missing_metric_is_named() {
     let mut r = record("lerp", 0, 42, 3, 0.1);
     r.metrics.remove("dtw");
-    let e = summarize(&[r], TableKind::Table1).unwrap_err();
+    let e = summarize(&[r], &TABLE1).unwrap_err();
     assert_eq!((e.path.as_str(), e.field.as_str()), ("c3", "dtw"));
 }
 
@@ -134,7 +135,7 @@ fn parquet_round_trips_per_clip_records() {
     let rmse = df.column("rmse").unwrap().f64().unwrap().get(1).unwrap();
     assert_eq!(rmse, 0.07);
     assert_eq!(df.column("method").unwrap().str().unwrap().get(0), Some("lerp"));
-    assert_eq!(any4d_eval::tables::read_clip_parquet(&path).unwrap(), records);
+    assert_eq!(any4d_eval::tables::summary::read_clip_parquet(&path).unwrap(), records);
     let mut bad = records.clone();
     bad[1].metrics.insert("extra".into(), 1.0);
     assert_eq!(write_clip_parquet(&bad, &path).unwrap_err().field, "metrics");
@@ -217,8 +218,10 @@ fn font_draws_distinct_glyphs() {
 fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
     use any4d_data::store::write_synth_with;
     use any4d_data::synth::SynthConfig;
-    use any4d_eval::methods::MethodKind;
-    use any4d_eval::run::{RunOptions, run_protocol, vertex_methods};
+    use any4d_eval::methods::{MethodKind, vertex_methods};
+    use any4d_eval::tables::long_horizon::LongHorizon;
+    use any4d_eval::tables::short_horizon::ShortHorizon;
+    use any4d_eval::tables::{Items, Protocol, TableOptions, run_protocol};
 
     let dir = tempfile::tempdir().unwrap();
     let store16 = dir.path().join("store16");
@@ -233,12 +236,18 @@ fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
     let methods = [MethodKind::Lerp, MethodKind::StaticNearest];
 
     let out = dir.path().join("t1");
-    let mut opts = RunOptions::new(TableKind::Table1, store16.clone(), out.clone());
+    let mut opts = TableOptions::new(store16.clone(), out.clone());
     opts.methods = vertex_methods(&methods).unwrap();
-    opts.clips = 3;
     opts.export_items = 1;
     opts.progress = false;
-    let report = run_protocol(&opts).unwrap();
+    let table1 = Protocol::ShortHorizon(ShortHorizon {
+        items: Items {
+            clips: 3,
+            ..Items::default()
+        },
+        ..ShortHorizon::default()
+    });
+    let report = run_protocol(&table1, &opts).unwrap();
     assert_eq!(report.rows.len(), 2 * 4, "two methods × K_x 0..3");
     let lerp_rmse: Vec<f64> = report
         .rows
@@ -273,22 +282,34 @@ fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
     assert_eq!(df.height(), 3 * 4 * 2);
 
     // Re-running on the saved manifest gives the same table.
-    let mut again = RunOptions::new(TableKind::Table1, store16, dir.path().join("t1b"));
+    let mut again = TableOptions::new(store16, dir.path().join("t1b"));
     again.methods = vertex_methods(&methods).unwrap();
-    again.manifest = Some(out.join("manifest.json"));
     again.export_items = 0;
     again.progress = false;
-    assert_eq!(run_protocol(&again).unwrap().rows, report.rows);
+    let saved = Protocol::ShortHorizon(ShortHorizon {
+        items: Items {
+            manifest: Some(out.join("manifest.json")),
+            ..Items::default()
+        },
+        ..ShortHorizon::default()
+    });
+    assert_eq!(run_protocol(&saved, &again).unwrap().rows, report.rows);
 
     // Table 2 on a store of 31-frame clips: the rollout path and the seam column.
     let store31 = dir.path().join("store31");
     write_synth_with(&SynthConfig { frames: 31, ..cfg }, &store31, 16, None).unwrap();
-    let mut t2 = RunOptions::new(TableKind::Table2, store31, dir.path().join("t2"));
+    let mut t2 = TableOptions::new(store31, dir.path().join("t2"));
     t2.methods = vertex_methods(&[MethodKind::Lerp]).unwrap();
-    t2.clips = 2;
     t2.export_items = 1;
     t2.progress = false;
-    let report = run_protocol(&t2).unwrap();
+    let table2 = Protocol::LongHorizon(LongHorizon {
+        items: Items {
+            clips: 2,
+            ..Items::default()
+        },
+        ..LongHorizon::default()
+    });
+    let report = run_protocol(&table2, &t2).unwrap();
     assert_eq!(report.rows.len(), 1);
     assert!(report.markdown.contains("seam jerk / GT"), "{}", report.markdown);
     assert!(
@@ -300,19 +321,23 @@ fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
 
 #[test]
 fn timing_table_runs_for_a_training_free_method() {
-    use any4d_eval::methods::MethodKind;
-    use any4d_eval::run::{RunOptions, run_protocol, timing_clip, vertex_methods};
+    use any4d_eval::methods::{MethodKind, vertex_methods};
+    use any4d_eval::tables::timing::{Timing, timing_clip};
+    use any4d_eval::tables::{Protocol, TableOptions, run_protocol};
     let c = timing_clip(512, 16).unwrap();
     assert_eq!((c.n_vertices, c.frames), (512, 16));
     assert!(timing_clip(7, 16).is_err(), "a prime count has no 2-row grid");
     let dir = tempfile::tempdir().unwrap();
-    let mut opts = RunOptions::new(TableKind::Table4, dir.path().join("none"), dir.path().join("t4"));
+    let mut opts = TableOptions::new(dir.path().join("none"), dir.path().join("t4"));
     opts.methods = vertex_methods(&[MethodKind::Lerp]).unwrap();
-    opts.timing_vertices = vec![512, 1024];
-    opts.timing_reps = 3;
     opts.progress = false;
     opts.header.device = "cpu (no model)".into();
-    let report = run_protocol(&opts).unwrap();
+    let table4 = Protocol::Timing(Timing {
+        vertices: vec![512, 1024],
+        reps: 3,
+        ..Timing::default()
+    });
+    let report = run_protocol(&table4, &opts).unwrap();
     assert!(
         report.markdown.contains("| lerp | 16 |") && report.markdown.contains("| lerp | 31 |"),
         "{}",

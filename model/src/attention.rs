@@ -1,8 +1,8 @@
-//! Attention shared by the mesh VAEs (SPEC §3.2) and usable by the MMDiT (§4.3): multi-head scaled dot-product
-//! attention with a key padding mask and several value streams pooled by one attention map, and sparse
+//! Attention shared by the mesh VAEs (docs/method.md §3.2) and usable by the MMDiT (§4.3): multi-head scaled
+//! dot-product attention with a key padding mask and several value streams pooled by one attention map, and sparse
 //! neighbour attention over a mesh edge list (segment softmax; a vertex without neighbours gets a zero update).
 //!
-//! Mask polarity: every mask in this crate's API is "true = real / kept" (SPEC §1.3). burn 0.22.1's fused
+//! Mask polarity: every mask in this crate's API is "true = real / kept" (docs/method.md §1.3). burn 0.22.1's fused
 //! `burn::tensor::module::attention` takes the opposite polarity — its `mask` is `[B, H, Lq, Lk]` with
 //! **true = masked out** (filled with −∞ before the softmax; see `attention_fallback` in
 //! burn-backend-0.22.1/src/backend/ops/modules/attention.rs and the flex kernel's "nonzero = masked out"), and
@@ -326,8 +326,8 @@ pub struct NeighbourAttentionConfig {
     pub head_dim: usize,
 }
 
-/// Topology-aware neighbour attention (SPEC §3.2 "Neighbour attention"): x + Out(Attn(LN_q x, LN_k x, LN_v x))
-/// where each vertex attends only to its 1-ring neighbours. Keys are gathered through the edge list and the
+/// Topology-aware neighbour attention (docs/method.md §3.2 "Neighbour attention"): x + Out(Attn(LN_q x, LN_k x, LN_v
+/// x)) where each vertex attends only to its 1-ring neighbours. Keys are gathered through the edge list and the
 /// softmax runs over each vertex's incident edges (segment softmax), so memory is O(E), never O(N²). The
 /// output projection is zero-initialised (the layer starts as the identity) and a vertex without neighbours
 /// gets a zero update.

@@ -1,558 +1,57 @@
-//! Frame-wise mesh VAE of CompletionAny4D (SPEC §3.1–§3.3, equations (V1)–(V3)) and the encoder/decoder body
-//! it shares with the sequence-wise DyMeshVAE ablation (`dymesh_vae.rs`, SPEC §3.5): AnimateAnyMesh's
-//! shape-synchronised attention with a per-frame motion input.
+//! Frame-wise mesh VAE of CompletionAny4D (docs/method.md §3.1–§3.3): the shared body of `mesh_vae.rs` with a
+//! per-frame motion input, so every frame gets its own trajectory latent z_f against the one reference mesh.
 
-use burn::nn::{LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::prelude::*;
-use burn::tensor::Distribution;
-use burn::tensor::activation::gelu;
-use burn::tensor::module::linear;
+use serde::{Deserialize, Serialize};
 
-pub use crate::attention::EdgeList;
-use crate::attention::{
-    NeighbourAttention, NeighbourAttentionConfig, OutInit, SharedMapAttention, SharedMapAttentionConfig,
-};
-use crate::point_embed::{OffsetEmbed, OffsetEmbedConfig, PointEmbed, PointEmbedConfig};
+use crate::mesh_vae::{MeshVae, MeshVaeBody, MeshVaeBodyConfig, Posterior, VaeBatch, VaeEncoding};
+use crate::point_embed::{OffsetEmbed, OffsetEmbedConfig};
 
-/// Whether padded vertex rows are visible as attention keys in the encoder (SPEC §2.4, §9.15).
-#[derive(Config, Debug, Copy, PartialEq, Eq)]
-pub enum PadKeys {
-    /// Padded rows are masked out of the encoder's keys (ours, default): latents do not depend on padding.
-    Masked,
-    /// Padded rows are attended to, as in the AnimateAnyMesh code (reproduces its padding dependence).
-    Visible,
-}
-
-/// Whether the trajectory latent is drawn from the posterior or taken as its mean.
-#[derive(Config, Debug, Copy, PartialEq, Eq)]
-pub enum Posterior {
-    /// z = μ + σ·ξ with ξ ~ N(0, I) from the device RNG (training, latent statistics).
-    Sample,
-    /// z = μ (keyframe latents at inference, SPEC §4.6).
-    Mean,
-}
-
-/// GEGLU feed-forward network: Linear(d → 2·m·d) → x·gelu(gate) → Linear(m·d → d), exact GELU.
-#[derive(Module, Debug)]
-pub struct GegluFfn {
-    proj_in: Linear,
-    proj_out: Linear,
-}
-
-impl GegluFfn {
-    fn new(d: usize, mult: usize, device: &Device) -> Self {
-        Self {
-            proj_in: LinearConfig::new(d, 2 * mult * d).init(device),
-            proj_out: LinearConfig::new(mult * d, d).init(device),
-        }
-    }
-
-    /// # Shapes
-    /// - `x`: `[.., D]` → `[.., D]`
-    pub fn forward<const R: usize>(&self, x: Tensor<R>) -> Tensor<R> {
-        // Same as chunking proj_in's output into (value, gate), but the split is taken on the small weight:
-        // slicing the [.., 2·m·d] activation would cost two full-size zero-filled gradients in the backward.
-        let hidden = self.proj_out.weight.dims()[0];
-        let weight = self.proj_in.weight.val();
-        let bias = self.proj_in.bias.as_ref().map(|b| b.val());
-        let half = |start: usize| {
-            linear(
-                x.clone(),
-                weight.clone().narrow(1, start, hidden),
-                bias.clone().map(|b| b.narrow(0, start, hidden)),
-            )
-        };
-        let (value, gate) = (half(0), half(hidden));
-        self.proj_out.forward(value * gelu(gate))
-    }
-}
-
-/// One shape-synchronised block (SPEC §3.2 encoder/decoder rows): one attention map computed from the shape
-/// stream (queries) and the shape context (keys) pools both the shape context (updates S) and the motion
-/// context (updates M); pre-LayerNorm, residuals, a GEGLU FFN per stream. The encoder uses it as
-/// cross-attention into the per-vertex features, the decoder as self-attention over the P tokens.
-#[derive(Module, Debug)]
-pub struct SyncBlock {
-    norm_q: LayerNorm,
-    norm_k: LayerNorm,
-    norm_v_shape: LayerNorm,
-    norm_v_motion: LayerNorm,
-    attn: SharedMapAttention,
-    norm_ff_shape: LayerNorm,
-    ff_shape: GegluFfn,
-    norm_ff_motion: LayerNorm,
-    ff_motion: GegluFfn,
-}
-
-impl SyncBlock {
-    fn new(d: usize, heads: usize, head_dim: usize, ffn_mult: usize, device: &Device) -> Self {
-        let ln = || LayerNormConfig::new(d).init(device);
-        Self {
-            norm_q: ln(),
-            norm_k: ln(),
-            norm_v_shape: ln(),
-            norm_v_motion: ln(),
-            attn: SharedMapAttentionConfig::new(d, d, vec![d, d], vec![d, d], heads, head_dim).init(device),
-            norm_ff_shape: ln(),
-            ff_shape: GegluFfn::new(d, ffn_mult, device),
-            norm_ff_motion: ln(),
-            ff_motion: GegluFfn::new(d, ffn_mult, device),
-        }
-    }
-
-    /// # Shapes
-    /// - `s`: `[B, P, D]` shape tokens, `m`: `[B, G, P, D]` motion tokens (G groups, e.g. T frames)
-    /// - `ctx_shape`: `[B, Lk, D]`, `ctx_motion`: `[B, G, Lk, D]`, `key_mask`: `[B, Lk]` (true = real)
-    /// - returns the updated `(s, m)`
-    pub fn forward(
-        &self,
-        s: Tensor<3>,
-        m: Tensor<4>,
-        ctx_shape: Tensor<3>,
-        ctx_motion: Tensor<4>,
-        key_mask: Option<Tensor<2, Bool>>,
-    ) -> (Tensor<3>, Tensor<4>) {
-        let values = vec![
-            self.norm_v_shape.forward(ctx_shape.clone()).unsqueeze_dim(1),
-            self.norm_v_motion.forward(ctx_motion),
-        ];
-        let mut pooled = self
-            .attn
-            .forward(
-                self.norm_q.forward(s.clone()),
-                self.norm_k.forward(ctx_shape),
-                values,
-                key_mask,
-            )
-            .into_iter();
-        let (ds, dm) = (
-            pooled.next().expect("shape stream"),
-            pooled.next().expect("motion stream"),
-        );
-        let s = s + ds.squeeze_dim(1);
-        let m = m + dm;
-        let s = s.clone() + self.ff_shape.forward(self.norm_ff_shape.forward(s));
-        let m = m.clone() + self.ff_motion.forward(self.norm_ff_motion.forward(m));
-        (s, m)
-    }
-}
-
-/// Sizes of the encoder/decoder body shared by both mesh VAEs (built by `FrameVaeConfig` / `DyMeshVaeConfig`).
-#[derive(Config, Debug)]
-pub struct MeshVaeBodyConfig {
-    /// Width d.
-    pub width: usize,
-    /// Decoder self-attention heads.
-    pub heads: usize,
-    /// Decoder head width.
-    pub head_dim: usize,
-    /// Encoder cross-attention blocks.
-    pub enc_blocks: usize,
-    /// Decoder self-attention blocks.
-    pub dec_blocks: usize,
-    /// Latent channels per stream (z₀ and each trajectory latent).
-    pub latent_channels: usize,
-    /// Point-embedding frequencies.
-    pub point_freqs: usize,
-    /// GEGLU hidden multiple.
-    pub ffn_mult: usize,
-    /// Padded-key policy in the encoder.
-    pub pad_keys: PadKeys,
-    /// Lower clamp of log σ².
-    pub logvar_min: f64,
-    /// Upper clamp of log σ².
-    pub logvar_max: f64,
-    /// Values decoded per vertex and motion group (3 per frame; 3T for the sequence-wise VAE).
-    pub out_per_group: usize,
-}
-
-/// Encoder/decoder body of both mesh VAEs, generic only in the number of motion groups G (T frames, or 1
-/// whole-clip trajectory) and in the latent and output sizes. The motion-input embedding lives in the VAE.
-#[derive(Module, Debug)]
-pub struct MeshVaeBody {
-    point_embed: PointEmbed,
-    neighbour: NeighbourAttention,
-    encoder: Vec<SyncBlock>,
-    z0_head: Linear,
-    mu_head: Linear,
-    logvar_head: Linear,
-    z0_in: Linear,
-    z_in: Linear,
-    decoder: Vec<SyncBlock>,
-    query_proj: Linear,
-    query_norm: LayerNorm,
-    token_norm_k: LayerNorm,
-    token_norm_v: LayerNorm,
-    query_attn: SharedMapAttention,
-    to_offsets: Linear,
-    #[module(skip)]
-    pad_keys: PadKeys,
-    #[module(skip)]
-    logvar_range: (f64, f64),
-}
-
-impl MeshVaeBodyConfig {
-    /// Builds the body on `device`.
-    pub fn init(&self, device: &Device) -> MeshVaeBody {
-        let (d, c) = (self.width, self.latent_channels);
-        let lin = |a: usize, b: usize| LinearConfig::new(a, b).init(device);
-        MeshVaeBody {
-            point_embed: PointEmbedConfig::new(d).with_point_freqs(self.point_freqs).init(device),
-            neighbour: NeighbourAttentionConfig::new(d, 2 * d).init(device),
-            // Encoder: one head of width d (AAM).
-            encoder: (0..self.enc_blocks)
-                .map(|_| SyncBlock::new(d, 1, d, self.ffn_mult, device))
-                .collect(),
-            z0_head: lin(d, c),
-            mu_head: lin(d, c),
-            logvar_head: lin(d, c),
-            z0_in: lin(c, d),
-            z_in: lin(c, d),
-            decoder: (0..self.dec_blocks)
-                .map(|_| SyncBlock::new(d, self.heads, self.head_dim, self.ffn_mult, device))
-                .collect(),
-            query_proj: lin(d, 2 * d),
-            query_norm: LayerNormConfig::new(2 * d).init(device),
-            token_norm_k: LayerNormConfig::new(d).init(device),
-            token_norm_v: LayerNormConfig::new(d).init(device),
-            // Query decoding: one head of width 2d, keys = shape tokens, values = motion tokens, zero-init out.
-            query_attn: SharedMapAttentionConfig::new(2 * d, d, vec![d], vec![2 * d], 1, 2 * d)
-                .with_out_init(OutInit::Zeros)
-                .init(device),
-            to_offsets: lin(2 * d, self.out_per_group),
-            pad_keys: self.pad_keys,
-            logvar_range: (self.logvar_min, self.logvar_max),
-        }
-    }
-}
-
-/// Gathers the FPS rows of per-vertex features.
-///
-/// # Shapes
-/// - `x`: `[B, G, N, D]`, `fps`: `[B, P]` → `[B, G, P, D]`
-pub fn gather_tokens(x: Tensor<4>, fps: Tensor<2, Int>) -> Tensor<4> {
-    let [b, g, n, d] = x.dims();
-    let p = fps.dims()[1];
-    // Whole rows of the flattened [B·G·N, D] features (row (b·G + g)·N + fps[b, p]): a row select, whose
-    // backward is one row scatter, instead of an element-wise gather over a [B, G, P, D] index.
-    let base = Tensor::<1, Int>::arange(0..(b * g) as i64, &fps.device()).mul_scalar(n as i64);
-    let rows = base.reshape([b, g, 1]) + fps.reshape([b, 1, p]);
-    x.reshape([b * g * n, d])
-        .select(0, rows.reshape([b * g * p]))
-        .reshape([b, g, p, d])
-}
-
-impl MeshVaeBody {
-    /// Per-vertex shape features E₀ of the reference mesh: point embedding, then neighbour attention.
-    ///
-    /// # Shapes
-    /// - `reference`: `[B, N, 3]` → `[B, N, D]`
-    pub fn encode_shape(&self, reference: Tensor<3>, edges: &EdgeList) -> Tensor<3> {
-        self.neighbour.forward(self.point_embed.forward(reference), edges)
-    }
-
-    /// Encoder blocks and bottleneck: returns `(z₀, μ, log σ²)`.
-    ///
-    /// # Shapes
-    /// - `e0`: `[B, N, D]`, `motion`: `[B, G, N, D]` embedded motion input of every vertex
-    /// - `vmask`: `[B, N]` (true = real vertex), `fps`: `[B, P]`
-    /// - returns `z₀` `[B, P, C]`, `μ` and `log σ²` `[B, G, P, C]`
-    pub fn encode_tokens(
-        &self,
-        e0: Tensor<3>,
-        motion: Tensor<4>,
-        vmask: Tensor<2, Bool>,
-        fps: Tensor<2, Int>,
-    ) -> (Tensor<3>, Tensor<4>, Tensor<4>) {
-        let key_mask = match self.pad_keys {
-            PadKeys::Masked => Some(vmask),
-            PadKeys::Visible => None,
-        };
-        let mut s: Tensor<3> = gather_tokens(e0.clone().unsqueeze_dim(1), fps.clone()).squeeze_dim(1);
-        let mut m = gather_tokens(motion.clone(), fps);
-        for block in &self.encoder {
-            (s, m) = block.forward(s, m, e0.clone(), motion.clone(), key_mask.clone());
-        }
-        let z0 = self.z0_head.forward(s);
-        let mu = self.mu_head.forward(m.clone());
-        let logvar = self
-            .logvar_head
-            .forward(m)
-            .clamp(self.logvar_range.0, self.logvar_range.1);
-        (z0, mu, logvar)
-    }
-
-    /// Decoder blocks and query decoding: per-vertex outputs for every motion group.
-    ///
-    /// # Shapes
-    /// - `e0`: `[B, N, D]`, `z0`: `[B, P, C]`, `z`: `[B, G, P, C]`
-    /// - returns `[B, G, N, out_per_group]` (offsets from the reference)
-    pub fn decode_offsets(&self, e0: Tensor<3>, z0: Tensor<3>, z: Tensor<4>) -> Tensor<4> {
-        let mut s = self.z0_in.forward(z0);
-        let mut m = self.z_in.forward(z);
-        for block in &self.decoder {
-            (s, m) = block.forward(s.clone(), m.clone(), s, m, None);
-        }
-        let q = self.query_norm.forward(self.query_proj.forward(e0));
-        let k = self.token_norm_k.forward(s);
-        let v = self.token_norm_v.forward(m);
-        // to_offsets(query_attn(q, k, v)), with the value, output and offset projections multiplied first.
-        self.query_attn.forward_then(q, k, v, None, &self.to_offsets)
-    }
-}
-
-/// Draws z = μ + σ·ξ, σ = exp(½ log σ²), ξ from the device RNG (SPEC §3.2 "Bottleneck").
-///
-/// # Shapes
-/// - `mu`, `logvar`: `[B, G, P, C]` → `[B, G, P, C]`
-pub fn sample(mu: Tensor<4>, logvar: Tensor<4>) -> Tensor<4> {
-    let noise = mu.random_like(Distribution::Normal(0.0, 1.0));
-    mu + logvar.mul_scalar(0.5).exp() * noise
-}
-
-/// (V1) mean per-vertex Euclidean distance over the real vertices of all frames of the batch:
-/// Σ_{b,f,v real} ‖x̂ − x̄‖₂ / (T · Σ_b N_v) (AAM's batch form of SPEC (V1)).
-///
-/// # Shapes
-/// - `pred`, `target`: `[B, T, N, 3]`, `vmask`: `[B, N]` (true = real) → `[1]`
-pub fn reconstruction_loss(pred: Tensor<4>, target: Tensor<4>, vmask: Tensor<2, Bool>) -> Tensor<1> {
-    let [b, t, n, _] = pred.dims();
-    let padded = vmask.clone().bool_not().reshape([b, 1, n]).expand([b, t, n]);
-    let sq: Tensor<3> = (pred - target).powi_scalar(2).sum_dim(3).squeeze_dim(3);
-    // Padded rows are replaced before the square root, so neither their value nor a zero distance
-    // (∂√x at 0) can reach the gradient; clamp_min keeps real rows with zero error finite.
-    let dist = sq
-        .mask_fill(padded.clone(), 1.0)
-        .clamp_min(1e-20)
-        .sqrt()
-        .mask_fill(padded, 0.0);
-    let real = vmask.int().sum().float().mul_scalar(t as f64);
-    dist.sum() / real
-}
-
-/// (V2) KL divergence of N(μ, σ²) from N(0, I): mean over every element (tokens, channels, groups, batch)
-/// of ½(μ² + σ² − 1 − log σ²).
-///
-/// # Shapes
-/// - `mu`, `logvar`: `[B, G, P, C]` → `[1]`
-pub fn kl_loss(mu: Tensor<4>, logvar: Tensor<4>) -> Tensor<1> {
-    (mu.powi_scalar(2) + logvar.clone().exp() - logvar)
-        .sub_scalar(1.0)
-        .mul_scalar(0.5)
-        .mean()
-}
-
-/// Loss terms of a VAE step.
-#[derive(Debug, Clone)]
-pub struct VaeLoss {
-    /// (V3) rec + kl_weight · kl, `[1]`.
-    pub total: Tensor<1>,
-    /// (V1) mean per-vertex distance, `[1]`.
-    pub rec: Tensor<1>,
-    /// (V2) KL term, `[1]`.
-    pub kl: Tensor<1>,
-}
-
-impl VaeLoss {
-    /// (V3) L = L_rec + β · L_KL.
-    pub fn new(rec: Tensor<1>, kl: Tensor<1>, kl_weight: f64) -> Self {
-        let total = rec.clone() + kl.clone().mul_scalar(kl_weight);
-        Self { total, rec, kl }
-    }
-}
-
-/// Encoder outputs of one batch.
-#[derive(Debug, Clone)]
-pub struct VaeEncoding {
-    /// Per-vertex shape features E₀, `[B, N, D]`.
-    pub e0: Tensor<3>,
-    /// Deterministic shape latent z₀, `[B, P, C]`.
-    pub z0: Tensor<3>,
-    /// Posterior mean of the trajectory latents, `[B, G, P, C]` (G = T frame-wise, 1 sequence-wise).
-    pub mu: Tensor<4>,
-    /// Posterior log-variance (clamped), `[B, G, P, C]`.
-    pub logvar: Tensor<4>,
-}
-
-/// One training batch of either mesh VAE, in the normalized, padded frame of SPEC §2.3–§2.4.
-#[derive(Debug, Clone)]
-pub struct VaeBatch {
-    /// Reference mesh x̄₀ (clip frame 0), `[B, N, 3]`.
-    pub reference: Tensor<3>,
-    /// All frames x̄_f, `[B, T, N, 3]`.
-    pub frames: Tensor<4>,
-    /// Real-vertex mask, `[B, N]`, true = real.
-    pub vmask: Tensor<2, Bool>,
-    /// FPS token indices into the vertex axis, `[B, P]`.
-    pub fps: Tensor<2, Int>,
-    /// Mesh edges of the batch.
-    pub edges: EdgeList,
-}
-
-/// The interface both mesh VAEs share (frame-wise [`FrameVae`], sequence-wise
-/// [`crate::dymesh_vae::DyMeshVae`]): each supplies its body, encoder, decoder and KL weight β; the shape
-/// features, posterior sample, reconstruction and (V1)–(V3) loss are written once here. G is the latent
-/// group axis: T frame-wise, 1 sequence-wise.
-pub trait MeshVaeModel: Module + Clone {
-    /// Encodes the clip against the reference mesh.
-    ///
-    /// # Shapes
-    /// - `reference`: `[B, N, 3]`, `frames`: `[B, T, N, 3]`, `vmask`: `[B, N]`, `fps`: `[B, P]`
-    /// - returns `e0` `[B, N, D]`, `z0` `[B, P, C]`, `mu`/`logvar` `[B, G, P, C]`
-    fn encode(
-        &self,
-        reference: Tensor<3>,
-        frames: Tensor<4>,
-        vmask: Tensor<2, Bool>,
-        fps: Tensor<2, Int>,
-        edges: &EdgeList,
-    ) -> VaeEncoding;
-
-    /// Decodes every frame: x̂_{t,v} = x̄_{0,v} + o_{t,v} (SPEC §3.2 "Output"). Padded rows get values too; the
-    /// loss and metrics ignore them.
-    ///
-    /// # Shapes
-    /// - `e0`: `[B, N, D]`, `reference`: `[B, N, 3]`, `z0`: `[B, P, C]`, `z`: `[B, G, P, C]`
-    /// - returns `[B, T, N, 3]`
-    fn decode(&self, e0: Tensor<3>, reference: Tensor<3>, z0: Tensor<3>, z: Tensor<4>) -> Tensor<4>;
-
-    /// β of (V3).
-    fn kl_weight(&self) -> f64;
-
-    /// The encoder/decoder body both VAEs share.
-    fn body(&self) -> &MeshVaeBody;
-
-    /// Per-vertex shape features E₀ (point embedding + neighbour attention).
-    ///
-    /// # Shapes
-    /// - `reference`: `[B, N, 3]` → `[B, N, D]`
-    fn encode_shape(&self, reference: Tensor<3>, edges: &EdgeList) -> Tensor<3> {
-        self.body().encode_shape(reference, edges)
-    }
-
-    /// Reparameterised sample z = μ + σ·ξ.
-    ///
-    /// # Shapes
-    /// - `mu`, `logvar`: `[B, G, P, C]` → `[B, G, P, C]`
-    fn sample(&self, mu: Tensor<4>, logvar: Tensor<4>) -> Tensor<4> {
-        sample(mu, logvar)
-    }
-
-    /// [`Self::encode`] of a whole batch.
-    ///
-    /// # Shapes
-    /// - returns `e0` `[B, N, D]`, `z0` `[B, P, C]`, `mu`/`logvar` `[B, G, P, C]`
-    fn encode_vae_batch(&self, batch: &VaeBatch) -> VaeEncoding {
-        self.encode(
-            batch.reference.clone(),
-            batch.frames.clone(),
-            batch.vmask.clone(),
-            batch.fps.clone(),
-            &batch.edges,
-        )
-    }
-
-    /// Encodes and decodes a batch; returns the reconstruction and the encoding.
-    ///
-    /// # Shapes
-    /// - returns `[B, T, N, 3]` and the [`Self::encode`] outputs
-    fn reconstruct(&self, batch: &VaeBatch, posterior: Posterior) -> (Tensor<4>, VaeEncoding) {
-        let enc = self.encode_vae_batch(batch);
-        let z = match posterior {
-            Posterior::Sample => self.sample(enc.mu.clone(), enc.logvar.clone()),
-            Posterior::Mean => enc.mu.clone(),
-        };
-        let recon = self.decode(enc.e0.clone(), batch.reference.clone(), enc.z0.clone(), z);
-        (recon, enc)
-    }
-
-    /// Training loss (V1)–(V3) with a posterior sample.
-    ///
-    /// # Shapes
-    /// - every term `[1]`
-    fn loss(&self, batch: &VaeBatch) -> VaeLoss {
-        let (recon, enc) = self.reconstruct(batch, Posterior::Sample);
-        let rec = reconstruction_loss(recon, batch.frames.clone(), batch.vmask.clone()); // (V1)
-        let kl = kl_loss(enc.mu, enc.logvar); // (V2)
-        VaeLoss::new(rec, kl, self.kl_weight()) // (V3)
-    }
-}
-
-/// Configuration of the frame-wise mesh VAE (SPEC §3.2, §3.5; paper values are the defaults).
-#[derive(Config, Debug)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct FrameVaeConfig {
-    /// Width d (P-Table S4: 128).
-    #[config(default = 128)]
-    pub width: usize,
-    /// Decoder self-attention heads (8).
-    #[config(default = 8)]
-    pub heads: usize,
-    /// Decoder head width (64, AAM).
-    #[config(default = 64)]
-    pub head_dim: usize,
-    /// Encoder cross-attention blocks (8); the encoder attention is one head of width d.
-    #[config(default = 8)]
-    pub enc_blocks: usize,
-    /// Decoder self-attention blocks (8).
-    #[config(default = 8)]
-    pub dec_blocks: usize,
-    /// Latent channels C per slot (12): z₀ and each frame's z_f.
-    #[config(default = 12)]
-    pub latent_channels: usize,
-    /// Point-embedding frequencies 2^k·π (8 → 51 Fourier values).
-    #[config(default = 8)]
-    pub point_freqs: usize,
     /// Offset-embedding frequencies 2^j·π (10 → 63 Fourier values).
-    #[config(default = 10)]
     pub offset_freqs: usize,
-    /// GEGLU multiple m: d → 2m·d, gate → m·d → d (4).
-    #[config(default = 4)]
-    pub ffn_mult: usize,
-    /// Padded vertices as encoder keys (SPEC §9.15): masked (ours) or visible (AAM).
-    #[config(default = "PadKeys::Masked")]
-    pub pad_keys: PadKeys,
-    /// Lower clamp of log σ² (−30).
-    #[config(default = -30.0)]
-    pub logvar_min: f64,
-    /// Upper clamp of log σ² (20).
-    #[config(default = 20.0)]
-    pub logvar_max: f64,
     /// KL weight β of (V3) (P-Table S4: 1e-4; AAM code 1e-6).
-    #[config(default = 1e-4)]
     pub kl_weight: f64,
+    /// The shared body (`[model.body]`).
+    pub body: MeshVaeBodyConfig,
 }
 
 impl FrameVaeConfig {
+    /// The paper's size (P-Table S4): d 128, C 12.
+    pub fn paper() -> Self {
+        Self {
+            offset_freqs: 10,
+            kl_weight: 1e-4,
+            body: MeshVaeBodyConfig::paper(128, 12),
+        }
+    }
+
     /// A small configuration for unit tests (d 32, 2 + 2 blocks, 2 heads of 16, C = 4).
     pub fn tiny() -> Self {
-        Self::new()
-            .with_width(32)
-            .with_heads(2)
-            .with_head_dim(16)
-            .with_enc_blocks(2)
-            .with_dec_blocks(2)
-            .with_latent_channels(4)
+        Self {
+            body: MeshVaeBodyConfig::tiny(),
+            ..Self::paper()
+        }
+    }
+
+    /// Checks the sizes; the error names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.offset_freqs == 0 || self.kl_weight.is_nan() || self.kl_weight < 0.0 {
+            return Err(format!(
+                "model.offset_freqs must be positive and model.kl_weight non-negative, got {} and {}",
+                self.offset_freqs, self.kl_weight
+            ));
+        }
+        self.body.validate()
     }
 
     /// Builds the VAE on `device`.
     pub fn init(&self, device: &Device) -> FrameVae {
-        let body = MeshVaeBodyConfig {
-            width: self.width,
-            heads: self.heads,
-            head_dim: self.head_dim,
-            enc_blocks: self.enc_blocks,
-            dec_blocks: self.dec_blocks,
-            latent_channels: self.latent_channels,
-            point_freqs: self.point_freqs,
-            ffn_mult: self.ffn_mult,
-            pad_keys: self.pad_keys,
-            logvar_min: self.logvar_min,
-            logvar_max: self.logvar_max,
-            out_per_group: 3,
-        };
         FrameVae {
-            body: body.init(device),
-            offset_embed: OffsetEmbedConfig::new(3, self.width)
+            body: self.body.init(3, device),
+            offset_embed: OffsetEmbedConfig::new(3, self.body.width)
                 .with_offset_freqs(self.offset_freqs)
                 .init(device),
             kl_weight: self.kl_weight,
@@ -560,7 +59,7 @@ impl FrameVaeConfig {
     }
 }
 
-/// Frame-wise mesh VAE (SPEC §3): the shape stream is computed once per clip, every frame's offset from the
+/// Frame-wise mesh VAE (docs/method.md §3): the shape stream is computed once per clip, every frame's offset from the
 /// reference is encoded into its own trajectory latent z_f with the same FPS tokens, and decoding predicts
 /// each frame as the reference plus a per-vertex offset.
 #[derive(Module, Debug)]
@@ -572,46 +71,30 @@ pub struct FrameVae {
 }
 
 impl FrameVae {
-    /// Encodes and decodes a batch (see [`MeshVaeModel::reconstruct`]).
+    /// Encodes and decodes a batch (see [`MeshVae::reconstruct`]).
     ///
     /// # Shapes
     /// - returns `[B, T, N, 3]` and the encoding (`mu`/`logvar` `[B, T, P, C]`)
     pub fn reconstruct(&self, batch: &VaeBatch, posterior: Posterior) -> (Tensor<4>, VaeEncoding) {
-        MeshVaeModel::reconstruct(self, batch, posterior)
+        MeshVae::reconstruct(self, batch, posterior)
     }
 }
 
-impl MeshVaeModel for FrameVae {
-    /// Encodes every frame against the reference mesh.
+impl MeshVae for FrameVae {
+    /// Each frame's offset from the reference, embedded on its own: one motion group per frame.
     ///
     /// # Shapes
-    /// - `reference`: `[B, N, 3]`, `frames`: `[B, T, N, 3]`, `vmask`: `[B, N]`, `fps`: `[B, P]`
-    /// - returns `e0` `[B, N, D]`, `z0` `[B, P, C]`, `mu`/`logvar` `[B, T, P, C]`
-    fn encode(
-        &self,
-        reference: Tensor<3>,
-        frames: Tensor<4>,
-        vmask: Tensor<2, Bool>,
-        fps: Tensor<2, Int>,
-        edges: &EdgeList,
-    ) -> VaeEncoding {
-        let e0 = self.encode_shape(reference.clone(), edges);
-        // r_f = x̄_f − x̄₀ for every frame (frame 0 included).
-        let offsets = frames - reference.unsqueeze_dim(1);
-        let motion = self.offset_embed.forward(offsets);
-        let (z0, mu, logvar) = self.body.encode_tokens(e0.clone(), motion, vmask, fps);
-        VaeEncoding { e0, z0, mu, logvar }
+    /// - `offsets`: `[B, T, N, 3]` → `[B, T, N, D]`
+    fn embed_motion(&self, offsets: Tensor<4>) -> Tensor<4> {
+        self.offset_embed.forward(offsets)
     }
 
-    /// Decodes every frame: x̂_{f,v} = x̄_{0,v} + o_{f,v} (SPEC §3.2 "Output"). Padded rows get values too; the
-    /// loss and metrics ignore them.
+    /// The head decodes 3 values per frame: the offsets as they are.
     ///
     /// # Shapes
-    /// - `e0`: `[B, N, D]`, `reference`: `[B, N, 3]`, `z0`: `[B, P, C]`, `z`: `[B, T, P, C]`
-    /// - returns `[B, T, N, 3]`
-    fn decode(&self, e0: Tensor<3>, reference: Tensor<3>, z0: Tensor<3>, z: Tensor<4>) -> Tensor<4> {
-        let offsets = self.body.decode_offsets(e0, z0, z);
-        reference.unsqueeze_dim(1) + offsets
+    /// - `decoded`: `[B, T, N, 3]` → `[B, T, N, 3]`
+    fn frame_offsets(&self, decoded: Tensor<4>) -> Tensor<4> {
+        decoded
     }
 
     fn kl_weight(&self) -> f64 {
@@ -620,109 +103,5 @@ impl MeshVaeModel for FrameVae {
 
     fn body(&self) -> &MeshVaeBody {
         &self.body
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use std::time::Instant;
-
-    /// A `configs/vae/tiny.toml`-sized micro-batch: B 4, T 16, N 768 (a strip mesh), P 512.
-    fn bench_batch(device: &Device) -> VaeBatch {
-        let (b, t, n, p) = (4usize, 16usize, 768usize, 512usize);
-        let reference = Tensor::<3>::random([b, n, 3], Distribution::Uniform(-1.0, 1.0), device);
-        let frames = reference.clone().unsqueeze_dim::<4>(1).repeat_dim(1, t)
-            + Tensor::<4>::random([b, t, n, 3], Distribution::Normal(0.0, 0.05), device);
-        let strip: Vec<[u32; 2]> = (0..n as u32)
-            .flat_map(|v| {
-                [v + 1, v + 2]
-                    .into_iter()
-                    .filter(|&w| (w as usize) < n)
-                    .map(move |w| [v, w])
-            })
-            .collect();
-        let fps: Vec<i64> = (0..b).flat_map(|_| (0..p as i64).map(|i| i * 3 / 2)).collect();
-        VaeBatch {
-            reference,
-            frames,
-            vmask: Tensor::from_data(TensorData::new(vec![true; b * n], [b, n]), device),
-            fps: Tensor::from_data(TensorData::new(fps, [b, p]), device),
-            edges: EdgeList::new(&vec![strip; b], n, device).expect("valid strip edges"),
-        }
-    }
-
-    #[test]
-    fn gather_tokens_picks_the_fps_rows_of_every_group() {
-        let device = Device::flex();
-        // x[b, g, v, c] = 1000·b + 100·g + 10·v + c.
-        let (b, g, n, d) = (2usize, 3usize, 5usize, 2usize);
-        let x: Vec<f32> = (0..b * g * n * d)
-            .map(|i| {
-                let (bi, gi, vi, ci) = (i / (g * n * d), i / (n * d) % g, i / d % n, i % d);
-                (1000 * bi + 100 * gi + 10 * vi + ci) as f32
-            })
-            .collect();
-        let x = Tensor::<4>::from_data(TensorData::new(x, [b, g, n, d]), &device);
-        let fps = Tensor::<2, Int>::from_data(TensorData::new(vec![4i64, 0, 2, 3], [2, 2]), &device);
-        let got = gather_tokens(x, fps).into_data().try_to_vec::<f32>().expect("f32 data");
-        let mut want = Vec::new();
-        for (bi, picks) in [[4usize, 0], [2, 3]].iter().enumerate() {
-            for gi in 0..g {
-                for &vi in picks {
-                    want.extend((0..d).map(|ci| (1000 * bi + 100 * gi + 10 * vi + ci) as f32));
-                }
-            }
-        }
-        assert_eq!(got, want);
-    }
-
-    fn median_ms(runs: usize, mut f: impl FnMut()) -> f64 {
-        f();
-        let mut times: Vec<f64> = (0..runs)
-            .map(|_| {
-                let start = Instant::now();
-                f();
-                start.elapsed().as_secs_f64() * 1e3
-            })
-            .collect();
-        times.sort_by(f64::total_cmp);
-        times[runs / 2]
-    }
-
-    /// Times forward + backward of the tiny frame-wise VAE on one micro-batch, whole and by stage.
-    /// Run: `cargo test -p any4d-model --lib frame_vae::tests::tiny_step_timing -- --ignored --nocapture`
-    #[test]
-    #[ignore = "timing only, about a minute on 2 cores"]
-    fn tiny_step_timing() {
-        let device = Device::flex().autodiff();
-        device.seed(1);
-        let vae = FrameVaeConfig::tiny().init(&device);
-        let b = bench_batch(&device);
-        let step = median_ms(3, || {
-            let grads = vae.loss(&b).total.backward();
-            drop(grads);
-        });
-        let forward = median_ms(3, || {
-            let loss = vae.loss(&b).total.into_scalar::<f32>();
-            assert!(loss.is_finite());
-        });
-        let shape = median_ms(3, || {
-            drop(vae.encode_shape(b.reference.clone(), &b.edges).sum().backward());
-        });
-        let encode = median_ms(3, || {
-            let e = vae.encode(
-                b.reference.clone(),
-                b.frames.clone(),
-                b.vmask.clone(),
-                b.fps.clone(),
-                &b.edges,
-            );
-            drop((e.z0.sum() + e.mu.sum() + e.logvar.sum()).backward());
-        });
-        println!(
-            "tiny frame VAE, B 4 T 16 N 768 P 512: forward+backward {step:.0} ms (forward {forward:.0} ms); \
-             fwd+bwd up to E0 {shape:.0} ms, up to the encoder outputs {encode:.0} ms"
-        );
     }
 }

@@ -1,4 +1,4 @@
-//! Global latent standardization (SPEC §3.4, AAM code): one scalar mean and standard deviation for all shape
+//! Global latent standardization (docs/method.md §3.4, AAM code): one scalar mean and standard deviation for all shape
 //! entries z₀ and one for all trajectory entries z_f, accumulated over the training set with Welford/Chan
 //! merging; the rectified flow works on (z − mean)/std. The train crate stores [`LatentStats`] with the VAE
 //! checkpoint.

@@ -1,10 +1,13 @@
-//! Networks of CompletionAny4D (SPEC §3–§5): frame-wise mesh VAE, keyframe-conditioned rectified-flow MMDiT,
+//! Networks of CompletionAny4D (docs/method.md §3–§5): frame-wise mesh VAE, keyframe-conditioned rectified-flow MMDiT,
 //! the sequence-wise DyMeshVAE ablation, text encoders. No file IO except weight loading.
 
+pub mod any_vae;
 pub mod attention;
+pub mod bench;
 pub mod dymesh_vae;
 pub mod frame_vae;
 pub mod latent_stats;
+pub mod mesh_vae;
 pub mod mmdit;
 pub mod point_embed;
 pub mod rectified_flow;

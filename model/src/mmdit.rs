@@ -1,5 +1,5 @@
-//! Keyframe-conditioned rectified-flow backbone: the MMDiT of SPEC §4.1 and §4.3 (CompletionAny4D P-Eq. 9 and 14,
-//! on AnimateAnyMesh's "40m" CogX-style MMDiT), plus the slot-major token layout of (R3).
+//! Keyframe-conditioned rectified-flow backbone: the MMDiT of docs/method.md §4.1 and §4.3 (CompletionAny4D P-Eq. 9 and
+//! 14, on AnimateAnyMesh's "40m" CogX-style MMDiT), plus the slot-major token layout of (R3).
 //!
 //! Reading order as in DiT's `models.py`: helpers → timestep embedder → block (`pre_attention` / joint attention /
 //! `post_attention`, as in SD3's `mmdit.py`) → model. One token per FPS point; the 16 frames live in the channels.
@@ -11,15 +11,15 @@ use burn::tensor::module::attention;
 use burn::tensor::ops::AttentionModuleOptions;
 use serde::{Deserialize, Serialize};
 
-/// Frequencies of the timestep sinusoid (SPEC §4.3): the embedding has `2 · TIME_FREQS` values `[cos ‖ sin]`.
+/// Frequencies of the timestep sinusoid (docs/method.md §4.3): the embedding has `2 · TIME_FREQS` values `[cos ‖ sin]`.
 pub const TIME_FREQS: usize = 256;
 /// Epsilon of the affine-free LayerNorm in front of the joint attention (AAM `LN0`).
 const PRE_NORM_EPS: f64 = 1e-6;
 
-/// How keyframes reach the network (SPEC §8 `rf.kf_mode`).
+/// How keyframes condition the network (docs/method.md §8 A1, X2: `model.conditioning`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum KfMode {
+pub enum KeyframeConditioning {
     /// Trained masked conditioning (the paper's method): clean keyframes + mask channels, 221 inputs (R3).
     InputMask,
     /// Sampling-time replacement with noised keyframes on the non-keyframe network, 204 inputs (R7)–(R8).
@@ -30,15 +30,18 @@ pub enum KfMode {
     None,
 }
 
-impl KfMode {
+impl KeyframeConditioning {
     /// Whether the input carries one mask channel per slot.
     pub fn has_mask_channels(self) -> bool {
-        matches!(self, KfMode::InputMask | KfMode::ImputeUntil)
+        matches!(
+            self,
+            KeyframeConditioning::InputMask | KeyframeConditioning::ImputeUntil
+        )
     }
 
     /// Whether `build_input` overwrites keyframe slots with the given keyframe latents.
     pub fn replaces_keyframes(self) -> bool {
-        !matches!(self, KfMode::None)
+        !matches!(self, KeyframeConditioning::None)
     }
 }
 
@@ -58,13 +61,14 @@ pub struct MmditConfig {
     pub channels: usize,
     /// Width D_txt of the text encoder's token states (768 for CLIP ViT-L/14).
     pub text_dim: usize,
-    /// How keyframes are given to the network.
-    pub kf_mode: KfMode,
+    /// How keyframes are given to the network (`kf_mode` in run folders written before the rename).
+    #[serde(alias = "kf_mode")]
+    pub conditioning: KeyframeConditioning,
 }
 
 impl MmditConfig {
-    /// The paper's size (SPEC §4.3) for a given keyframe mode and text width.
-    pub fn paper(kf_mode: KfMode, text_dim: usize) -> Self {
+    /// The paper's size (docs/method.md §4.3) for a given keyframe mode and text width.
+    pub fn paper(conditioning: KeyframeConditioning, text_dim: usize) -> Self {
         Self {
             width: 512,
             blocks: 12,
@@ -72,7 +76,7 @@ impl MmditConfig {
             frames: 16,
             channels: 12,
             text_dim,
-            kf_mode,
+            conditioning,
         }
     }
 
@@ -85,13 +89,13 @@ impl MmditConfig {
             frames: 4,
             channels: 3,
             text_dim: 8,
-            kf_mode: KfMode::InputMask,
+            conditioning: KeyframeConditioning::InputMask,
         }
     }
 
-    /// Input channels per token: (T+1)(C+1) with mask channels, (T+1)·C without (SPEC §4.1).
+    /// Input channels per token: (T+1)(C+1) with mask channels, (T+1)·C without (docs/method.md §4.1).
     pub fn in_channels(&self) -> usize {
-        let per_slot = self.channels + usize::from(self.kf_mode.has_mask_channels());
+        let per_slot = self.channels + usize::from(self.conditioning.has_mask_channels());
         (self.frames + 1) * per_slot
     }
 
@@ -235,7 +239,7 @@ impl MmditConfig {
     }
 }
 
-/// Initialisation of one Linear layer (AAM code, SPEC §4.3).
+/// Initialisation of one Linear layer (AAM code, docs/method.md §4.3).
 #[derive(Clone, Copy)]
 enum LinearInit {
     /// PyTorch's default `U(±1/√fan_in)` for weight and bias (burn's default Linear init is the same).
@@ -280,7 +284,7 @@ fn modulate(x: Tensor<3>, shift: Tensor<3>, scale: Tensor<3>) -> Tensor<3> {
     x.clone() * scale + x + shift
 }
 
-/// Sinusoid of the raw flow time: `f_i = exp(−ln(10⁴)·i/256)`, output `[cos(τ f) ‖ sin(τ f)]` (SPEC §4.3).
+/// Sinusoid of the raw flow time: `f_i = exp(−ln(10⁴)·i/256)`, output `[cos(τ f) ‖ sin(τ f)]` (docs/method.md §4.3).
 ///
 /// # Shapes
 /// - tau: `[B]` (τ ∈ [0, 1], τ = 0 noise, τ = 1 data)
@@ -296,7 +300,7 @@ pub fn timestep_sinusoid(tau: Tensor<1>) -> Tensor<2> {
 }
 
 // ---------------------------------------------------------------------------------------------------------------
-// Token layout (SPEC §4.1, (R3))
+// Token layout (docs/method.md §4.1, (R3))
 
 /// Keyframe replacement `m ⊙ z_key + (1 − m) ⊙ x` — the first half of (R3), and of (R7) when `z_key` is noised.
 ///
@@ -312,17 +316,22 @@ pub fn replace_keyframes(x: Tensor<4>, z_key: Tensor<4>, mask: Tensor<2>) -> Ten
 }
 
 /// Interleaves the slots into the network input: slot-major `[z_s(C) ‖ m̂_s(1)]`, s = 0..T, with m̂ = [0; m]
-/// (mask channels only for [`KfMode::has_mask_channels`]). The second half of (R3).
+/// (mask channels only for [`KeyframeConditioning::has_mask_channels`]). The second half of (R3).
 ///
 /// # Shapes
 /// - z0: `[B, P, C]` shape latent (slot 0)
 /// - state: `[B, P, T, C]` trajectory slots 1..T (already replaced where wanted)
 /// - mask: `[B, T]` mask channel values, 1 = observed
 /// - output: `[B, P, (T+1)(C+1)]` or `[B, P, (T+1)·C]`
-pub fn assemble_input(z0: Tensor<3>, state: Tensor<4>, mask: Tensor<2>, kf_mode: KfMode) -> Tensor<3> {
+pub fn assemble_input(
+    z0: Tensor<3>,
+    state: Tensor<4>,
+    mask: Tensor<2>,
+    conditioning: KeyframeConditioning,
+) -> Tensor<3> {
     let [b, p, t, c] = state.dims();
     let slots = Tensor::cat(vec![z0.unsqueeze_dim::<4>(2), state], 2); // [B, P, T+1, C]
-    if !kf_mode.has_mask_channels() {
+    if !conditioning.has_mask_channels() {
         return slots.reshape([b, p, (t + 1) * c]);
     }
     let device = mask.device();
@@ -331,19 +340,25 @@ pub fn assemble_input(z0: Tensor<3>, state: Tensor<4>, mask: Tensor<2>, kf_mode:
     Tensor::cat(vec![slots, m_hat], 3).reshape([b, p, (t + 1) * (c + 1)])
 }
 
-/// The network input of (R3): keyframe slots take `z_key` where `mask` = 1 (not for [`KfMode::None`]), slot 0 takes
+/// The network input of (R3): keyframe slots take `z_key` where `mask` = 1 (not for [`KeyframeConditioning::None`]), slot 0 takes
 /// the clean shape latent, and mask channels m̂ = [0; m] follow each slot when the mode has them.
 ///
 /// # Shapes
 /// - z0: `[B, P, C]`; x, z_key: `[B, P, T, C]`; mask: `[B, T]` (1 = observed)
 /// - output: `[B, P, in_channels]` with in_channels = (T+1)(C+1) or (T+1)·C
-pub fn build_input(z0: Tensor<3>, x: Tensor<4>, mask: Tensor<2>, z_key: Tensor<4>, kf_mode: KfMode) -> Tensor<3> {
-    let state = if kf_mode.replaces_keyframes() {
+pub fn build_input(
+    z0: Tensor<3>,
+    x: Tensor<4>,
+    mask: Tensor<2>,
+    z_key: Tensor<4>,
+    conditioning: KeyframeConditioning,
+) -> Tensor<3> {
+    let state = if conditioning.replaces_keyframes() {
         replace_keyframes(x, z_key, mask.clone())
     } else {
         x
     };
-    assemble_input(z0, state, mask, kf_mode)
+    assemble_input(z0, state, mask, conditioning)
 }
 
 /// Inverse of the output layout: slot-major velocities of slots 1..T.
@@ -369,7 +384,7 @@ pub fn merge_slots(x: Tensor<4>) -> Tensor<3> {
 // ---------------------------------------------------------------------------------------------------------------
 // Timestep embedder
 
-/// Sinusoid of τ → Linear(512 → 4W) → GELU → Linear(4W → W) (SPEC §4.3; no SiLU in front).
+/// Sinusoid of τ → Linear(512 → 4W) → GELU → Linear(4W → W) (docs/method.md §4.3; no SiLU in front).
 #[derive(Module, Debug)]
 pub struct TimestepEmbedder {
     fc1: Linear,
@@ -557,7 +572,7 @@ impl Mmdit {
         self.output_proj.forward(self.final_norm.forward(motion))
     }
 
-    /// The timestep embedder (exposed for the τ-direction test of SPEC §1.4).
+    /// The timestep embedder (exposed for the τ-direction test of docs/method.md §1.4).
     pub fn timestep_embedder(&self) -> &TimestepEmbedder {
         &self.time
     }
@@ -597,7 +612,7 @@ mod tests {
     fn linear_flops_match_the_weights_of_the_initialised_module() {
         let device = Device::flex();
         let mut other = MmditConfig::tiny();
-        (other.kf_mode, other.text_dim, other.blocks, other.width) = (KfMode::None, 12, 3, 24);
+        (other.conditioning, other.text_dim, other.blocks, other.width) = (KeyframeConditioning::None, 12, 3, 24);
         for (cfg, tokens, text_len) in [(MmditConfig::tiny(), 7, 3), (other, 5, 11)] {
             let weights = linear_flops_of_weights(&cfg.init(&device), tokens, text_len);
             let counted = cfg.forward_flops(tokens as usize, text_len as usize);

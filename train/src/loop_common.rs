@@ -1,6 +1,6 @@
-//! The training loop shared by the VAE (SPEC §3.3–3.5) and the RF (SPEC §4.5–4.7): gradient accumulation to the
-//! global batch, global-norm gradient clipping, AdamW at a constant learning rate, metrics, validation,
-//! checkpoints that resume exactly, Ctrl-C and the NaN/Inf guard (issue 5 items 1–3). What a step computes is
+//! The training loop shared by the VAE (docs/method.md §3.3–3.5) and the RF (docs/method.md §4.5–4.7): gradient
+//! accumulation to the global batch, global-norm gradient clipping, AdamW at a constant learning rate, metrics,
+//! validation, checkpoints that resume exactly, Ctrl-C and the NaN/Inf guard. What a step computes is
 //! an [`Objective`].
 
 use std::path::{Path, PathBuf};
@@ -15,10 +15,13 @@ use burn::tensor::Gradients;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use any4d_data::rng::{GOLDEN_GAMMA, splitmix64};
+
 use crate::checkpoint::{self, TrainState};
 use crate::config::{OptimConfig, TrainConfig};
 use crate::data_order::DataOrder;
 use crate::error::{Result, TrainError};
+use crate::multi_device::Parallel;
 use crate::plot;
 use crate::progress::{Progress, ProgressMode};
 use crate::run_folder::{CHECKPOINTS_DIR, METRICS_FILE, PLOT_FILE, RunFolder, VALID_FILE};
@@ -68,12 +71,23 @@ impl StopFlag {
     pub fn is_set(&self) -> bool {
         self.0.load(Ordering::SeqCst)
     }
-    /// Installs the process-wide Ctrl-C handler that sets this flag (once per process; the CLI calls it).
-    pub fn install_ctrlc(&self) -> Result<()> {
-        let flag = self.clone();
-        ctrlc::set_handler(move || flag.request())
-            .map_err(|e| TrainError::Other(format!("cannot install the Ctrl-C handler: {e}")))
-    }
+}
+
+/// Options of a training run besides its config: where the data and the run folder are, how progress shows, the
+/// stop flag and the optional data-parallel devices (`any4d train vae|rf`).
+pub struct RunOptions {
+    /// Store folder (`--data`).
+    pub data: PathBuf,
+    /// Folder that holds run folders (`--runs-dir`, `runs/`).
+    pub runs_dir: PathBuf,
+    /// Run name (`--run`): the run goes to `<runs_dir>/<name>-<n>/`.
+    pub name: String,
+    /// Progress display.
+    pub progress: ProgressMode,
+    /// Ctrl-C flag.
+    pub stop: StopFlag,
+    /// Data-parallel devices (`--devices`, `--strategy`); `None` trains on `[device] backend`.
+    pub parallel: Option<Parallel>,
 }
 
 /// How a run ended.
@@ -204,7 +218,7 @@ impl StepLosses<'_> {
         } = *micro;
         let n = self.names.len();
         if terms.len() != n {
-            return Err(TrainError::Other(format!(
+            return Err(TrainError::Loop(format!(
                 "objective returned {} loss terms, declared {n}",
                 terms.len()
             )));
@@ -238,12 +252,12 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
     } = setup;
     let devices = stepper.devices();
     let Some(main) = devices.first() else {
-        return Err(TrainError::Other("training needs at least one device".into()));
+        return Err(TrainError::Devices("training needs at least one device".into()));
     };
     let ckpt_dir = run.path(CHECKPOINTS_DIR);
     let len = objective.train_len();
     if len == 0 {
-        return Err(TrainError::Other("the training set is empty".into()));
+        return Err(TrainError::Loop("the training set is empty".into()));
     }
     let total_steps = cfg.duration.steps(len, cfg.batch_size);
     let (mut model, mut optim, mut state) = match &resume {
@@ -340,7 +354,7 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
             && let Some(values) = objective.validate(&model.clone().valid(), &main.clone().without_autodiff(), step)?
         {
             let Some(&loss) = values.last() else {
-                return Err(TrainError::Other("validate returned no values".into()));
+                return Err(TrainError::Loop("validate returned no values".into()));
             };
             run.append_valid(step, &values)?;
             bar.println(&format!("step {step}: validation loss {loss:.4e}"));
@@ -387,11 +401,8 @@ fn finish_plot(run: &RunFolder) -> Result<()> {
 
 /// Device seed of `step`: a fixed function of (seed, step), so a resumed run draws the same in-model noise.
 pub fn step_seed(seed: u64, step: u64) -> u64 {
-    // SplitMix64 finaliser of seed ⊕ step·φ: nearby steps get unrelated seeds.
-    let mut z = seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+    // The SplitMix64 finaliser of seed ⊕ step·φ: nearby steps get unrelated seeds.
+    splitmix64(seed ^ step.wrapping_mul(GOLDEN_GAMMA))
 }
 
 /// The value of a one-element tensor on the host.
@@ -413,7 +424,7 @@ fn guard(value: f64, step: u64, what: &str, last_good: &Option<PathBuf>) -> Resu
 }
 
 /// Scales `grads` so that their global L2 norm over `model`'s parameters is at most `max_norm` (PyTorch's
-/// `clip_grad_norm_`, SPEC §3.5/§4.7 "gradient clip 1.0"); returns the clipped gradients and the norm before.
+/// `clip_grad_norm_`, docs/method.md §3.5/§4.7 "gradient clip 1.0"); returns the clipped gradients and the norm before.
 pub fn clip_global_norm<M: Module>(model: &M, mut grads: GradientsParams, max_norm: f64) -> (GradientsParams, f64) {
     struct SquaredNorm<'a> {
         grads: &'a GradientsParams,

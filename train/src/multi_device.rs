@@ -1,4 +1,5 @@
-//! Data-parallel training on several devices of one machine (issue 5 item 6): the shared loop of
+//! Data-parallel training on several devices of one machine, the optional strategy of both training loops
+//! (`train vae` and `train rf` with `--devices`): the shared loop of
 //! [`crate::loop_common`] with each step's micro-batches spread over the devices, using burn 0.22.1's own
 //! multi-device mechanisms, chosen by [`Strategy`]:
 //! - main-device (burn-train's `MultiDeviceOptim::OptimMainDevice`): every worker forks the model onto its device
@@ -11,9 +12,6 @@
 //! Either way the optimiser steps once on the main device and the replicas are forked from it again next step.
 //! Same global batch, same micro-batches, same checkpoints and exact resume as one device.
 
-use std::path::{Path, PathBuf};
-
-use any4d_data::store::{Split, Store};
 use burn::module::Module;
 use burn::optim::{GradientsAccumulator, GradientsParams};
 use burn::prelude::Device;
@@ -23,15 +21,10 @@ use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::backend::{self, Backend, Precision};
-use crate::checkpoint::{self, TrainState};
-use crate::config::TrainConfig;
+use crate::checkpoint::TrainState;
+use crate::config::{DeviceConfig, TrainConfig};
 use crate::error::{Result, TrainError};
 use crate::loop_common::{LoopSetup, MicroLoss, Objective, Outcome, StepGradients, StepLosses, micro_batch, run_steps};
-use crate::run_folder::{CHECKPOINTS_DIR, RunFolder, write_atomic};
-use crate::vae_loop::{
-    LATENT_STATS_FILE, MeshVae, StoredLatentStats, VaeModelConfig, VaeObjective, VaeRunConfig, VaeRunOptions,
-    check_store, latent_stats,
-};
 
 /// One entry of `--devices`: a backend and a device index (`flex`, `ndarray`, `cuda:1`, `vulkan:0`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -45,7 +38,7 @@ pub struct DeviceSpec {
 impl DeviceSpec {
     /// Parses `BACKEND` or `BACKEND:INDEX`.
     pub fn parse(text: &str) -> Result<Self> {
-        let bad = |reason: String| TrainError::Other(format!("--devices entry `{text}`: {reason}"));
+        let bad = |reason: String| TrainError::Devices(format!("--devices entry `{text}`: {reason}"));
         let (name, index) = match text.split_once(':') {
             Some((n, i)) => (
                 n,
@@ -54,8 +47,7 @@ impl DeviceSpec {
             ),
             None => (text, 0),
         };
-        let backend = <Backend as clap::ValueEnum>::from_str(name.trim(), true)
-            .map_err(|_| bad(format!("unknown backend `{name}` (flex, ndarray, vulkan, cuda)")))?;
+        let backend: Backend = name.parse().map_err(bad)?;
         if backend.is_cpu() && index != 0 {
             return Err(bad(format!("the {backend} backend has one device, index 0")));
         }
@@ -70,7 +62,7 @@ impl DeviceSpec {
             .map(|s| Self::parse(s.trim()))
             .collect::<Result<Vec<_>>>()?;
         if specs.is_empty() {
-            return Err(TrainError::Other("--devices: no device given".into()));
+            return Err(TrainError::Devices("--devices: no device given".into()));
         }
         Ok(specs)
     }
@@ -81,7 +73,7 @@ impl DeviceSpec {
             return Ok(backend::device(self.backend, precision)?);
         }
         if precision != Precision::F32 {
-            return Err(TrainError::Other(format!(
+            return Err(TrainError::Devices(format!(
                 "--devices {}:{}: only f32 is supported on a device other than index 0",
                 self.backend, self.index
             )));
@@ -97,15 +89,14 @@ fn indexed_gpu(backend: Backend, index: usize) -> Result<Device> {
         Backend::Cuda => Ok(Device::cuda(index)),
         #[cfg(feature = "vulkan")]
         Backend::Vulkan => Ok(Device::vulkan(burn::tensor::DeviceKind::DiscreteGpu(index))),
-        other => Err(TrainError::Other(format!(
+        other => Err(TrainError::Devices(format!(
             "--devices {other}:{index}: this build has no {other} backend (build with --features {other})"
         ))),
     }
 }
 
 /// How the devices of `--devices` combine one step's gradients (`--strategy`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-#[value(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Strategy {
     /// `ddp` when every device is a distinct cuda device, `main-device` otherwise.
     Auto,
@@ -116,6 +107,33 @@ pub enum Strategy {
     /// (sums) every gradient across the devices during the backward pass (`burn::tensor::distributed`, NCCL on
     /// cuda). burn 0.22.1 implements the collective only on cuda; `flex`, `ndarray` and `vulkan` refuse it.
     Ddp,
+}
+
+impl Strategy {
+    /// Every strategy, in the order `--help` lists them.
+    pub const ALL: [Strategy; 3] = [Strategy::Auto, Strategy::MainDevice, Strategy::Ddp];
+}
+
+impl std::fmt::Display for Strategy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Strategy::Auto => "auto",
+            Strategy::MainDevice => "main-device",
+            Strategy::Ddp => "ddp",
+        })
+    }
+}
+
+impl std::str::FromStr for Strategy {
+    type Err = String;
+
+    /// Parses `auto`, `main-device` or `ddp`.
+    fn from_str(name: &str) -> std::result::Result<Self, String> {
+        Strategy::ALL
+            .into_iter()
+            .find(|s| s.to_string() == name.trim())
+            .ok_or_else(|| format!("unknown strategy `{name}` (auto, main-device, ddp)"))
+    }
 }
 
 /// `--devices` with `--strategy`: which devices, and how they share a step.
@@ -141,14 +159,14 @@ impl Parallel {
             Strategy::Auto if all_cuda && distinct && devices.len() > 1 => Strategy::Ddp,
             Strategy::Auto => Strategy::MainDevice,
             Strategy::Ddp if !all_cuda => {
-                return Err(TrainError::Other(
+                return Err(TrainError::Devices(
                     "--strategy ddp needs cuda devices: burn 0.22.1 implements the gradient all-reduce (NCCL) only \
                      on cuda; flex, ndarray and vulkan have no collective operations (use --strategy main-device)"
                         .into(),
                 ));
             }
             Strategy::Ddp if !distinct => {
-                return Err(TrainError::Other(
+                return Err(TrainError::Devices(
                     "--strategy ddp: each cuda device may be listed once (NCCL runs one rank per GPU)".into(),
                 ));
             }
@@ -184,7 +202,7 @@ where
     O: Objective + Sync,
 {
     let Some(main) = devices.first() else {
-        return Err(TrainError::Other(
+        return Err(TrainError::Devices(
             "data-parallel training needs at least one device".into(),
         ));
     };
@@ -193,7 +211,7 @@ where
         Strategy::Ddp => {
             let accumulation = setup.train.accumulation();
             if !accumulation.is_multiple_of(devices.len()) {
-                return Err(TrainError::Other(format!(
+                return Err(TrainError::Devices(format!(
                     "--strategy ddp: batch_size / micro_batch = {accumulation} micro-batches per step is not a \
                      multiple of the {} devices (every device takes part in every all-reduce)",
                     devices.len()
@@ -237,7 +255,7 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
     ) -> Result<GradientsParams> {
         let devices = self.devices;
         let Some(main) = devices.first() else {
-            return Err(TrainError::Other(
+            return Err(TrainError::Devices(
                 "data-parallel training needs at least one device".into(),
             ));
         };
@@ -275,7 +293,7 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
                     .into_iter()
                     .map(|h| {
                         h.join().unwrap_or_else(|p| {
-                            Err(TrainError::Other(format!(
+                            Err(TrainError::Loop(format!(
                                 "a training worker panicked: {}",
                                 panic_text(p.as_ref())
                             )))
@@ -311,101 +329,14 @@ fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
     }
 }
 
-/// Starts a new VAE run with `cfg`, data-parallel as `parallel` says (`--devices`, `--strategy`); returns the
-/// run folder and the outcome. A finished run writes `latent_stats.json` (SPEC §3.4) as the single-device path
-/// does.
-pub fn train_vae_data_parallel(
-    cfg: &VaeRunConfig,
-    opts: &VaeRunOptions,
-    parallel: &Parallel,
-) -> Result<(RunFolder, Outcome)> {
-    let plain = parallel.plain_devices(cfg.device.precision)?;
-    check_store(cfg, &opts.data)?;
-    let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &["rec", "kl"])?;
-    let outcome = run_vae(cfg, &run, opts, plain, parallel.strategy, None)?;
-    Ok((run, outcome))
-}
-
-/// Continues the VAE run in `run_dir` from its newest checkpoint, data-parallel as `parallel` says (config from
-/// the run folder; `[device] precision` applies to every device).
-pub fn resume_vae_data_parallel(run_dir: &Path, opts: &VaeRunOptions, parallel: &Parallel) -> Result<Outcome> {
-    let run = RunFolder::open(run_dir)?;
-    let cfg = VaeRunConfig::parse(&run.config_text()?, &run.path(crate::run_folder::CONFIG_FILE))?;
-    let plain = parallel.plain_devices(cfg.device.precision)?;
-    let ckpt = checkpoint::latest(&run.path(CHECKPOINTS_DIR))?.ok_or_else(|| TrainError::Checkpoint {
-        path: run_dir.to_path_buf(),
-        reason: "no complete checkpoint to resume".into(),
-    })?;
-    run_vae(&cfg, &run, opts, plain, parallel.strategy, Some(ckpt))
-}
-
-fn run_vae(
-    cfg: &VaeRunConfig,
-    run: &RunFolder,
-    opts: &VaeRunOptions,
-    plain: Vec<Device>,
-    strategy: Strategy,
-    resume: Option<PathBuf>,
-) -> Result<Outcome> {
-    let ad: Vec<Device> = plain.into_iter().map(|d| d.autodiff()).collect();
-    let Some(main) = ad.first() else {
-        return Err(TrainError::Other(
-            "data-parallel training needs at least one device".into(),
-        ));
-    };
-    main.seed(cfg.train.seed);
-    match &cfg.model {
-        VaeModelConfig::Framewise(m) => fit_vae(m.init(main), cfg, run, opts, &ad, strategy, resume),
-        VaeModelConfig::Sequencewise(m) => fit_vae(m.init(main), cfg, run, opts, &ad, strategy, resume),
+/// The plain devices a run trains on: `parallel`'s, or the one of `[device] backend`. Fails before a run folder is
+/// claimed when a backend is not in this binary.
+pub fn run_devices(device: &DeviceConfig, parallel: Option<&Parallel>) -> Result<Vec<Device>> {
+    match parallel {
+        Some(p) => p.plain_devices(device.precision),
+        None => {
+            backend::check(device.backend, device.precision)?;
+            Ok(vec![backend::device(device.backend, device.precision)?])
+        }
     }
-}
-
-fn fit_vae<V: MeshVae>(
-    model: V,
-    cfg: &VaeRunConfig,
-    run: &RunFolder,
-    opts: &VaeRunOptions,
-    devices: &[Device],
-    strategy: Strategy,
-    resume: Option<PathBuf>,
-) -> Result<Outcome>
-where
-    VaeObjective<V>: Sync,
-{
-    let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch, &cfg.vae)?;
-    run.log(&format!(
-        "VAE {:?} on {}, data-parallel over {} devices ({strategy:?})",
-        cfg.vae.kind,
-        opts.data.display(),
-        devices.len()
-    ))?;
-    let setup = LoopSetup {
-        run,
-        train: &cfg.train,
-        optim: &cfg.optim,
-        device: devices[0].clone(),
-        stop: opts.stop.clone(),
-        progress: opts.progress,
-        resume,
-    };
-    let (model, outcome) = train_data_parallel(&objective, model, setup, devices, strategy)?;
-    if let Outcome::Finished { steps, .. } = &outcome {
-        let inference = devices[0].clone().without_autodiff();
-        inference.seed(cfg.train.seed);
-        let store = Store::open(&opts.data).map_err(|e| TrainError::Other(format!("{}: {e}", opts.data.display())))?;
-        let train_ids = store.indices(Split::Train);
-        let stats = latent_stats(
-            &model.valid(),
-            &store,
-            &train_ids,
-            cfg.train.micro_batch,
-            cfg.vae.tokens,
-            &inference,
-        )?;
-        let json = serde_json::to_vec_pretty(&StoredLatentStats { step: *steps, stats })
-            .map_err(|e| TrainError::Other(format!("serialise latent stats: {e}")))?;
-        write_atomic(&run.path(LATENT_STATS_FILE), &json)?;
-        run.log(&format!("latent statistics (SPEC §3.4) of step {steps}: {stats:?}"))?;
-    }
-    Ok(outcome)
 }

@@ -1,12 +1,12 @@
-//! Loss-curve PNG of a run (issue 5 item 3): every `metrics.csv` loss column (diagnostics such as the RF's
-//! keyframe fraction left out, and the total when it equals the single term) and the validation loss against the step, on a log₁₀ y axis, drawn with the
-//! evaluation crate's plotter (`any4d_eval::plot`, no system fonts).
+//! Loss-curve PNG of a run: every `metrics.csv` loss column (diagnostics such as the RF's
+//! keyframe fraction left out, and the total when it equals the single term) and the validation loss against the step,
+//! on a log₁₀ y axis, drawn with the evaluation crate's plotter (`any4d_eval::plot`, no system fonts).
 
 use std::path::Path;
 
 use any4d_eval::plot::{Series, line_plot_fit_y};
 
-use crate::error::{Result, TrainError};
+use crate::error::Result;
 use crate::run_folder::{METRIC_TAIL, read_table};
 
 /// `metrics.csv` term columns that are diagnostics, not losses: not drawn.
@@ -26,7 +26,7 @@ pub fn plot_run(metrics: &Path, valid: &Path, out: &Path) -> Result<()> {
     if series.is_empty() {
         return Ok(());
     }
-    line_plot_fit_y("LOSS CURVES", "STEP", "LOG10 LOSS", &series, out).map_err(|e| TrainError::Other(e.to_string()))
+    Ok(line_plot_fit_y("LOSS CURVES", "STEP", "LOG10 LOSS", &series, out)?)
 }
 
 /// The curves of [`plot_run`]: each loss column, then `valid`; empty curves dropped.

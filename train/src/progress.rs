@@ -1,4 +1,4 @@
-//! Training progress (issue 5 item 3, STYLE.md §8): a live indicatif bar with loss, steps/s and ETA on a
+//! Training progress: a live indicatif bar with loss, steps/s and ETA on a
 //! terminal; otherwise one compact line every few seconds (never one per batch, unlike burn-train's renderer).
 
 use std::io::IsTerminal;

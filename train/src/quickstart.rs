@@ -9,22 +9,29 @@ use std::time::Instant;
 use any4d_data::store::write_synth;
 use any4d_data::synth::SynthConfig;
 use any4d_eval::methods::MethodKind;
-use any4d_eval::run::{RunOptions, TableReport, run_protocol};
-use any4d_eval::tables::{TableHeader, TableKind};
+use any4d_eval::tables::short_horizon::ShortHorizon;
+use any4d_eval::tables::summary::TableHeader;
+use any4d_eval::tables::{Items, Protocol, TableOptions, TableReport, run_protocol};
 use any4d_model::rectified_flow::Solver;
 
 use crate::backend;
-use crate::config::Duration;
+use crate::config::{Duration, Embedded};
 use crate::error::{Result, TrainError};
 use crate::evaluate::{LearnedRuns, SamplingSetup, build_methods};
-use crate::loop_common::{Outcome, StopFlag};
+use crate::loop_common::{Outcome, RunOptions, StopFlag};
 use crate::progress::ProgressMode;
 use crate::rf_loop::{RfRunConfig, RfRunOptions, train_rf};
-use crate::vae_loop::{VaeRunConfig, VaeRunOptions, train_vae};
+use crate::vae_loop::{VaeRunConfig, train_vae};
 
-const VAE_TINY: &str = include_str!("../../configs/vae/tiny.toml");
-const RF_TINY: &str = include_str!("../../configs/rf/tiny.toml");
-const BASELINE_TINY: &str = include_str!("../../configs/rf/baseline_tiny.toml");
+/// The presets the quickstart runs, embedded with the files their `extends` chains name.
+const PRESETS: Embedded = Embedded(&[
+    ("configs/vae/tiny.toml", include_str!("../../configs/vae/tiny.toml")),
+    ("configs/rf/tiny.toml", include_str!("../../configs/rf/tiny.toml")),
+    (
+        "configs/rf/baseline_tiny.toml",
+        include_str!("../../configs/rf/baseline_tiny.toml"),
+    ),
+]);
 
 /// What the quickstart does; every default is chosen to finish in minutes on 2 cores.
 #[derive(Debug, Clone)]
@@ -35,7 +42,7 @@ pub struct QuickstartOptions {
     pub clips: usize,
     /// Seed of the procedural clips.
     pub seed: u64,
-    /// Largest vertex count of the procedural clips (SPEC filter 512..=4096; small is fast).
+    /// Largest vertex count of the procedural clips (the paper's filter 512..=4096; small is fast).
     pub max_vertices: usize,
     /// Optimiser steps of the VAE (the tiny preset's when `None`).
     pub vae_steps: Option<u64>,
@@ -81,7 +88,7 @@ fn fresh_folder(out: &Path) -> PathBuf {
 fn finished(what: &str, outcome: Outcome) -> Result<()> {
     match outcome {
         Outcome::Finished { .. } => Ok(()),
-        Outcome::Interrupted { step, checkpoint } => Err(TrainError::Other(format!(
+        Outcome::Interrupted { step, checkpoint } => Err(TrainError::Loop(format!(
             "{what} interrupted at step {step}; checkpoint kept at {}",
             checkpoint.display()
         ))),
@@ -97,9 +104,9 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
     let stage = |msg: String| say(&format!("[{:>5.0} s] {msg}", started.elapsed().as_secs_f64()));
 
     // The presets are embedded; errors name the repository file they came from.
-    let mut vae_cfg = VaeRunConfig::parse(VAE_TINY, Path::new("configs/vae/tiny.toml"))?;
-    let mut rf_cfg = RfRunConfig::parse(RF_TINY, Path::new("configs/rf/tiny.toml"))?;
-    let mut base_cfg = RfRunConfig::parse(BASELINE_TINY, Path::new("configs/rf/baseline_tiny.toml"))?;
+    let mut vae_cfg = VaeRunConfig::load_with(&PRESETS, Path::new("configs/vae/tiny.toml"), &[])?;
+    let mut rf_cfg = RfRunConfig::load_with(&PRESETS, Path::new("configs/rf/tiny.toml"), &[])?;
+    let mut base_cfg = RfRunConfig::load_with(&PRESETS, Path::new("configs/rf/baseline_tiny.toml"), &[])?;
     if let Some(n) = opts.vae_steps {
         vae_cfg.train.duration = Duration::Steps(n);
         // Four validations (each encodes every frame of the VAL clips, the slow part of a short run).
@@ -125,7 +132,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         min_vertices: 512,
         max_vertices: opts.max_vertices,
     };
-    let report = write_synth(&synth, &data).map_err(|e| TrainError::Other(e.to_string()))?;
+    let report = write_synth(&synth, &data)?;
     stage(format!(
         "      {} clips: {} train, {} validation",
         report.total, report.train, report.val
@@ -134,24 +141,27 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
     stage("2/5 training the tiny frame-wise VAE".into());
     let (vae_run, outcome) = train_vae(
         &vae_cfg,
-        &VaeRunOptions {
+        &RunOptions {
             data: data.clone(),
             runs_dir: runs_dir.clone(),
             name: "vae".into(),
             progress: opts.progress,
             stop: opts.stop.clone(),
+            parallel: None,
         },
     )?;
     finished("VAE training", outcome)?;
 
     let rf_opts = |name: &str| RfRunOptions {
-        data: data.clone(),
+        run: RunOptions {
+            data: data.clone(),
+            runs_dir: runs_dir.clone(),
+            name: name.into(),
+            progress: opts.progress,
+            stop: opts.stop.clone(),
+            parallel: None,
+        },
         vae_run: Some(vae_run.root().to_path_buf()),
-        runs_dir: runs_dir.clone(),
-        name: name.into(),
-        progress: opts.progress,
-        stop: opts.stop.clone(),
-        parallel: None,
     };
     stage("3/5 training the tiny keyframe-conditioned RF (ours)".into());
     let (rf_run, outcome) = train_rf(&rf_cfg, &rf_opts("rf"))?;
@@ -184,9 +194,15 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
     };
     let built = build_methods(&kinds, &runs, sampling, &device)?;
     let eval_dir = out.join("eval");
-    let mut run_opts = RunOptions::new(TableKind::Table1, data.clone(), eval_dir.clone());
+    let protocol = Protocol::ShortHorizon(ShortHorizon {
+        items: Items {
+            clips: opts.eval_clips,
+            ..Items::default()
+        },
+        ..ShortHorizon::default()
+    });
+    let mut run_opts = TableOptions::new(data.clone(), eval_dir.clone());
     run_opts.methods = built.methods;
-    run_opts.clips = opts.eval_clips;
     run_opts.export_items = 3;
     run_opts.progress = !matches!(opts.progress, ProgressMode::Quiet);
     run_opts.header = TableHeader {
@@ -198,7 +214,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         ),
         ..TableHeader::default()
     };
-    let table = run_protocol(&run_opts).map_err(|e| TrainError::Other(e.to_string()))?;
+    let table = run_protocol(&protocol, &run_opts)?;
     stage("done".into());
     Ok(QuickstartReport {
         out,
@@ -209,4 +225,31 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         eval_dir,
         table,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use any4d_model::mmdit::KeyframeConditioning;
+
+    use super::*;
+
+    #[test]
+    fn the_embedded_presets_resolve_as_the_repository_files_do() {
+        let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+        for name in ["configs/rf/tiny.toml", "configs/rf/baseline_tiny.toml"] {
+            let embedded = RfRunConfig::load_with(&PRESETS, Path::new(name), &[]).expect(name);
+            assert_eq!(
+                embedded,
+                RfRunConfig::load(&root.join(name), &[]).expect(name),
+                "{name}"
+            );
+        }
+        let baseline = RfRunConfig::load_with(&PRESETS, Path::new("configs/rf/baseline_tiny.toml"), &[]).unwrap();
+        assert_eq!(baseline.model.conditioning, KeyframeConditioning::ReplaceNoised);
+        let vae = VaeRunConfig::load_with(&PRESETS, Path::new("configs/vae/tiny.toml"), &[]).unwrap();
+        assert_eq!(
+            vae,
+            VaeRunConfig::load(&root.join("configs/vae/tiny.toml"), &[]).unwrap()
+        );
+    }
 }

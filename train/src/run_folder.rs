@@ -1,6 +1,7 @@
-//! Append-only run folders (STYLE.md §9): `runs/<name>-<n>/` with the resolved `config.toml`, `log.txt`,
-//! `metrics.csv`, `valid.csv`, `checkpoints/` and, for an RF run that samples during validation, `samples.csv`. A folder is claimed with `create_dir` (never reused), files
-//! that are replaced are written atomically (temp file + rename), logs and tables are only appended to.
+//! Append-only run folders : `runs/<name>-<n>/` with the resolved `config.toml`, `log.txt`,
+//! `metrics.csv`, `valid.csv`, `checkpoints/` and, for an RF run that samples during validation, `samples.csv`. A
+//! folder is claimed with `create_dir` (never reused), files that are replaced are written atomically (temp file +
+//! rename), logs and tables are only appended to.
 
 use std::fs::{self, File, OpenOptions};
 use std::io::Write;
@@ -16,7 +17,7 @@ pub const LOG_FILE: &str = "log.txt";
 pub const METRICS_FILE: &str = "metrics.csv";
 /// One row per validation.
 pub const VALID_FILE: &str = "valid.csv";
-/// One row per validation-sampling round of an RF run (issue 5 item 4): `step, rmse, chamfer, dtw`.
+/// One row per validation-sampling round of an RF run: `step, rmse, chamfer, dtw`.
 pub const SAMPLES_FILE: &str = "samples.csv";
 /// Loss-curve plot written at the end of a run.
 pub const PLOT_FILE: &str = "loss.png";

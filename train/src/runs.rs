@@ -1,11 +1,11 @@
-//! Loading trained runs for evaluation, sampling and the quickstart (issue 5): a VAE run (its resolved config,
-//! newest checkpoint and the SPEC §3.4 latent statistics of that checkpoint) and an RF run (config, newest
+//! Loading trained runs for evaluation, sampling and the quickstart: a VAE run (its resolved config,
+//! newest checkpoint and the docs/method.md §3.4 latent statistics of that checkpoint) and an RF run (config, newest
 //! checkpoint, the scratch tokenizer and the record of the VAE run it was trained on). Errors name the run folder
 //! and the missing or bad file.
 
 use std::path::{Path, PathBuf};
 
-use any4d_model::dymesh_vae::DyMeshVae;
+use any4d_model::any_vae::{AnyMeshVae, AnyMeshVaeConfig};
 use any4d_model::frame_vae::FrameVae;
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::text::scratch::{ScratchTokenizer, TOKENIZER_FILE};
@@ -13,29 +13,20 @@ use burn::prelude::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 use crate::checkpoint;
-use crate::error::{Result, TrainError, io_err};
+use crate::error::{Result, TrainError, io_err, run_err};
 use crate::rf_loop::{RfModel, RfRunConfig};
 use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder, write_atomic};
-use crate::vae_loop::{LATENT_STATS_FILE, StoredLatentStats, VaeModelConfig, VaeRunConfig};
+use crate::vae_loop::{LATENT_STATS_FILE, StoredLatentStats, VaeRunConfig};
 
 /// File in an RF run folder naming the VAE run (and its checkpoint step) whose latents trained it.
 pub const VAE_RUN_FILE: &str = "vae_run.json";
-
-/// A trained mesh VAE of either kind (SPEC §8 A3).
-#[derive(Debug, Clone)]
-pub enum VaeModel {
-    /// The frame-wise VAE (the method's).
-    Framewise(FrameVae),
-    /// The sequence-wise DyMeshVAE (ablation).
-    Sequencewise(DyMeshVae),
-}
 
 /// A VAE run ready for encoding and decoding.
 #[derive(Debug, Clone)]
 pub struct LoadedVae {
     /// The network with the newest checkpoint's parameters.
-    pub model: VaeModel,
-    /// SPEC §3.4 statistics of that checkpoint.
+    pub model: AnyMeshVae,
+    /// docs/method.md §3.4 statistics of that checkpoint.
     pub stats: LatentStats,
     /// The run's resolved config.
     pub config: VaeRunConfig,
@@ -51,11 +42,11 @@ impl LoadedVae {
     /// The frame-wise VAE, or an error naming the run when it is the sequence-wise ablation.
     pub fn frame_vae(&self) -> Result<&FrameVae> {
         match &self.model {
-            VaeModel::Framewise(m) => Ok(m),
-            VaeModel::Sequencewise(_) => Err(TrainError::Other(format!(
-                "VAE run {} is a sequence-wise DyMeshVAE; the keyframe RF needs a frame-wise VAE (vae.kind = \"framewise\")",
-                self.run.display()
-            ))),
+            AnyMeshVae::Framewise(m) => Ok(m),
+            AnyMeshVae::Sequencewise(_) => Err(run_err(
+                &self.run,
+                "a sequence-wise DyMeshVAE; the keyframe RF needs a frame-wise VAE (vae.kind = \"framewise\")",
+            )),
         }
     }
 
@@ -66,15 +57,12 @@ impl LoadedVae {
 
     /// Latent channels C per slot.
     pub fn latent_channels(&self) -> usize {
-        match &self.config.model {
-            VaeModelConfig::Framewise(c) => c.latent_channels,
-            VaeModelConfig::Sequencewise(c) => c.latent_channels,
-        }
+        self.config.model.latent_channels()
     }
 }
 
 fn missing(run: &Path, file: &str, hint: &str) -> TrainError {
-    TrainError::Other(format!("run {}: `{file}` is missing{hint}", run.display()))
+    run_err(run, format!("`{file}` is missing{hint}"))
 }
 
 fn canonical(run_dir: &Path) -> Result<PathBuf> {
@@ -117,19 +105,21 @@ pub fn load_vae_run(run_dir: &Path, device: &Device) -> Result<LoadedVae> {
         LATENT_STATS_FILE,
         " (written when a VAE run finishes: finish it with `any4d train vae --resume`)",
     )?;
-    let stored: StoredLatentStats = serde_json::from_str(&stats_text)
-        .map_err(|e| TrainError::Other(format!("run {}: bad `{LATENT_STATS_FILE}`: {e}", run.display())))?;
+    let stored: StoredLatentStats =
+        serde_json::from_str(&stats_text).map_err(|e| run_err(&run, format!("bad `{LATENT_STATS_FILE}`: {e}")))?;
     if stored.step != step {
-        return Err(TrainError::Other(format!(
-            "run {}: `{LATENT_STATS_FILE}` belongs to step {}, the newest checkpoint is step {step}; finish the run \
-             so that its statistics are recomputed",
-            run.display(),
-            stored.step
-        )));
+        return Err(run_err(
+            &run,
+            format!(
+                "`{LATENT_STATS_FILE}` belongs to step {}, the newest checkpoint is step {step}; finish the run so \
+                 that its statistics are recomputed",
+                stored.step
+            ),
+        ));
     }
     let model = match &config.model {
-        VaeModelConfig::Framewise(c) => VaeModel::Framewise(checkpoint::load_model(c.init(device), &ckpt)?),
-        VaeModelConfig::Sequencewise(c) => VaeModel::Sequencewise(checkpoint::load_model(c.init(device), &ckpt)?),
+        AnyMeshVaeConfig::Framewise(c) => AnyMeshVae::Framewise(checkpoint::load_model(c.init(device), &ckpt)?),
+        AnyMeshVaeConfig::Sequencewise(c) => AnyMeshVae::Sequencewise(checkpoint::load_model(c.init(device), &ckpt)?),
     };
     Ok(LoadedVae {
         model,
@@ -165,12 +155,13 @@ impl VaeRunRecord {
     pub fn load(&self, device: &Device) -> Result<LoadedVae> {
         let vae = load_vae_run(&self.run, device)?;
         if vae.step != self.step {
-            return Err(TrainError::Other(format!(
-                "VAE run {} is now at step {}, but the RF was trained on its step {}: its latents changed",
-                self.run.display(),
-                vae.step,
-                self.step
-            )));
+            return Err(run_err(
+                &self.run,
+                format!(
+                    "now at step {}, but the RF was trained on its step {}: its latents changed",
+                    vae.step, self.step
+                ),
+            ));
         }
         Ok(vae)
     }
@@ -179,15 +170,14 @@ impl VaeRunRecord {
 /// Writes `vae_run.json` into an RF run folder.
 pub fn write_vae_record(run: &RunFolder, record: &VaeRunRecord) -> Result<()> {
     let json =
-        serde_json::to_vec_pretty(record).map_err(|e| TrainError::Other(format!("serialise {VAE_RUN_FILE}: {e}")))?;
+        serde_json::to_vec_pretty(record).map_err(|e| run_err(run.root(), format!("serialise {VAE_RUN_FILE}: {e}")))?;
     write_atomic(&run.path(VAE_RUN_FILE), &json)
 }
 
 /// Reads `vae_run.json` of the RF run in `run_dir`.
 pub fn read_vae_record(run_dir: &Path) -> Result<VaeRunRecord> {
     let text = read_run_file(run_dir, VAE_RUN_FILE, " (not an RF run folder?)")?;
-    serde_json::from_str(&text)
-        .map_err(|e| TrainError::Other(format!("run {}: bad `{VAE_RUN_FILE}`: {e}", run_dir.display())))
+    serde_json::from_str(&text).map_err(|e| run_err(run_dir, format!("bad `{VAE_RUN_FILE}`: {e}")))
 }
 
 /// An RF run ready for sampling.
@@ -234,8 +224,7 @@ pub fn load_rf_run(run_dir: &Path, device: &Device) -> Result<LoadedRf> {
     if !run.join(TOKENIZER_FILE).is_file() {
         return Err(missing(&run, TOKENIZER_FILE, " (written when an RF run starts)"));
     }
-    let tokenizer =
-        ScratchTokenizer::load(&run).map_err(|e| TrainError::Other(format!("run {}: {e}", run.display())))?;
+    let tokenizer = ScratchTokenizer::load(&run)?;
     let vae = read_vae_record(&run)?;
     let (ckpt, step) = newest_checkpoint(&run)?;
     let model = checkpoint::load_model(config.model_config(tokenizer.vocab_size()).init(device), &ckpt)?;

@@ -1,38 +1,30 @@
-//! VAE training (SPEC §3.3–3.5; issue 5 item 1): `any4d train vae`. Loss (V1)–(V3) from the model crate,
-//! the shared loop of `loop_common`, then the latent statistics of SPEC §3.4 over the training set, stored
-//! next to the VAE checkpoint (`latent_stats.json`). Both the frame-wise VAE and the sequence-wise DyMeshVAE
-//! ablation (SPEC §8 A3: `vae.kind`) train here.
+//! VAE training (docs/method.md §3.3–3.5): `any4d train vae`, on one device or data-parallel (`--devices`). Loss
+//! (V1)–(V3) from the model crate, the shared loop of `loop_common`, then the latent statistics of
+//! docs/method.md §3.4 over the training set, stored next to the VAE checkpoint (`latent_stats.json`). Both the
+//! frame-wise VAE and the sequence-wise DyMeshVAE ablation (docs/method.md §8 A3: `vae.kind`) train here.
 
 use std::path::{Path, PathBuf};
 
 use any4d_data::batch::{ClipBatch, ClipBatcher, PadTo};
 use any4d_data::store::{Split, Store, StoredClip};
-use any4d_model::dymesh_vae::DyMeshVaeConfig;
-use any4d_model::frame_vae::{EdgeList, FrameVaeConfig, MeshVaeModel, VaeBatch, VaeEncoding, VaeLoss};
+use any4d_model::any_vae::{AnyMeshVaeConfig, VaeKind};
 use any4d_model::latent_stats::{LatentStats, LatentStatsAccumulator};
+use any4d_model::mesh_vae::{EdgeList, MeshVae, VaeBatch};
+use burn::module::Module;
 use burn::prelude::{Device, Int, Tensor, TensorData};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::backend;
-use crate::config::{DeviceConfig, OptimConfig, TrainConfig, parse_strict, strict_model_config, to_toml};
-use crate::error::{Result, TrainError, io_err};
-use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, StopFlag};
-use crate::progress::ProgressMode;
-use crate::run_folder::{RunFolder, write_atomic};
+use crate::config::resolve::{self, ConfigSource, Files, Override};
+use crate::config::{DeviceConfig, OptimConfig, TrainConfig, to_toml};
+use crate::error::{Result, TrainError};
+use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, RunOptions};
+use crate::multi_device::{run_devices, train_data_parallel};
+use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder, write_atomic};
 
-/// File in the VAE run folder with the SPEC §3.4 statistics of its final checkpoint.
+/// File in the VAE run folder with the docs/method.md §3.4 statistics of its final checkpoint.
 pub const LATENT_STATS_FILE: &str = "latent_stats.json";
-
-/// Which mesh VAE (SPEC §8 A3).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum VaeKind {
-    /// Frame-wise VAE (SPEC §3.2; the method's).
-    Framewise,
-    /// Sequence-wise DyMeshVAE (AnimateAnyMesh; ablation).
-    Sequencewise,
-}
 
 /// The `[vae]` table.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -40,32 +32,23 @@ pub enum VaeKind {
 pub struct VaeSection {
     /// Which VAE the `[model]` table configures.
     pub kind: VaeKind,
-    /// Frames of each clip in a training micro-batch: 0 = all T (SPEC §3.5); k ≥ 2 = frame 0 (the reference) and
-    /// k − 1 other frames drawn without replacement for each micro-batch. The frame-wise VAE encodes and decodes
-    /// frames independently (SPEC §3.1), so this trades frames per step for steps per second; the sequence-wise
-    /// VAE needs whole clips (0 only). Validation always uses every frame.
+    /// Frames of each clip in a training micro-batch: 0 = all T (docs/method.md §3.5); k ≥ 2 = frame 0 (the
+    /// reference) and k − 1 other frames drawn without replacement for each micro-batch. The frame-wise VAE encodes
+    /// and decodes frames independently (docs/method.md §3.1), so this trades frames per step for steps per
+    /// second; the sequence-wise VAE needs whole clips (0 only). Validation always uses every frame.
     pub train_frames: usize,
-    /// FPS tokens P per clip (SPEC §2.5: 512): the first P entries of the store's FPS order. Farthest-point
+    /// FPS tokens P per clip (docs/method.md §2.5: 512): the first P entries of the store's FPS order. Farthest-point
     /// sampling is greedy, so they are exactly the FPS of P points, and one store serves every P up to its own.
     pub tokens: usize,
 }
 
-/// The model configuration, by kind.
-#[derive(Clone, Debug)]
-pub enum VaeModelConfig {
-    /// `[model]` of a frame-wise VAE.
-    Framewise(FrameVaeConfig),
-    /// `[model]` of a DyMeshVAE.
-    Sequencewise(DyMeshVaeConfig),
-}
-
 /// A whole `configs/vae/*.toml` run config.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct VaeRunConfig {
     /// `[vae]`.
     pub vae: VaeSection,
-    /// `[model]`, checked key by key.
-    pub model: VaeModelConfig,
+    /// `[model]`: the VAE of `vae.kind`.
+    pub model: AnyMeshVaeConfig,
     /// `[train]`.
     pub train: TrainConfig,
     /// `[optim]`.
@@ -74,42 +57,83 @@ pub struct VaeRunConfig {
     pub device: DeviceConfig,
 }
 
+/// The tables of a VAE run config, `[model]` still untyped until `[vae] kind` says which VAE it describes.
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct VaeTables {
     vae: VaeSection,
-    model: toml::Value,
+    model: toml::Table,
     train: TrainConfig,
     optim: OptimConfig,
     device: DeviceConfig,
 }
 
+/// Keys of `[model]` that moved into `[model.body]` when the VAE body got its own table.
+const BODY_KEYS: [&str; 11] = [
+    "width",
+    "heads",
+    "head_dim",
+    "enc_blocks",
+    "dec_blocks",
+    "latent_channels",
+    "point_freqs",
+    "ffn_mult",
+    "pad_keys",
+    "logvar_min",
+    "logvar_max",
+];
+
+/// Reads run folders written before `[model.body]` existed: their `[model]` holds the body's keys flat, and
+/// `pad_keys` as `"Masked"` / `"Visible"`. A table that already has `body` is left alone.
+fn migrate_flat_model(model: &mut toml::Table) {
+    if model.contains_key("body") || !model.contains_key("width") {
+        return;
+    }
+    let mut body = toml::Table::new();
+    for key in BODY_KEYS {
+        if let Some(value) = model.remove(key) {
+            body.insert(key.to_string(), value);
+        }
+    }
+    if let Some(toml::Value::String(p)) = body.get_mut("pad_keys") {
+        *p = p.to_lowercase();
+    }
+    model.insert("body".into(), toml::Value::Table(body));
+}
+
 impl VaeRunConfig {
-    /// Parses and validates a VAE run config; unknown or missing keys anywhere are errors naming `file`.
-    pub fn parse(text: &str, file: &Path) -> Result<Self> {
-        let t: VaeTables = parse_strict(text, file)?;
-        let model = match t.vae.kind {
-            VaeKind::Framewise => VaeModelConfig::Framewise(strict_model_config(&t.model, "model", file)?),
-            VaeKind::Sequencewise => VaeModelConfig::Sequencewise(strict_model_config(&t.model, "model", file)?),
-        };
-        t.train.validate(file)?;
-        t.optim.validate(file)?;
+    /// Parses and validates a resolved VAE run config; unknown or missing keys anywhere are errors naming `file`
+    /// and the dotted key.
+    pub fn from_table(mut table: toml::Table, file: &Path) -> Result<Self> {
+        if let Some(toml::Value::Table(model)) = table.get_mut("model") {
+            migrate_flat_model(model);
+        }
+        let t: VaeTables = resolve::from_table(table, file)?;
         let bad = |reason: String| TrainError::Config {
             path: file.to_path_buf(),
-            reason: format!("vae.train_frames = {}: {reason}", t.vae.train_frames),
+            reason,
         };
+        let model = match t.vae.kind {
+            VaeKind::Framewise => AnyMeshVaeConfig::Framewise(model_table(t.model, file)?),
+            VaeKind::Sequencewise => AnyMeshVaeConfig::Sequencewise(model_table(t.model, file)?),
+        };
+        match &model {
+            AnyMeshVaeConfig::Framewise(c) => c.validate(),
+            AnyMeshVaeConfig::Sequencewise(c) => c.validate(),
+        }
+        .map_err(bad)?;
+        t.train.validate(file)?;
+        t.optim.validate(file)?;
+        let frames_bad = |reason: &str| bad(format!("vae.train_frames = {}: {reason}", t.vae.train_frames));
         if t.vae.tokens == 0 {
-            return Err(TrainError::Config {
-                path: file.to_path_buf(),
-                reason: "vae.tokens: P must be positive".into(),
-            });
+            return Err(bad("vae.tokens: P must be positive".into()));
         }
         match (t.vae.kind, t.vae.train_frames) {
             (_, 0) => {}
-            (VaeKind::Sequencewise, _) => return Err(bad("the sequence-wise VAE encodes whole clips; use 0".into())),
+            (VaeKind::Sequencewise, _) => return Err(frames_bad("the sequence-wise VAE encodes whole clips; use 0")),
             (VaeKind::Framewise, 1) => {
-                return Err(bad(
-                    "frame 0 alone has no motion; use 0 (all frames) or at least 2".into()
+                return Err(frames_bad(
+                    "frame 0 alone has no motion; use 0 (all frames) or at least 2",
                 ));
             }
             (VaeKind::Framewise, _) => {}
@@ -123,17 +147,26 @@ impl VaeRunConfig {
         })
     }
 
-    /// Reads a config file.
-    pub fn load(file: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(file).map_err(io_err("read config", file))?;
-        Self::parse(&text, file)
+    /// Parses the text of `file` (its `extends` chain read from the file system).
+    pub fn parse(text: &str, file: &Path) -> Result<Self> {
+        Self::from_table(resolve::resolve_text(&Files, text, file)?, file)
+    }
+
+    /// Reads `file` from `source` with its `extends` chain and `overrides`.
+    pub fn load_with(source: &dyn ConfigSource, file: &Path, overrides: &[Override]) -> Result<Self> {
+        Self::from_table(resolve::resolve(source, file, overrides)?, file)
+    }
+
+    /// Reads a config file with `overrides` (`--set`).
+    pub fn load(file: &Path, overrides: &[Override]) -> Result<Self> {
+        Self::load_with(&Files, file, overrides)
     }
 
     /// The fully resolved config as TOML (what the run folder stores).
     pub fn to_toml(&self) -> Result<String> {
         let model = match &self.model {
-            VaeModelConfig::Framewise(c) => toml::Value::try_from(c),
-            VaeModelConfig::Sequencewise(c) => toml::Value::try_from(c),
+            AnyMeshVaeConfig::Framewise(c) => toml::Table::try_from(c),
+            AnyMeshVaeConfig::Sequencewise(c) => toml::Table::try_from(c),
         }
         .map_err(|e| TrainError::Config {
             path: "<resolved>".into(),
@@ -149,35 +182,30 @@ impl VaeRunConfig {
     }
 }
 
-/// The train loops' view of a mesh VAE: [`MeshVaeModel`] under the names the loops use; every model-crate VAE
-/// has it.
-pub trait MeshVae: MeshVaeModel {
-    /// (V1)–(V3) with a posterior sample.
-    fn vae_loss(&self, batch: &VaeBatch) -> VaeLoss {
-        self.loss(batch)
+/// `[model]` parsed strictly as the VAE config `C`, errors naming `model.…`.
+fn model_table<C: serde::de::DeserializeOwned>(model: toml::Table, file: &Path) -> Result<C> {
+    let mut wrapped = toml::Table::new();
+    wrapped.insert("model".into(), toml::Value::Table(model));
+    #[derive(Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct Wrapped<C> {
+        model: C,
     }
-    /// Encoder outputs.
-    fn vae_encode(&self, batch: &VaeBatch) -> VaeEncoding {
-        self.encode_vae_batch(batch)
-    }
+    Ok(resolve::from_table::<Wrapped<C>>(wrapped, file)?.model)
 }
-
-impl<V: MeshVaeModel> MeshVae for V {}
 
 /// Reads clips `indices` of `store` and stacks them (padded to the batch's largest N_v).
 pub fn load_clips(store: &Store, indices: &[usize], device: &Device) -> Result<(ClipBatch, Vec<StoredClip>)> {
     let items = indices
         .iter()
-        .map(|&i| store.get(i).map_err(|e| TrainError::Other(e.to_string())))
-        .collect::<Result<Vec<_>>>()?;
-    let batch = ClipBatcher::new(PadTo::BatchMax)
-        .try_batch(&items, device)
-        .map_err(|e| TrainError::Other(e.to_string()))?;
+        .map(|&i| store.get(i))
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    let batch = ClipBatcher::new(PadTo::BatchMax).try_batch(&items, device)?;
     Ok((batch, items))
 }
 
 /// The VAE view of a clip batch with `tokens` FPS tokens (the first ones of the store's FPS order, see
-/// [`VaeSection::tokens`]): reference = frame 0 (SPEC §1.2).
+/// [`VaeSection::tokens`]): reference = frame 0 (docs/method.md §1.2).
 ///
 /// # Shapes
 /// - `batch.vertices`: `[B, T, N, 3]` → reference `[B, N, 3]`, frames `[B, T, N, 3]`; fps `[B, tokens]`
@@ -185,12 +213,12 @@ pub fn vae_batch(batch: &ClipBatch, tokens: usize, device: &Device) -> Result<Va
     let [b, _t, n, _] = batch.vertices.dims();
     let stored = batch.fps.dims()[1];
     if tokens == 0 || tokens > stored {
-        return Err(TrainError::Other(format!(
+        return Err(TrainError::Setup(format!(
             "the VAE encodes P = {tokens} FPS tokens per clip, the store holds {stored}: import the clips with --p {tokens} or more"
         )));
     }
     let reference: Tensor<3> = batch.vertices.clone().narrow(1, 0, 1).reshape([b, n, 3]);
-    let edges = EdgeList::new(&batch.edges, n, device).map_err(|e| TrainError::Other(e.to_string()))?;
+    let edges = EdgeList::new(&batch.edges, n, device)?;
     Ok(VaeBatch {
         reference,
         frames: batch.vertices.clone(),
@@ -237,9 +265,9 @@ impl<V> VaeObjective<V> {
 /// FPS tokens.
 fn open_store(data: &Path, vae: &VaeSection) -> Result<Store> {
     let train_frames = vae.train_frames;
-    let store = Store::open(data).map_err(|e| TrainError::Other(format!("{}: {e}", data.display())))?;
+    let store = Store::open(data)?;
     if vae.tokens > store.p() {
-        return Err(TrainError::Other(format!(
+        return Err(TrainError::Setup(format!(
             "vae.tokens = {} but the store {} holds {} FPS tokens per clip: import it with --p {} or more",
             vae.tokens,
             data.display(),
@@ -248,18 +276,13 @@ fn open_store(data: &Path, vae: &VaeSection) -> Result<Store> {
         )));
     }
     if train_frames > store.frames() {
-        return Err(TrainError::Other(format!(
+        return Err(TrainError::Setup(format!(
             "vae.train_frames = {train_frames} but the store {} holds {}-frame clips",
             data.display(),
             store.frames()
         )));
     }
     Ok(store)
-}
-
-/// Fails before a run folder is claimed when the store in `data` cannot serve `cfg`.
-pub(crate) fn check_store(cfg: &VaeRunConfig, data: &Path) -> Result<()> {
-    open_store(data, &cfg.vae).map(|_| ())
 }
 
 /// Frame 0 and `k − 1` distinct frames of `1..t` in increasing order, drawn from `rng`; all `t` frames when `k` is
@@ -273,7 +296,7 @@ pub fn training_frames(t: usize, k: usize, rng: &mut ChaCha8Rng) -> Vec<usize> {
     std::iter::once(0).chain(rest.into_iter().map(|f| f + 1)).collect()
 }
 
-impl<V: MeshVae> Objective for VaeObjective<V> {
+impl<V: MeshVae + Module + Clone> Objective for VaeObjective<V> {
     type Model = V;
 
     fn terms(&self) -> Vec<String> {
@@ -294,7 +317,7 @@ impl<V: MeshVae> Objective for VaeObjective<V> {
             let index = Tensor::<1, Int>::from_data(TensorData::new(frames, [self.train_frames]), device);
             clips.vertices = clips.vertices.select(1, index);
         }
-        let l = model.vae_loss(&vae_batch(&clips, self.tokens, device)?); // (V1)–(V3)
+        let l = model.loss(&vae_batch(&clips, self.tokens, device)?); // (V1)–(V3)
         Ok(Losses {
             total: l.total,
             terms: vec![l.rec, l.kl],
@@ -308,7 +331,7 @@ impl<V: MeshVae> Objective for VaeObjective<V> {
         let mut sums = [0.0f64; 3];
         for chunk in self.valid.chunks(self.micro_batch) {
             let (clips, _) = load_clips(&self.store, chunk, device)?;
-            let l = model.vae_loss(&vae_batch(&clips, self.tokens, device)?);
+            let l = model.loss(&vae_batch(&clips, self.tokens, device)?);
             let w = chunk.len() as f64 / self.valid.len() as f64;
             for (s, t) in sums.iter_mut().zip([l.rec, l.kl, l.total]) {
                 *s += w * loop_common::scalar(t);
@@ -318,7 +341,7 @@ impl<V: MeshVae> Objective for VaeObjective<V> {
     }
 }
 
-/// SPEC §3.4: global mean/std of z₀ and of posterior-sampled trajectory latents over `indices` of `store`.
+/// docs/method.md §3.4: global mean/std of z₀ and of posterior-sampled trajectory latents over `indices` of `store`.
 pub fn latent_stats<V: MeshVae>(
     model: &V,
     store: &Store,
@@ -330,11 +353,11 @@ pub fn latent_stats<V: MeshVae>(
     let mut acc = LatentStatsAccumulator::new();
     for chunk in indices.chunks(micro_batch.max(1)) {
         let (clips, _) = load_clips(store, chunk, device)?;
-        let enc = model.vae_encode(&vae_batch(&clips, tokens, device)?);
-        let z = any4d_model::frame_vae::sample(enc.mu, enc.logvar);
+        let enc = model.encode_vae_batch(&vae_batch(&clips, tokens, device)?);
+        let z = any4d_model::mesh_vae::sample(enc.mu, enc.logvar);
         acc.update(enc.z0, z);
     }
-    acc.finish().map_err(|e| TrainError::Other(e.to_string()))
+    Ok(acc.finish()?)
 }
 
 /// `latent_stats.json`: the statistics and the VAE checkpoint step they belong to.
@@ -347,65 +370,64 @@ pub struct StoredLatentStats {
     pub stats: LatentStats,
 }
 
-/// Options of `any4d train vae` besides the config.
-pub struct VaeRunOptions {
-    /// Store folder (`--data`).
-    pub data: PathBuf,
-    /// Folder that holds run folders (`runs/`).
-    pub runs_dir: PathBuf,
-    /// Run name (`--run`), default "vae".
-    pub name: String,
-    /// Progress display.
-    pub progress: ProgressMode,
-    /// Ctrl-C flag.
-    pub stop: StopFlag,
-}
-
 /// Starts a new VAE run with `cfg`; returns the run folder and the outcome.
-pub fn train_vae(cfg: &VaeRunConfig, opts: &VaeRunOptions) -> Result<(RunFolder, Outcome)> {
-    // Fail before claiming a run folder when the backend or the store is unusable.
-    backend::check(cfg.device.backend, cfg.device.precision)?;
-    check_store(cfg, &opts.data)?;
+pub fn train_vae(cfg: &VaeRunConfig, opts: &RunOptions) -> Result<(RunFolder, Outcome)> {
+    // Fail before claiming a run folder when a backend or the store is unusable.
+    let devices = run_devices(&cfg.device, opts.parallel.as_ref())?;
+    open_store(&opts.data, &cfg.vae)?;
     let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &["rec", "kl"])?;
-    let outcome = run_vae(cfg, &run, opts, None)?;
+    let outcome = run_vae(cfg, &run, opts, &devices, None)?;
     Ok((run, outcome))
 }
 
-/// Continues the VAE run in `run_dir` from its newest checkpoint (config from the run folder; the backend may
-/// be overridden).
-pub fn resume_vae(run_dir: &Path, backend: Option<backend::Backend>, opts: &VaeRunOptions) -> Result<Outcome> {
+/// Continues the VAE run in `run_dir` from its newest checkpoint (config from the run folder; the backend may be
+/// overridden, or `opts.parallel` given, whose devices then all run at `[device] precision`).
+pub fn resume_vae(run_dir: &Path, backend: Option<backend::Backend>, opts: &RunOptions) -> Result<Outcome> {
     let run = RunFolder::open(run_dir)?;
-    let mut cfg = VaeRunConfig::parse(&run.config_text()?, &run.path(crate::run_folder::CONFIG_FILE))?;
+    let mut cfg = VaeRunConfig::parse(&run.config_text()?, &run.path(CONFIG_FILE))?;
     if let Some(b) = backend {
         cfg.device.backend = b;
     }
-    let ckpt = crate::checkpoint::latest(&run.path(crate::run_folder::CHECKPOINTS_DIR))?.ok_or_else(|| {
-        TrainError::Checkpoint {
-            path: run_dir.to_path_buf(),
-            reason: "no complete checkpoint to resume".into(),
-        }
+    let ckpt = crate::checkpoint::latest(&run.path(CHECKPOINTS_DIR))?.ok_or_else(|| TrainError::Checkpoint {
+        path: run_dir.to_path_buf(),
+        reason: "no complete checkpoint to resume".into(),
     })?;
-    run_vae(&cfg, &run, opts, Some(ckpt))
+    let devices = run_devices(&cfg.device, opts.parallel.as_ref())?;
+    run_vae(&cfg, &run, opts, &devices, Some(ckpt))
 }
 
-fn run_vae(cfg: &VaeRunConfig, run: &RunFolder, opts: &VaeRunOptions, resume: Option<PathBuf>) -> Result<Outcome> {
-    let device = backend::device(cfg.device.backend, cfg.device.precision)?;
-    let ad = device.clone().autodiff();
-    ad.seed(cfg.train.seed);
+fn run_vae(
+    cfg: &VaeRunConfig,
+    run: &RunFolder,
+    opts: &RunOptions,
+    devices: &[Device],
+    resume: Option<PathBuf>,
+) -> Result<Outcome> {
+    let ad: Vec<Device> = devices.iter().map(|d| d.clone().autodiff()).collect();
+    let main = ad
+        .first()
+        .ok_or_else(|| TrainError::Devices("training needs at least one device".into()))?;
+    main.seed(cfg.train.seed);
     match &cfg.model {
-        VaeModelConfig::Framewise(m) => fit(m.init(&ad), cfg, run, opts, resume, &ad),
-        VaeModelConfig::Sequencewise(m) => fit(m.init(&ad), cfg, run, opts, resume, &ad),
+        AnyMeshVaeConfig::Framewise(m) => fit(m.init(main), cfg, run, opts, &ad, resume),
+        AnyMeshVaeConfig::Sequencewise(m) => fit(m.init(main), cfg, run, opts, &ad, resume),
     }
 }
 
-fn fit<V: MeshVae>(
+/// Trains `model` on `devices` (autodiff; one, or several with `opts.parallel`'s strategy), then writes the latent
+/// statistics of a finished run.
+fn fit<V>(
     model: V,
     cfg: &VaeRunConfig,
     run: &RunFolder,
-    opts: &VaeRunOptions,
+    opts: &RunOptions,
+    devices: &[Device],
     resume: Option<PathBuf>,
-    device: &Device,
-) -> Result<Outcome> {
+) -> Result<Outcome>
+where
+    V: MeshVae + Module + Clone,
+    VaeObjective<V>: Sync,
+{
     let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch, &cfg.vae)?;
     run.log(&format!(
         "VAE {:?} on {} ({} train / {} val clips), backend {}",
@@ -419,14 +441,24 @@ fn fit<V: MeshVae>(
         run,
         train: &cfg.train,
         optim: &cfg.optim,
-        device: device.clone(),
+        device: devices[0].clone(),
         stop: opts.stop.clone(),
         progress: opts.progress,
         resume,
     };
-    let (model, outcome) = loop_common::train(&objective, model, setup)?;
+    let (model, outcome) = match &opts.parallel {
+        Some(p) => {
+            run.log(&format!(
+                "data-parallel over {} devices ({:?})",
+                devices.len(),
+                p.strategy
+            ))?;
+            train_data_parallel(&objective, model, setup, devices, p.strategy)?
+        }
+        None => loop_common::train(&objective, model, setup)?,
+    };
     if let Outcome::Finished { steps, .. } = &outcome {
-        let inference = device.clone().without_autodiff();
+        let inference = devices[0].clone().without_autodiff();
         inference.seed(cfg.train.seed);
         let stats = latent_stats(
             &model.valid(),
@@ -437,9 +469,11 @@ fn fit<V: MeshVae>(
             &inference,
         )?;
         let json = serde_json::to_vec_pretty(&StoredLatentStats { step: *steps, stats })
-            .map_err(|e| TrainError::Other(format!("serialise latent stats: {e}")))?;
+            .map_err(|e| crate::error::run_err(run.root(), format!("serialise {LATENT_STATS_FILE}: {e}")))?;
         write_atomic(&run.path(LATENT_STATS_FILE), &json)?;
-        run.log(&format!("latent statistics (SPEC §3.4) of step {steps}: {stats:?}"))?;
+        run.log(&format!(
+            "latent statistics (docs/method.md §3.4) of step {steps}: {stats:?}"
+        ))?;
     }
     Ok(outcome)
 }

@@ -1,8 +1,11 @@
-//! Every TOML in `configs/` and `experiments/` parses as a complete run config: no unknown keys, no missing
-//! keys, values in range (STYLE.md §4). Also checks that a typo anywhere, `[model]` included, is rejected.
+//! Every TOML in `configs/` and `experiments/` resolves (`extends` included) to a complete run config: no unknown
+//! keys, no missing keys, values in range. Also checks that a typo anywhere, `[model]` included, is rejected, that
+//! the overlays are short and resolve to their base with the keys they change, and that `--set` overrides work.
 
 use std::path::{Path, PathBuf};
 
+use any4d_train::config::resolve::{Files, resolve_text};
+use any4d_train::config::{Override, RunConfig};
 use any4d_train::rf_loop::RfRunConfig;
 use any4d_train::vae_loop::VaeRunConfig;
 
@@ -22,19 +25,13 @@ fn tomls(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// Parses `text` as the run config its tables announce: `[vae]` → VAE, `[rf]` → RF.
+/// Parses `text` (as if it were `path`, its `extends` chain read from disk) as the run config its tables announce:
+/// `[vae]` → VAE, `[rf]` → RF.
 fn parse_any(text: &str, path: &Path) -> Result<(), String> {
-    let table: toml::Table = toml::from_str(text).map_err(|e| format!("{}: {e}", path.display()))?;
-    if table.contains_key("vae") {
-        VaeRunConfig::parse(text, path).map(|_| ()).map_err(|e| e.to_string())
-    } else if table.contains_key("rf") {
-        RfRunConfig::parse(text, path).map(|_| ()).map_err(|e| e.to_string())
-    } else {
-        Err(format!(
-            "{}: neither a [vae] nor an [rf] table: not a run config",
-            path.display()
-        ))
-    }
+    let table = resolve_text(&Files, text, path).map_err(|e| e.to_string())?;
+    RunConfig::from_table(table, path)
+        .map(|_| ())
+        .map_err(|e| e.to_string())
 }
 
 #[test]
@@ -59,9 +56,10 @@ fn typos_and_omissions_are_rejected_in_every_table() {
     let text = std::fs::read_to_string(&vae).expect("configs/vae/tiny.toml");
     assert!(parse_any(&text, &vae).is_ok());
     for (from, to, needle) in [
-        ("width = 32", "widht = 32", "width"), // [model]: reported as the missing `width`
-        ("width = 32\n", "width = 32\nwidth_mult = 2\n", "model.width_mult"), // unknown [model] key
-        ("kl_weight = 1e-4\n", "", "kl_weight"), // missing [model] key
+        ("width = 32", "widht = 32", "widht"), // [model.body]: the unknown `widht`
+        ("width = 32\n", "width = 32\nwidth_mult = 2\n", "model.body"), // unknown [model.body] key
+        ("width = 32\n", "width = 32\nwidth_mult = 2\n", "width_mult"),
+        ("kl_weight = 1e-4\n", "", "kl_weight"),         // missing [model] key
         ("keep_last = 3", "keep_lats = 3", "keep_lats"), // [train]
         ("grad_clip = 1.0", "grad_clip = 0.0", "optim"), // out of range
         ("kind = \"framewise\"", "kind = \"framewize\"", "framewize"),
@@ -77,6 +75,7 @@ fn typos_and_omissions_are_rejected_in_every_table() {
     }
     let dymesh = root().join("configs/vae/dymesh_paper.toml");
     let text = std::fs::read_to_string(&dymesh).expect("configs/vae/dymesh_paper.toml");
+    assert!(parse_any(&text, &dymesh).is_ok());
     let err = parse_any(&text.replacen("train_frames = 0", "train_frames = 4", 1), &dymesh).unwrap_err();
     assert!(
         err.contains("vae.train_frames = 4") && err.contains("whole clips"),
@@ -94,14 +93,14 @@ fn typos_and_omissions_are_rejected_in_every_table() {
 #[test]
 fn resolved_configs_round_trip() {
     let vae = root().join("configs/vae/paper.toml");
-    let cfg = VaeRunConfig::load(&vae).unwrap();
+    let cfg = VaeRunConfig::load(&vae, &[]).unwrap();
     let again = VaeRunConfig::parse(&cfg.to_toml().unwrap(), Path::new("resolved.toml")).unwrap();
     assert_eq!(again.to_toml().unwrap(), cfg.to_toml().unwrap());
     assert_eq!(
         (cfg.train.batch_size, cfg.optim.lr, cfg.optim.beta2),
         (256, 1e-4, 0.999)
     );
-    let rf = RfRunConfig::load(&root().join("configs/rf/paper.toml")).unwrap();
+    let rf = RfRunConfig::load(&root().join("configs/rf/paper.toml"), &[]).unwrap();
     assert_eq!(
         RfRunConfig::parse(&rf.to_toml().unwrap(), Path::new("r.toml")).unwrap(),
         rf
@@ -109,5 +108,86 @@ fn resolved_configs_round_trip() {
     assert_eq!(
         (rf.train.batch_size, rf.optim.lr, rf.optim.beta2, rf.optim.weight_decay),
         (256, 2e-4, 0.99, 0.01)
+    );
+}
+
+#[test]
+fn overlays_are_short_and_resolve_to_their_base_with_the_changed_keys() {
+    for (overlay, base) in [
+        ("configs/rf/baseline_tiny.toml", "configs/rf/tiny.toml"),
+        ("configs/rf/baseline_paper.toml", "configs/rf/paper.toml"),
+    ] {
+        let lines = std::fs::read_to_string(root().join(overlay)).unwrap().lines().count();
+        assert!(
+            lines <= 10,
+            "{overlay} has {lines} lines: an overlay holds only what changes"
+        );
+        let over = RfRunConfig::load(&root().join(overlay), &[]).unwrap();
+        let mut base = RfRunConfig::load(&root().join(base), &[]).unwrap();
+        assert_ne!(over, base);
+        base.model.conditioning = over.model.conditioning;
+        assert_eq!(over, base, "{overlay} changes only model.conditioning");
+    }
+    let seq = VaeRunConfig::load(&root().join("configs/vae/dymesh_paper.toml"), &[]).unwrap();
+    let frame = VaeRunConfig::load(&root().join("configs/vae/paper.toml"), &[]).unwrap();
+    assert_eq!(seq.model.body().width, 256);
+    assert_eq!(seq.optim, frame.optim, "the optimiser comes from the base");
+    assert_eq!(seq.train.batch_size, 128);
+}
+
+#[test]
+fn set_overrides_apply_after_extends_and_reject_unknown_keys() {
+    let tiny = root().join("configs/rf/baseline_tiny.toml");
+    let sets: Vec<Override> = ["rf.k_max=3", "rf.tau_sampler=cosmap", "train.duration={ steps = 7 }"]
+        .iter()
+        .map(|s| s.parse().unwrap())
+        .collect();
+    let cfg = RfRunConfig::load(&tiny, &sets).unwrap();
+    assert_eq!(cfg.rf.k_max, 3);
+    assert_eq!(format!("{:?}", cfg.rf.tau_sampler), "Cosmap");
+    assert_eq!(format!("{:?}", cfg.train.duration), "Steps(7)");
+    assert_eq!(
+        format!("{:?}", cfg.model.conditioning),
+        "ReplaceNoised",
+        "the overlay still applies"
+    );
+    let resolved = cfg.to_toml().unwrap();
+    assert!(
+        !resolved.contains("extends") && resolved.contains("k_max = 3"),
+        "{resolved}"
+    );
+    let err = RfRunConfig::load(&tiny, &["rf.k_maxx=3".parse().unwrap()])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("unknown key `rf.k_maxx`") && err.contains("baseline_tiny.toml"),
+        "{err}"
+    );
+    let err = RfRunConfig::load(&tiny, &["rf.k_max=\"three\"".parse().unwrap()])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("rf.k_max"), "{err}");
+}
+
+#[test]
+fn run_folders_written_before_the_renames_still_load() {
+    // VAE run folders once held the body's keys flat under [model], with `pad_keys = "Masked"`.
+    let vae = root().join("configs/vae/tiny.toml");
+    let text = std::fs::read_to_string(&vae).unwrap();
+    let header = "\n# The encoder/decoder body both mesh VAEs share (model/src/mesh_vae.rs).\n[model.body]\n";
+    assert!(text.contains(header));
+    let flat = text.replace(header, "\n").replace("\"masked\"", "\"Masked\"");
+    assert_eq!(
+        VaeRunConfig::parse(&flat, &vae).unwrap(),
+        VaeRunConfig::parse(&text, &vae).unwrap()
+    );
+    // RF run folders once named the keyframe conditioning `kf_mode`.
+    let rf = root().join("configs/rf/tiny.toml");
+    let text = std::fs::read_to_string(&rf).unwrap();
+    let old = text.replace("conditioning = ", "kf_mode = ");
+    assert_ne!(old, text);
+    assert_eq!(
+        RfRunConfig::parse(&old, &rf).unwrap(),
+        RfRunConfig::parse(&text, &rf).unwrap()
     );
 }

@@ -1,4 +1,4 @@
-//! The generic training loop on a toy MLP regression (issue 5 item 2 tests): resume equality (2n straight vs
+//! The generic training loop on a toy MLP regression: resume equality (2n straight vs
 //! n + Ctrl-C + resume + n, bitwise on the CPU backend), the NaN guard keeps the last good checkpoint, a
 //! half-written checkpoint (kill -9) is ignored, the loss goes down and the plot is written.
 

@@ -1,8 +1,8 @@
-//! The keyframe RF loop on a tiny frozen VAE (SPEC §4.5, §5.4; issue 5 item 1): a short run lowers (R5), keyframe
+//! The keyframe RF loop on a tiny frozen VAE (docs/method.md §4.5, §5.4): a short run lowers (R5), keyframe
 //! masks follow the sampler (k ≤ k_max, k = 0 drawn; no keyframes for `none`/`replace_noised`), `impute_until`
 //! trains on noisy keyframes, resume is bitwise equal to straight training (validation sampling on), `load_rf_run`
-//! round-trips, validation sampling (issue 5 item 4) writes seeded `samples.csv` rows at its steps for every
-//! `kf_mode` without touching the training streams, and mismatched configs or incomplete run folders give errors
+//! round-trips, validation sampling writes seeded `samples.csv` rows at its steps for every
+//! `conditioning` without touching the training streams, and mismatched configs or incomplete run folders give errors
 //! naming the field or file. One tiny VAE run on
 //! procedural clips is shared by all tests.
 
@@ -11,20 +11,21 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use any4d_model::mmdit::KfMode;
+use any4d_data::keyframes::TrainingKeyframes;
+use any4d_model::mmdit::KeyframeConditioning;
 use any4d_model::text::scratch::ScratchTokenizer;
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::Duration;
-use any4d_train::loop_common::{Objective, Outcome, StopFlag, train};
+use any4d_train::loop_common::{Objective, Outcome, RunOptions, StopFlag, train};
 use any4d_train::multi_device::{Parallel, Strategy};
 use any4d_train::progress::ProgressMode;
 use any4d_train::rf_loop::{
-    KfSampler, LatentCache, LatentDraw, RF_TERMS, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS, Subset,
-    TextDropout, draw_keyframe_mask, resume_rf, train_rf,
+    LatentCache, LatentDraw, RF_TERMS, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS, Subset, TextDropout,
+    resume_rf, train_rf, training_mask,
 };
 use any4d_train::run_folder::{LOG_FILE, METRICS_FILE, RunFolder, SAMPLES_FILE, VALID_FILE, read_table};
 use any4d_train::runs::{LoadedVae, VAE_RUN_FILE, load_rf_run, load_vae_run};
-use any4d_train::vae_loop::{VaeRunOptions, train_vae};
+use any4d_train::vae_loop::train_vae;
 use burn::prelude::{Device, Tensor};
 use common::{params, quiet_setup, root, serial, synth_store, tiny_vae};
 use rand::SeedableRng;
@@ -47,12 +48,13 @@ fn fixture() -> &'static Fixture {
         cfg.train.micro_batch = 4;
         cfg.train.checkpoint_every = 6;
         cfg.train.valid_every = 6;
-        let opts = VaeRunOptions {
+        let opts = RunOptions {
             data: store.clone(),
             runs_dir: dir.path().join("runs"),
             name: "vae".into(),
             progress: ProgressMode::Quiet,
             stop: StopFlag::new(),
+            parallel: None,
         };
         let (run, outcome) = train_vae(&cfg, &opts).expect("tiny VAE run");
         assert!(matches!(outcome, Outcome::Finished { .. }), "{outcome:?}");
@@ -67,7 +69,7 @@ fn fixture() -> &'static Fixture {
 
 /// configs/rf/tiny.toml sized for the fixture: T = 4, k_max = 3, `steps` steps of 4 clips, no validation samples.
 fn tiny_rf(steps: u64) -> RfRunConfig {
-    let mut cfg = RfRunConfig::load(&root().join("configs/rf/tiny.toml")).expect("configs/rf/tiny.toml");
+    let mut cfg = RfRunConfig::load(&root().join("configs/rf/tiny.toml"), &[]).expect("configs/rf/tiny.toml");
     cfg.model.frames = 4;
     cfg.rf.k_max = 3;
     cfg.train.duration = Duration::Steps(steps);
@@ -92,13 +94,15 @@ fn sampling_rf(steps: u64, every: u64) -> RfRunConfig {
 fn rf_opts(name: &str) -> RfRunOptions {
     let f = fixture();
     RfRunOptions {
-        data: f.store.clone(),
+        run: RunOptions {
+            data: f.store.clone(),
+            runs_dir: f.dir.join("runs"),
+            name: name.into(),
+            progress: ProgressMode::Quiet,
+            stop: StopFlag::new(),
+            parallel: None,
+        },
         vae_run: Some(f.vae_run.clone()),
-        runs_dir: f.dir.join("runs"),
-        name: name.into(),
-        progress: ProgressMode::Quiet,
-        stop: StopFlag::new(),
-        parallel: None,
     }
 }
 
@@ -208,30 +212,30 @@ fn load_rf_run_round_trips_the_trained_run() {
 
 #[test]
 fn keyframe_masks_follow_sampler_and_mode() {
-    let cfg = RfRunConfig::load(&root().join("configs/rf/tiny.toml")).unwrap();
+    let cfg = RfRunConfig::load(&root().join("configs/rf/tiny.toml"), &[]).unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let mut hist = [0usize; 17];
     for _ in 0..3000 {
-        let m = draw_keyframe_mask(&cfg.rf, KfMode::InputMask, 16, &mut rng);
+        let m = training_mask(&cfg.rf, KeyframeConditioning::InputMask, 16, &mut rng);
         assert_eq!(m.len(), 16);
         hist[m.iter().filter(|&&x| x).count()] += 1;
     }
     assert!(hist[6..].iter().all(|&n| n == 0), "k > k_max = 5 drawn: {hist:?}");
     // k ~ U{0..5}: 500 expected per value; 4.5 standard deviations ≈ 92.
     assert!(hist[..6].iter().all(|&n| (400..=600).contains(&n)), "{hist:?}");
-    for mode in [KfMode::None, KfMode::ReplaceNoised] {
+    for mode in [KeyframeConditioning::None, KeyframeConditioning::ReplaceNoised] {
         for _ in 0..100 {
             assert!(
-                draw_keyframe_mask(&cfg.rf, mode, 16, &mut rng).iter().all(|&m| !m),
+                training_mask(&cfg.rf, mode, 16, &mut rng).iter().all(|&m| !m),
                 "{mode:?}"
             );
         }
     }
     let mut scenemi = cfg.rf.clone();
-    scenemi.kf_sampler = KfSampler::Scenemi;
+    scenemi.kf_sampler = TrainingKeyframes::Scenemi;
     let mut ks = std::collections::BTreeSet::new();
     for _ in 0..2000 {
-        let m = draw_keyframe_mask(&scenemi, KfMode::ImputeUntil, 16, &mut rng);
+        let m = training_mask(&scenemi, KeyframeConditioning::ImputeUntil, 16, &mut rng);
         assert!(m[0] && m[15], "SceneMI keeps first and last: {m:?}");
         ks.insert(m.iter().filter(|&&x| x).count());
     }
@@ -252,6 +256,7 @@ fn batch_masks_respect_k_max_and_none_has_no_keyframes() {
     let mut sums = Vec::new();
     for _ in 0..50 {
         let step = objective
+            .batcher()
             .batch(&model, Subset::Train, &all, &mut rng, TextDropout::Apply, &dev)
             .unwrap();
         assert_eq!(step.batch.z.dims(), [n, 32, 4, 4]);
@@ -263,15 +268,16 @@ fn batch_masks_respect_k_max_and_none_has_no_keyframes() {
     assert!(sums.contains(&0.0), "k = 0 never drawn in {} masks", sums.len());
     assert!(sums.contains(&3.0), "k = 3 never drawn in {} masks", sums.len());
 
-    cfg.model.kf_mode = KfMode::None;
+    cfg.model.conditioning = KeyframeConditioning::None;
     let (objective, vocab) = make_objective(&cfg, &vae, &dev);
     let model = cfg.model_config(vocab).init(&dev);
     for _ in 0..5 {
         let step = objective
+            .batcher()
             .batch(&model, Subset::Train, &all, &mut rng, TextDropout::Apply, &dev)
             .unwrap();
         let total = step.batch.mask.sum().into_scalar::<f32>();
-        assert_eq!(total, 0.0, "kf_mode none drew keyframes");
+        assert_eq!(total, 0.0, "conditioning none drew keyframes");
     }
 }
 
@@ -290,6 +296,7 @@ fn per_batch_encoding_matches_the_memory_cache() {
     let draw = |o: &RfObjective| {
         dev.seed(5);
         let step = o
+            .batcher()
             .batch(
                 &model,
                 Subset::Train,
@@ -312,8 +319,8 @@ fn per_batch_encoding_matches_the_memory_cache() {
 fn impute_until_trains_on_noisy_keyframes() {
     let _g = serial();
     let mut cfg = tiny_rf(3);
-    cfg.model.kf_mode = KfMode::ImputeUntil;
-    cfg.rf.kf_sampler = KfSampler::Scenemi;
+    cfg.model.conditioning = KeyframeConditioning::ImputeUntil;
+    cfg.rf.kf_sampler = TrainingKeyframes::Scenemi;
     cfg.rf.keyframe_noise = 0.5; // large, so the encoded keyframes must differ from the clean latents
     cfg.rf.latent = LatentDraw::Mean; // Z = standardized clean μ: comparable with the noisy keyframes' μ
     let dev = inference_device();
@@ -322,6 +329,7 @@ fn impute_until_trains_on_noisy_keyframes() {
     let model = cfg.model_config(vocab).init(&dev);
     let all: Vec<usize> = (0..objective.train_len()).collect();
     let step = objective
+        .batcher()
         .batch(
             &model,
             Subset::Train,
@@ -494,13 +502,13 @@ fn validation_samples_run_for_every_kf_mode() {
     let dev = inference_device();
     let vae = load_vae_run(&fixture().vae_run, &dev).unwrap();
     for mode in [
-        KfMode::InputMask,
-        KfMode::ReplaceNoised,
-        KfMode::None,
-        KfMode::ImputeUntil,
+        KeyframeConditioning::InputMask,
+        KeyframeConditioning::ReplaceNoised,
+        KeyframeConditioning::None,
+        KeyframeConditioning::ImputeUntil,
     ] {
         let mut cfg = sampling_rf(1, 1);
-        cfg.model.kf_mode = mode;
+        cfg.model.conditioning = mode;
         cfg.rf.valid_sample_clips = 5; // more than the 3 VAL clips: all of them
         let (objective, vocab) = make_objective(&cfg, &vae, &dev);
         dev.seed(1);
@@ -595,7 +603,7 @@ fn tiny_rf_trains_and_resumes_over_two_cpu_devices() {
     cfg.train.micro_batch = 2;
     cfg.train.checkpoint_every = 1;
     let mut opts = rf_opts("parallel");
-    opts.parallel = Some(Parallel::parse("flex,flex", Strategy::Auto).unwrap());
+    opts.run.parallel = Some(Parallel::parse("flex,flex", Strategy::Auto).unwrap());
     let (run, outcome) = train_rf(&cfg, &opts).expect("data-parallel RF run");
     assert!(matches!(outcome, Outcome::Finished { steps: 3, .. }), "{outcome:?}");
     let log = std::fs::read_to_string(run.path(LOG_FILE)).unwrap();

@@ -3,14 +3,13 @@
 
 mod common;
 
+use any4d_model::any_vae::AnyMeshVaeConfig;
 use any4d_model::frame_vae::FrameVae;
 use any4d_train::backend::{Backend, Precision, device};
-use any4d_train::loop_common::{Outcome, StopFlag, train};
+use any4d_train::loop_common::{Outcome, RunOptions, StopFlag, train};
 use any4d_train::progress::ProgressMode;
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, read_table};
-use any4d_train::vae_loop::{
-    LATENT_STATS_FILE, StoredLatentStats, VaeModelConfig, VaeObjective, VaeRunConfig, VaeRunOptions, train_vae,
-};
+use any4d_train::vae_loop::{LATENT_STATS_FILE, StoredLatentStats, VaeObjective, VaeRunConfig, train_vae};
 use common::{params, quiet_setup, serial, synth_store, tiny_vae};
 
 fn tiny(steps: u64) -> VaeRunConfig {
@@ -27,12 +26,13 @@ fn tiny_vae_run_lowers_its_loss_and_stores_latent_stats() {
     let dir = tempfile::tempdir().unwrap();
     let data = synth_store(dir.path(), 3);
     let cfg = tiny(30);
-    let opts = VaeRunOptions {
+    let opts = RunOptions {
         data,
         runs_dir: dir.path().join("runs"),
         name: "vae".into(),
         progress: ProgressMode::Quiet,
         stop: StopFlag::new(),
+        parallel: None,
     };
     let (run, outcome) = train_vae(&cfg, &opts).unwrap();
     assert!(matches!(outcome, Outcome::Finished { steps: 30, .. }), "{outcome:?}");
@@ -58,7 +58,7 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
     let n = 3;
     let go = |run: &RunFolder, steps: u64, resume: Option<std::path::PathBuf>| {
         let cfg = tiny(steps);
-        let VaeModelConfig::Framewise(m) = &cfg.model else {
+        let AnyMeshVaeConfig::Framewise(m) = &cfg.model else {
             panic!("tiny is frame-wise")
         };
         let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
@@ -108,12 +108,13 @@ fn tiny_vae_trains_on_two_frames_per_clip_and_validates_on_all() {
     let data = synth_store(dir.path(), 3);
     let mut cfg = tiny(4);
     cfg.vae.train_frames = 2;
-    let opts = VaeRunOptions {
+    let opts = RunOptions {
         data: data.clone(),
         runs_dir: dir.path().join("runs"),
         name: "vae".into(),
         progress: ProgressMode::Quiet,
         stop: StopFlag::new(),
+        parallel: None,
     };
     let (run, outcome) = train_vae(&cfg, &opts).unwrap();
     assert!(matches!(outcome, Outcome::Finished { steps: 4, .. }), "{outcome:?}");

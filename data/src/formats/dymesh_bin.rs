@@ -1,4 +1,4 @@
-//! DyMesh `.bin` clips (SPEC §2.1): a pickled dict `{vertices: (T, N, 3), faces: (M, 3), caption: str}`.
+//! DyMesh `.bin` clips (docs/method.md §2.1): a pickled dict `{vertices: (T, N, 3), faces: (M, 3), caption: str}`.
 //!
 //! Reading goes through the restricted unpickler in [`super::pickle`]; nothing in the file is executed.
 //! A missing caption becomes a single space " " (AAM loader); the empty string stays empty (unconditional).
@@ -9,7 +9,7 @@ use super::pickle::{self, ArrayData, DType, NdArray, Value};
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
 
-/// Caption used when the file has none (SPEC §2.1, AAM code).
+/// Caption used when the file has none (docs/method.md §2.1, AAM code).
 pub const MISSING_CAPTION: &str = " ";
 
 /// Read a DyMesh `.bin` clip. The id is the file stem.

@@ -1,5 +1,5 @@
-//! glTF 2.0 / GLB clips (SPEC §2.1): animation baked to per-frame world-space vertex positions, and a writer that
-//! stores a clip as frame-0 mesh + one morph target per frame.
+//! glTF 2.0 / GLB clips (docs/method.md §2.1): animation baked to per-frame world-space vertex positions, and a writer
+//! that stores a clip as frame-0 mesh + one morph target per frame.
 //!
 //! Reading takes the first animation and the first triangle primitive of the chosen mesh, samples every channel
 //! (STEP, LINEAR with slerp for rotations, CUBICSPLINE) at `t = f / fps` for `f = 0..=⌊duration · fps⌋`, and bakes

@@ -1,4 +1,4 @@
-//! Clip file formats (SPEC §2.1), one module each, and dispatch by extension.
+//! Clip file formats (docs/method.md §2.1), one module each, and dispatch by extension.
 //!
 //! Readers return the file's coordinates, vertex order and faces unchanged (glTF: the world-space positions a
 //! viewer shows); normalisation is preprocessing's job.

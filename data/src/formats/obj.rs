@@ -1,4 +1,4 @@
-//! OBJ sequences (SPEC §2.1 clip record): a folder of per-frame `.obj` files sharing one topology.
+//! OBJ sequences (docs/method.md §2.1 clip record): a folder of per-frame `.obj` files sharing one topology.
 //!
 //! Frames are the folder's `.obj` files in natural order (`f2` before `f10`); faces come from frame 0 and every
 //! frame must have the same vertex count and faces. Polygons are triangulated as fans `(0, i, i+1)`; face corners

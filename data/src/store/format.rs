@@ -1,5 +1,5 @@
-//! The `clips.bin` container of a dataset store: a streaming writer and a random-access reader (SPEC §2.1–§2.5
-//! record; layout in the [`crate::store`] module doc).
+//! The `clips.bin` container of a dataset store: a streaming writer and a random-access reader (docs/method.md
+//! §2.1–§2.5 record; layout in the [`crate::store`] module doc).
 //!
 //! Every read is bounds-checked against the file: a corrupt or truncated file gives a [`DataError`] naming the
 //! file, the clip, the field and the byte offset, never a panic and never an allocation larger than the file.

@@ -1,5 +1,6 @@
 //! Import clip files (or procedural clips) into a dataset store: find sources, preprocess each window
-//! (weld, filter, normalise (D1)–(D3), FPS of SPEC §2.5), split by object (SPEC §2.2), write atomically.
+//! (weld, filter, normalise (D1)–(D3), FPS of docs/method.md §2.5), split by object (docs/method.md §2.2), write
+//! atomically.
 //!
 //! One bad file never aborts an import: it becomes a "rejected" row of the index with its reason. Only problems
 //! with the output folder or an existing store abort.
@@ -21,7 +22,7 @@ use super::{
     CLIPS_FILE, DEFAULT_P, IndexRow, SPLIT_SEED, Split, Status, Store, StoreWriter, StoredClip, read_index, write_index,
 };
 
-/// Vertex welding before anything else (SPEC §2.1 sources with split seams).
+/// Vertex welding before anything else (docs/method.md §2.1 sources with split seams).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum Weld {
     /// Keep the file's vertices as they are (default).
@@ -34,15 +35,15 @@ pub enum Weld {
 /// How files become store clips.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImportOptions {
-    /// Accepted vertex counts (SPEC §2.2: 512..=4096).
+    /// Accepted vertex counts (docs/method.md §2.2: 512..=4096).
     pub filter: VertexFilter,
-    /// Window length T (SPEC §2.6: 16).
+    /// Window length T (docs/method.md §2.6: 16).
     pub frames: usize,
-    /// Frames between window starts (SPEC §2.6: 1).
+    /// Frames between window starts (docs/method.md §2.6: 1).
     pub stride: usize,
     /// Welding (default off).
     pub weld: Weld,
-    /// FPS tokens P (SPEC §2.5: 512). A clip with fewer vertices gets its FPS order repeated cyclically
+    /// FPS tokens P (docs/method.md §2.5: 512). A clip with fewer vertices gets its FPS order repeated cyclically
     /// (see [`farthest_point_sampling`]); the default filter rules that out.
     pub p: usize,
 }
@@ -153,7 +154,8 @@ fn format_name(f: &Format) -> &'static str {
     }
 }
 
-/// Import `sources` (files, or folders searched recursively for `.bin`/`.pkl`/`.pickle`/`.gltf`/`.glb` files and folders of
+/// Import `sources` (files, or folders searched recursively for `.bin`/`.pkl`/`.pickle`/`.gltf`/`.glb` files and
+/// folders of
 /// `.obj` frames) into the store folder `out`; see the [`crate::store`] module doc for re-imports.
 pub fn import(sources: &[PathBuf], out: &Path, opts: &ImportOptions) -> Result<ImportReport> {
     import_with_progress(sources, out, opts, None)
@@ -186,8 +188,8 @@ pub fn write_synth_with(cfg: &SynthConfig, out: &Path, p: usize, progress: Progr
 }
 
 /// [`write_synth_with`] cutting each procedural clip into windows of `window` frames every `stride` frames
-/// (SPEC §2.6). With `cfg.frames = 31`, `window = 16`, `stride = 15` the two windows of a clip share frame 15 and
-/// form a long-horizon pair (SPEC §2.7, P-Table 2).
+/// (docs/method.md §2.6). With `cfg.frames = 31`, `window = 16`, `stride = 15` the two windows of a clip share frame 15
+/// and form a long-horizon pair (docs/method.md §2.7, P-Table 2).
 pub fn write_synth_windows(
     cfg: &SynthConfig,
     out: &Path,
@@ -406,8 +408,8 @@ fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
     Outcome::Clips(preprocess_windows(&clip, opts.frames, opts.stride, opts.p))
 }
 
-/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 (SPEC §2.5)
-/// and assign the split of the clip's object (SPEC §2.2). Returns each window with its object uid.
+/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 (docs/method.md
+/// §2.5) and assign the split of the clip's object (docs/method.md §2.2). Returns each window with its object uid.
 fn preprocess_windows(clip: &Clip, frames: usize, stride: usize, p: usize) -> Vec<(StoredClip, String)> {
     // The uid of the whole clip, so every window of one animation shares its split.
     let object = object_uid(&clip.id).to_owned();

@@ -1,4 +1,4 @@
-//! `index.parquet` of a dataset store: one row per accepted clip and per rejected file (SPEC §2.2 manifest).
+//! `index.parquet` of a dataset store: one row per accepted clip and per rejected file (docs/method.md §2.2 manifest).
 
 use std::fs::File;
 use std::path::Path;

@@ -1,10 +1,10 @@
-//! The dataset store (SPEC §2.1–§2.5): preprocessed clips in one binary file plus a parquet index and the
-//! object-level train/validation split of SPEC §2.2.
+//! The dataset store (docs/method.md §2.1–§2.5): preprocessed clips in one binary file plus a parquet index and the
+//! object-level train/validation split of docs/method.md §2.2.
 //!
 //! # Folder
 //! A store is a folder `DIR/` holding
 //! - `clips.bin`: every accepted clip (window) after preprocessing: optional welding (off by default),
-//!   normalisation by the window's frame 0 (D1)–(D3), and P FPS indices on normalised frame 0 (SPEC §2.5);
+//!   normalisation by the window's frame 0 (D1)–(D3), and P FPS indices on normalised frame 0 (docs/method.md §2.5);
 //! - `index.parquet`: one row per accepted clip (status "ok", same order as `clips.bin`) followed by one row
 //!   per rejected source file (status "rejected" with its reason). Columns: `id`, `source`, `format`,
 //!   `frames`, `vertices`, `faces` (u32, null when rejected), `caption`, `split` ("train"/"val", null when
@@ -26,7 +26,7 @@
 //! ```
 //! Every clip of a store has the same T and P (the header's), so batches need no frame or token padding.
 //!
-//! # Split (SPEC §2.2)
+//! # Split (docs/method.md §2.2)
 //! 80/20 by object uid ([`crate::clip::object_uid`]): a clip goes to validation iff
 //! `mix(FNV-1a-64(seed as u64 LE ‖ uid)) / 2⁶⁴ < 0.2` with seed 666 ([`SPLIT_SEED`]) and `mix` the SplitMix64
 //! finaliser. The rule reads nothing but the uid, so all clips of one object land on the same side, the split
@@ -61,11 +61,11 @@ pub use index::{IndexRow, Status, read_index, write_index};
 pub const CLIPS_FILE: &str = "clips.bin";
 /// File name of the parquet index inside a store folder.
 pub const INDEX_FILE: &str = "index.parquet";
-/// Seed of the object-level split (SPEC §2.2).
+/// Seed of the object-level split (docs/method.md §2.2).
 pub const SPLIT_SEED: u64 = 666;
-/// Fraction of objects in the validation split (SPEC §2.2).
+/// Fraction of objects in the validation split (docs/method.md §2.2).
 pub const VAL_FRACTION: f64 = 0.2;
-/// FPS tokens per clip P (SPEC §1.1).
+/// FPS tokens per clip P (docs/method.md §1.1).
 pub const DEFAULT_P: usize = 512;
 
 /// Which side of the train/validation split a clip is on.
@@ -131,7 +131,7 @@ impl Split {
 pub struct StoredClip {
     /// The clip with vertices normalised by frame 0 (D1)–(D3).
     pub clip: Clip,
-    /// P FPS indices into `0..clip.n_vertices`, computed on normalised frame 0 (SPEC §2.5).
+    /// P FPS indices into `0..clip.n_vertices`, computed on normalised frame 0 (docs/method.md §2.5).
     pub fps: Vec<u32>,
     /// (c, s) of (D1)–(D2): `x = x̄ · s + c`.
     pub normalization: Normalization,

@@ -1,4 +1,4 @@
-//! The embedded procedural dataset (any4d issue 3, `any4d data synth`): shape families × motion families with
+//! The embedded procedural dataset (`any4d data synth`): shape families × motion families with
 //! random parameters, vertex counts spread over the §2.2 filter range, and captions built from what happens.
 //!
 //! Clips are in world units (metres, y up, standing on y = 0), not normalised. Every clip depends only on

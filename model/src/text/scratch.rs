@@ -1,4 +1,4 @@
-//! The `scratch` text encoder (SPEC §4.4): a word-level tokenizer trained on the dataset's captions with the
+//! The `scratch` text encoder (docs/method.md §4.4): a word-level tokenizer trained on the dataset's captions with the
 //! `tokenizers` crate (saved as `tokenizer.json` in the run folder; its word-level trainer orders equal counts
 //! alphabetically, so training is deterministic — the WordPiece trainer is not) and a small pre-LN transformer
 //! trained jointly with the rectified flow. An empty caption has no tokens: all padding, zero states (unconditional).
@@ -36,7 +36,8 @@ pub struct ScratchTokenizer {
 }
 
 impl ScratchTokenizer {
-    /// Trains a lower-casing word-level tokenizer (deterministic for the same captions) on the captions (vocabulary at most `vocab_size`, special tokens
+    /// Trains a lower-casing word-level tokenizer (deterministic for the same captions) on the captions (vocabulary at
+    /// most `vocab_size`, special tokens
     /// `[PAD]` = 0 and `[UNK]` = 1).
     pub fn train(captions: &[String], vocab_size: usize) -> Result<Self, TextError> {
         let source = PathBuf::from("<captions>");

@@ -3,28 +3,20 @@
 
 use std::path::Path;
 
+use any4d_data::keyframes::TrainingKeyframes;
 use any4d_model::mmdit::MmditConfig;
 use any4d_model::rectified_flow::{KeyframeLoss, RfLossOptions, TauSampler};
 use any4d_model::text::scratch::ScratchTextConfig;
 use serde::{Deserialize, Serialize};
 
-use crate::config::{DeviceConfig, OptimConfig, TrainConfig, parse_strict, to_toml};
-use crate::error::{Result, TrainError, io_err};
+use crate::config::resolve::{self, ConfigSource, Files, Override};
+use crate::config::{DeviceConfig, OptimConfig, TrainConfig, to_toml};
+use crate::error::{Result, TrainError};
 
 use super::VALID_SAMPLE_KEYFRAMES;
 use super::network::RfModelConfig;
 
-/// How the keyframe set of a training sample is drawn (SPEC §4.5, §5.4, §8 X3).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum KfSampler {
-    /// k ~ Unif{0..=k_max}, a uniform k-subset of the T frames (paper, k_max = 5).
-    Random,
-    /// SceneMI: k ~ Unif{2..=T}, first and last always included.
-    Scenemi,
-}
-
-/// Which VAE latent trains the RF (SPEC §3.4: statistics over posterior samples).
+/// Which VAE latent trains the RF (docs/method.md §3.4: statistics over posterior samples).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LatentDraw {
@@ -50,33 +42,33 @@ pub enum LatentCache {
 #[serde(deny_unknown_fields)]
 pub struct RfSection {
     /// Keyframe sampler in training.
-    pub kf_sampler: KfSampler,
-    /// Largest k of the random sampler (SPEC §4.5: 5).
+    pub kf_sampler: TrainingKeyframes,
+    /// Largest k of the random sampler (docs/method.md §4.5: 5).
     pub k_max: usize,
-    /// τ distribution (SPEC §4.5 step 4: uniform; AAM: cosmap).
+    /// τ distribution (docs/method.md §4.5 step 4: uniform; AAM: cosmap).
     pub tau_sampler: TauSampler,
-    /// Which slots enter (R5) (SPEC §4.2: all).
+    /// Which slots enter (R5) (docs/method.md §4.2: all).
     pub keyframe_loss: KeyframeLoss,
-    /// τ* of (R9) for `kf_mode = "impute_until"` (SPEC §5.4: 0.98).
+    /// τ* of (R9) for `conditioning = "impute_until"` (docs/method.md §5.4: 0.98).
     pub tau_star: f64,
-    /// Std of the keyframe vertex noise per unit l ~ U(0, 1) for `impute_until` (SPEC §5.4: 0.02).
+    /// Std of the keyframe vertex noise per unit l ~ U(0, 1) for `impute_until` (docs/method.md §5.4: 0.02).
     pub keyframe_noise: f64,
-    /// Probability of dropping the caption for CFG (SPEC §4.4: 0.1).
+    /// Probability of dropping the caption for CFG (docs/method.md §4.4: 0.1).
     pub text_dropout: f64,
     /// Posterior sample or mean as the RF's target latent.
     pub latent: LatentDraw,
     /// Frozen-VAE latents cached in memory or encoded per batch.
     pub latent_cache: LatentCache,
-    /// Validation sampling (issue 5 item 4) at every validation whose step is a multiple of this, and at the
+    /// Validation sampling at every validation whose step is a multiple of this, and at the
     /// last step; 0 = off. A multiple of `train.valid_every`.
     pub valid_sample_every: u64,
     /// VAL clips sampled (the first ones in store order, the same every time).
     pub valid_sample_clips: usize,
-    /// Grid points over [0, 1] of the validation sampler (SPEC §4.6: 64, midpoint solver).
+    /// Grid points over [0, 1] of the validation sampler (docs/method.md §4.6: 64, midpoint solver).
     pub valid_sample_grid: usize,
 }
 
-/// Which caption encoder the RF trains with (SPEC §4.4).
+/// Which caption encoder the RF trains with (docs/method.md §4.4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TextEncoderKind {
@@ -97,7 +89,7 @@ pub struct TextSection {
     pub layers: usize,
     /// Attention heads; must divide `model.text_dim`.
     pub heads: usize,
-    /// Tokens L per caption (SPEC §1.1: 77).
+    /// Tokens L per caption (docs/method.md §1.1: 77).
     pub max_len: usize,
 }
 
@@ -120,9 +112,10 @@ pub struct RfRunConfig {
 }
 
 impl RfRunConfig {
-    /// Parses and validates an RF run config; unknown or missing keys anywhere are errors naming `file`.
-    pub fn parse(text: &str, file: &Path) -> Result<Self> {
-        let cfg: RfRunConfig = parse_strict(text, file)?;
+    /// Parses and validates a resolved RF run config; unknown or missing keys anywhere are errors naming `file` and
+    /// the dotted key.
+    pub fn from_table(table: toml::Table, file: &Path) -> Result<Self> {
+        let cfg: RfRunConfig = resolve::from_table(table, file)?;
         let bad = |reason: String| TrainError::Config {
             path: file.to_path_buf(),
             reason,
@@ -149,7 +142,7 @@ impl RfRunConfig {
                 rf.k_max, cfg.model.frames
             )));
         }
-        if rf.kf_sampler == KfSampler::Scenemi && cfg.model.frames < 2 {
+        if rf.kf_sampler == TrainingKeyframes::Scenemi && cfg.model.frames < 2 {
             return Err(bad(format!(
                 "rf.kf_sampler = \"scenemi\" keeps the first and last frames: needs model.frames ≥ 2, got {}",
                 cfg.model.frames
@@ -196,10 +189,19 @@ impl RfRunConfig {
         Ok(cfg)
     }
 
-    /// Reads a config file.
-    pub fn load(file: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(file).map_err(io_err("read config", file))?;
-        Self::parse(&text, file)
+    /// Parses the text of `file` (its `extends` chain read from the file system).
+    pub fn parse(text: &str, file: &Path) -> Result<Self> {
+        Self::from_table(resolve::resolve_text(&Files, text, file)?, file)
+    }
+
+    /// Reads `file` from `source` with its `extends` chain and `overrides`.
+    pub fn load_with(source: &dyn ConfigSource, file: &Path, overrides: &[Override]) -> Result<Self> {
+        Self::from_table(resolve::resolve(source, file, overrides)?, file)
+    }
+
+    /// Reads a config file with `overrides` (`--set`).
+    pub fn load(file: &Path, overrides: &[Override]) -> Result<Self> {
+        Self::load_with(&Files, file, overrides)
     }
 
     /// The fully resolved config as TOML.
@@ -224,7 +226,7 @@ impl RfRunConfig {
     /// The options of (R5) for this config.
     pub fn loss_options(&self) -> RfLossOptions {
         RfLossOptions {
-            kf_mode: self.model.kf_mode,
+            conditioning: self.model.conditioning,
             keyframe_loss: self.rf.keyframe_loss,
             tau_star: self.rf.tau_star,
         }

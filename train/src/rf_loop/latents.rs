@@ -1,11 +1,13 @@
-//! Frozen-VAE latents of the clips (SPEC §3.4, §4.1): encoded once into host memory or per micro-batch.
+//! Frozen-VAE latents of the clips (docs/method.md §3.4, §4.1): encoded once into host memory or per micro-batch.
 
 use any4d_data::store::Store;
 use any4d_model::frame_vae::FrameVae;
 use burn::prelude::{Device, Tensor};
 
+use any4d_model::mesh_vae::MeshVae;
+
 use crate::error::{Result, TrainError};
-use crate::vae_loop::{MeshVae, load_clips, vae_batch};
+use crate::vae_loop::{load_clips, vae_batch};
 
 /// Frozen-VAE encoding of one clip, kept in host memory in the VAE's layout.
 #[derive(Clone, Debug)]
@@ -46,7 +48,7 @@ fn host_f32<const D: usize>(t: Tensor<D>, what: &str) -> Result<Vec<f32>> {
     t.into_data()
         .convert::<f32>()
         .try_into_vec::<f32>()
-        .map_err(|e| TrainError::Other(format!("{what}: cannot read tensor data: {e:?}")))
+        .map_err(|e| TrainError::Loop(format!("{what}: cannot read tensor data: {e:?}")))
 }
 
 /// Encodes clips `store_indices` of `store` with the frozen frame-wise VAE on `tokens` FPS tokens (the VAE run's
@@ -64,10 +66,10 @@ pub fn encode_latents(
     let mut channels = 0;
     for chunk in store_indices.chunks(micro_batch.max(1)) {
         let (batch, _) = load_clips(store, chunk, device)?;
-        let enc = vae.vae_encode(&vae_batch(&batch, tokens, device)?);
+        let enc = vae.encode_vae_batch(&vae_batch(&batch, tokens, device)?);
         let [b, t, p, c] = enc.mu.dims();
         if (t, p) != (frames, tokens) {
-            return Err(TrainError::Other(format!(
+            return Err(TrainError::Setup(format!(
                 "VAE latents are [{b}, {t}, {p}, {c}], expected T = {frames} (the store {}) and P = {tokens}",
                 store.dir().display()
             )));

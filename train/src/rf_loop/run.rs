@@ -8,45 +8,23 @@ use burn::prelude::Device;
 
 use crate::backend;
 use crate::error::{Result, TrainError, io_err};
-use crate::loop_common::{self, LoopSetup, Objective, Outcome, StopFlag};
-use crate::multi_device::{Parallel, train_data_parallel};
-use crate::progress::ProgressMode;
+use crate::loop_common::{self, LoopSetup, Objective, Outcome, RunOptions};
+use crate::multi_device::{run_devices, train_data_parallel};
 use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 
 use super::RF_TERMS;
+use super::batcher::{check_compatible, open_store};
 use super::config::RfRunConfig;
-use super::objective::{RfObjective, check_compatible, open_store};
+use super::objective::RfObjective;
 
-/// Options of `any4d train rf` besides the config.
+/// Options of `any4d train rf` besides the config: those of every run, and the frozen VAE.
 pub struct RfRunOptions {
-    /// Store folder (`--data`).
-    pub data: PathBuf,
+    /// Data, run folder, progress, stop flag, devices.
+    pub run: RunOptions,
     /// The frozen VAE's run folder (`--vae`): required for a new run; for `--resume` it may be omitted (the run
     /// folder records it) and must otherwise name the same run.
     pub vae_run: Option<PathBuf>,
-    /// Folder that holds run folders.
-    pub runs_dir: PathBuf,
-    /// Run name.
-    pub name: String,
-    /// Progress display.
-    pub progress: ProgressMode,
-    /// Ctrl-C flag.
-    pub stop: StopFlag,
-    /// Data-parallel devices (`--devices`, `--strategy`); `None` trains on `[device] backend`.
-    pub parallel: Option<Parallel>,
-}
-
-/// The plain devices a run trains on: `opts.parallel`'s, or the one of `[device] backend`. Fails before a run
-/// folder is claimed when a backend is not in this binary.
-fn run_devices(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<Vec<Device>> {
-    match &opts.parallel {
-        Some(p) => p.plain_devices(cfg.device.precision),
-        None => {
-            backend::check(cfg.device.backend, cfg.device.precision)?;
-            Ok(vec![backend::device(cfg.device.backend, cfg.device.precision)?])
-        }
-    }
 }
 
 /// Starts a new RF run with `cfg` on the frozen VAE of `opts.vae_run`; returns the run folder and the outcome.
@@ -55,21 +33,18 @@ pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Ou
     let vae_dir = opts
         .vae_run
         .as_deref()
-        .ok_or_else(|| TrainError::Other("a new RF run needs the VAE run folder (--vae RUN)".into()))?;
+        .ok_or_else(|| TrainError::Setup("a new RF run needs the VAE run folder (--vae RUN)".into()))?;
     // Fail before claiming a run folder when the backend, the store or the VAE run is unusable.
-    let devices = run_devices(cfg, opts)?;
-    let store = open_store(&opts.data)?;
+    let devices = run_devices(&cfg.device, opts.run.parallel.as_ref())?;
+    let store = open_store(&opts.run.data)?;
     let vae = runs::load_vae_run(vae_dir, &devices[0])?;
     check_compatible(cfg, &store, &vae)?;
     let captions = train_captions(&store)?;
-    let tokenizer =
-        ScratchTokenizer::train(&captions, cfg.text.vocab_size).map_err(|e| TrainError::Other(e.to_string()))?;
+    let tokenizer = ScratchTokenizer::train(&captions, cfg.text.vocab_size)?;
 
-    let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &RF_TERMS)?;
+    let run = RunFolder::create(&opts.run.runs_dir, &opts.run.name, &cfg.to_toml()?, &RF_TERMS)?;
     runs::write_vae_record(&run, &VaeRunRecord::of(&vae)?)?;
-    tokenizer
-        .save(run.root())
-        .map_err(|e| TrainError::Other(e.to_string()))?;
+    tokenizer.save(run.root())?;
     run.log(&format!(
         "tokenizer trained on {} TRAIN captions: {} tokens",
         captions.len(),
@@ -95,7 +70,7 @@ pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRun
     if let Some(given) = &opts.vae_run {
         let given = std::fs::canonicalize(given).map_err(io_err("resolve VAE run folder", given))?;
         if given != record.run {
-            return Err(TrainError::Other(format!(
+            return Err(TrainError::Setup(format!(
                 "--vae {} differs from the VAE run {} that {} was trained on",
                 given.display(),
                 record.run.display(),
@@ -103,9 +78,9 @@ pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRun
             )));
         }
     }
-    let devices = run_devices(&cfg, opts)?;
+    let devices = run_devices(&cfg.device, opts.run.parallel.as_ref())?;
     let vae = record.load(&devices[0])?;
-    let tokenizer = ScratchTokenizer::load(run_dir).map_err(|e| TrainError::Other(e.to_string()))?;
+    let tokenizer = ScratchTokenizer::load(run_dir)?;
     run_rf(&cfg, &run, opts, &vae, tokenizer, &devices, Some(ckpt))
 }
 
@@ -113,12 +88,7 @@ fn train_captions(store: &Store) -> Result<Vec<String>> {
     store
         .indices(Split::Train)
         .into_iter()
-        .map(|i| {
-            store
-                .get(i)
-                .map(|c| c.clip.caption)
-                .map_err(|e| TrainError::Other(e.to_string()))
-        })
+        .map(|i| Ok(store.get(i)?.clip.caption))
         .collect()
 }
 
@@ -132,12 +102,12 @@ fn run_rf(
     resume: Option<PathBuf>,
 ) -> Result<Outcome> {
     let vocab = tokenizer.vocab_size();
-    let mut objective = RfObjective::new(cfg, &opts.data, vae, tokenizer, &devices[0])?;
+    let mut objective = RfObjective::new(cfg, &opts.run.data, vae, tokenizer, &devices[0])?;
     objective.log_validation_samples(run)?;
     run.log(&format!(
         "RF {:?} on {} ({} train / {} val clips, latents {:?}: {:.1} MiB), VAE {} step {}, backend {}",
-        cfg.model.kf_mode,
-        opts.data.display(),
+        cfg.model.conditioning,
+        opts.run.data.display(),
         objective.train_len(),
         objective.valid_len(),
         cfg.rf.latent_cache,
@@ -154,11 +124,11 @@ fn run_rf(
         train: &cfg.train,
         optim: &cfg.optim,
         device: ad[0].clone(),
-        stop: opts.stop.clone(),
-        progress: opts.progress,
+        stop: opts.run.stop.clone(),
+        progress: opts.run.progress,
         resume,
     };
-    let (_, outcome) = match &opts.parallel {
+    let (_, outcome) = match &opts.run.parallel {
         Some(p) => {
             run.log(&format!("data-parallel over {} devices ({:?})", ad.len(), p.strategy))?;
             train_data_parallel(&objective, model, setup, &ad, p.strategy)?

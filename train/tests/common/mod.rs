@@ -1,10 +1,10 @@
-//! Helpers shared by the train crate's integration tests: the one-at-a-time lock, paths, the small procedural
-//! store, the tiny VAE config, a parameter dump, and the toy MLP regression that exercises the generic loop.
+//! Helpers shared by the train crate's integration tests (and, through `tests/common`, the binary's): the
+//! one-at-a-time lock, paths, the small procedural store, the tiny VAE config, a parameter dump, and the toy MLP
+//! regression that exercises the generic loop.
 // Each test file compiles its own copy of this module and uses only some of it.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Mutex, MutexGuard};
 
@@ -31,9 +31,13 @@ pub fn serial() -> MutexGuard<'static, ()> {
     SERIAL.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// The workspace root (configs/, scripts/).
+/// The repository root (configs/, scripts/): the nearest folder above this package that holds `configs/`.
 pub fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .find(|p| p.join("configs").is_dir())
+        .expect("the repository root holds configs/")
+        .to_path_buf()
 }
 
 /// Writes `dir/store`: 10 procedural clips of 4 frames and 256–512 vertices drawn with `seed`, P = 32 FPS points.
@@ -52,7 +56,7 @@ pub fn synth_store(dir: &Path, seed: u64) -> PathBuf {
 
 /// configs/vae/tiny.toml for `steps` steps of 4 clips; callers set micro-batches, checkpoints and validation.
 pub fn tiny_vae(steps: u64) -> VaeRunConfig {
-    let mut cfg = VaeRunConfig::load(&root().join("configs/vae/tiny.toml")).expect("configs/vae/tiny.toml");
+    let mut cfg = VaeRunConfig::load(&root().join("configs/vae/tiny.toml"), &[]).expect("configs/vae/tiny.toml");
     cfg.train.duration = Duration::Steps(steps);
     cfg.train.batch_size = 4;
     cfg
@@ -228,20 +232,4 @@ pub fn toy_configs(steps: u64) -> (TrainConfig, OptimConfig) {
         grad_clip: 1.0,
     };
     (train, optim)
-}
-
-/// Runs the built `any4d` binary with `args` and waits for it.
-pub fn any4d(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_any4d"))
-        .args(args)
-        .output()
-        .expect("the any4d binary runs")
-}
-
-/// (stdout, stderr) of a finished command, as text.
-pub fn text(out: &Output) -> (String, String) {
-    (
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }

@@ -1,4 +1,4 @@
-//! `any4d eval metrics` end to end (SPEC §6.1–§6.2): runs the built binary on clip files written with
+//! `any4d eval metrics` end to end (docs/method.md §6.1–§6.2): runs the built binary on clip files written with
 //! `any4d_data::formats::write_clip`, checks the JSON and table outputs and the errors on malformed input.
 
 use std::path::{Path, PathBuf};
@@ -145,7 +145,7 @@ fn bad_keyframes_and_missing_files_fail() {
 
 #[test]
 fn bench_metrics_runs_on_tiny_clips() {
-    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/metrics_reference.py");
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/metrics_reference.py");
     let args = [
         "bench",
         "metrics",

@@ -1,12 +1,13 @@
-//! `any4d quickstart`: the README's first command (see `any4d_train::quickstart`).
+//! `any4d quickstart`: the README's first command; parses its options and calls `any4d_train::quickstart`.
 
 use std::process::ExitCode;
 
 use clap::Args;
 
-use crate::loop_common::StopFlag;
-use crate::progress::ProgressMode;
-use crate::quickstart::{QuickstartOptions, quickstart};
+use any4d_train::progress::ProgressMode;
+use any4d_train::quickstart::{QuickstartOptions, quickstart};
+
+use super::stop_on_ctrl_c;
 
 #[derive(Args, Debug)]
 pub struct QuickstartArgs {
@@ -36,9 +37,8 @@ pub struct QuickstartArgs {
     pub n_grid: usize,
 }
 
-pub fn run(args: QuickstartArgs) -> anyhow::Result<ExitCode> {
-    let stop = StopFlag::new();
-    stop.install_ctrlc()?;
+pub fn exec(args: QuickstartArgs) -> anyhow::Result<ExitCode> {
+    let stop = stop_on_ctrl_c()?;
     let opts = QuickstartOptions {
         out: args.out,
         clips: args.clips,

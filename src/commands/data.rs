@@ -1,24 +1,23 @@
-//! `any4d data …` and `any4d bench data`: parse arguments, call `any4d_data` (SPEC §2: clip files, the dataset
-//! store, inspection, contact sheets; the throughput benchmark of import + normalise (D1)–(D3) + FPS).
+//! `any4d data …` and `any4d bench data`: parse arguments, call `any4d_data` (docs/method.md §2: clip files, the
+//! dataset store, inspection, contact sheets; the throughput benchmark of import + normalise (D1)–(D3) + FPS).
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
-use std::process::{Command, ExitCode};
-use std::time::Instant;
+use std::path::PathBuf;
+use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use any4d_data::Clip;
+use any4d_data::bench::DataBench;
 use any4d_data::formats;
-use any4d_data::fps::farthest_point_sampling;
 use any4d_data::inspect;
 use any4d_data::preprocess::{self, VertexFilter};
 use any4d_data::render::{RenderOptions, render_contact_sheet};
-use any4d_data::rng::{Rng, rng};
 use any4d_data::store::{self, DEFAULT_P, ImportOptions, Store, Weld};
 use any4d_data::synth::SynthConfig;
+
+use crate::reference::{PythonReference, Skipped};
 
 #[derive(Subcommand, Debug)]
 pub enum DataCmd {
@@ -40,7 +39,7 @@ pub struct ConvertArgs {
     pub input: PathBuf,
     /// Output clip; the extension picks the format.
     pub output: PathBuf,
-    /// Normalise by frame 0 (SPEC (D1)–(D3)).
+    /// Normalise by frame 0 (docs/method.md (D1)–(D3)).
     #[arg(long)]
     pub normalize: bool,
     /// Weld vertices closer than EPS before writing.
@@ -138,7 +137,7 @@ pub struct RenderArgs {
 /// Exit code of `import` when some sources were rejected (the store is still written).
 pub const EXIT_REJECTED: u8 = 2;
 
-pub fn run(cmd: DataCmd) -> anyhow::Result<ExitCode> {
+pub fn exec(cmd: DataCmd) -> anyhow::Result<ExitCode> {
     match cmd {
         DataCmd::Convert(a) => convert(a),
         DataCmd::Import(a) => import(a),
@@ -288,41 +287,11 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = DEFAULT_P)]
     pub p: usize,
     /// The numpy reference script.
-    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/bench_data_reference.py"))]
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/bench_data_reference.py"))]
     pub script: PathBuf,
     /// Python interpreter for the reference.
     #[arg(long, default_value = "python3")]
     pub python: PathBuf,
-}
-
-/// A deterministic clip for the benchmark: a noisy sphere that drifts and breathes, with a triangle strip.
-fn bench_clip(index: usize, frames: usize, n: usize) -> anyhow::Result<Clip> {
-    let mut r = rng(index as u64, 0xbe7c);
-    let base: Vec<[f32; 3]> = (0..n)
-        .map(|_| {
-            let v = [0, 1, 2].map(|_| r.random_range(-1.0f32..1.0));
-            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-3);
-            v.map(|x| 3.0 * x / len + 0.05 * r.random_range(-1.0f32..1.0))
-        })
-        .collect();
-    let vertices = (0..frames)
-        .flat_map(|f| {
-            let (s, dx) = (1.0 + 0.02 * f as f32, 0.1 * f as f32);
-            base.iter()
-                .map(move |p| [p[0] * s + dx, p[1] * s, p[2] * s])
-                .collect::<Vec<_>>()
-        })
-        .collect();
-    let faces = (0..n.saturating_sub(2) as u32).map(|i| [i, i + 1, i + 2]).collect();
-    Ok(Clip::new(
-        format!("bench-{index}"),
-        vertices,
-        frames,
-        n,
-        faces,
-        "a benchmark blob",
-        format!("bench:{index}"),
-    )?)
 }
 
 /// What the numpy reference printed.
@@ -333,113 +302,58 @@ struct Reference {
     fps_checksum: u64,
 }
 
-/// Run the reference script; `Ok(None)` when Python or numpy is missing (then only our numbers are reported).
-fn run_reference(a: &BenchArgs, dir: &Path) -> anyhow::Result<Option<Reference>> {
-    let out = Command::new(&a.python)
-        .arg(&a.script)
-        .arg(dir)
-        .arg("--p")
-        .arg(a.p.to_string())
-        .env("OMP_NUM_THREADS", "1")
-        .env("OPENBLAS_NUM_THREADS", "1")
-        .env("MKL_NUM_THREADS", "1")
-        .output();
-    let out = match out {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            println!("reference: {} not found; reporting ours only", a.python.display());
-            return Ok(None);
-        }
-        other => other.with_context(|| format!("running {}", a.python.display()))?,
-    };
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    if !out.status.success() {
-        if stderr.contains("No module named 'numpy'") {
-            println!(
-                "reference: numpy is not installed for {}; reporting ours only",
-                a.python.display()
-            );
-            return Ok(None);
-        }
-        bail!(
-            "{} {} failed ({}): {stderr}",
-            a.python.display(),
-            a.script.display(),
-            out.status
-        );
-    }
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let line = stdout
-        .lines()
-        .last()
-        .with_context(|| format!("{} printed nothing", a.script.display()))?;
-    Ok(Some(serde_json::from_str(line).with_context(|| {
-        format!("{}: unexpected output {line:?}", a.script.display())
-    })?))
-}
-
+/// `any4d bench data`: [`DataBench`] in a temporary folder, beside the numpy reference on the same files.
 pub fn bench(a: BenchArgs) -> anyhow::Result<ExitCode> {
-    if a.clips == 0 || a.vertices < 3 || a.frames < 2 {
-        bail!("bench data needs --clips ≥ 1, --vertices ≥ 3 and --frames ≥ 2");
-    }
-    let dir = std::env::temp_dir().join(format!("any4d-bench-data-{}", std::process::id()));
-    std::fs::create_dir(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let result = bench_in(&a, &dir);
-    std::fs::remove_dir_all(&dir).with_context(|| format!("removing the benchmark folder {}", dir.display()))?;
-    result
-}
-
-fn bench_in(a: &BenchArgs, dir: &Path) -> anyhow::Result<ExitCode> {
-    let mut files = Vec::with_capacity(a.clips);
-    for i in 0..a.clips {
-        let path = dir.join(format!("clip_{i:05}.bin"));
-        formats::write_clip(&path, &bench_clip(i, a.frames, a.vertices)?)?;
-        files.push(path);
-    }
+    let bench = DataBench {
+        clips: a.clips,
+        vertices: a.vertices,
+        frames: a.frames,
+        p: a.p,
+    };
+    bench.check()?;
+    let dir = tempfile::tempdir().context("creating the benchmark folder")?;
+    let files = bench.write_clips(dir.path())?;
     println!(
         "bench data: {} clips × {} frames × {} vertices, P = {}",
         a.clips, a.frames, a.vertices, a.p
     );
     if cfg!(debug_assertions) {
-        println!(
-            "note: debug build; run `cargo run --release -p any4d-train -- bench data` for representative numbers"
-        );
+        println!("note: debug build; run `cargo run --release -- bench data` for representative numbers");
     }
-    // (a) ours: read + normalise (D1)–(D3) + FPS, one thread.
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
-    let (seconds, checksum) = pool.install(|| -> anyhow::Result<(f64, u64)> {
-        let start = Instant::now();
-        let mut checksum = 0u64;
-        for path in &files {
-            let clip = formats::read_clip(path)?;
-            let (clip, _norm) = preprocess::normalize(&clip);
-            checksum += farthest_point_sampling(clip.frame(0), a.p)
-                .iter()
-                .map(|&i| u64::from(i))
-                .sum::<u64>();
+    let ours = bench.time(&files)?;
+    let rate = a.clips as f64 / ours.seconds;
+    println!("ours (1 thread):        {rate:>9.2} clips/s ({:.3} s)", ours.seconds);
+    let reference = PythonReference {
+        python: &a.python,
+        script: &a.script,
+        args: vec![dir.path().display().to_string(), "--p".into(), a.p.to_string()],
+        threads: 1,
+    };
+    let theirs: Reference = match reference.json()? {
+        Ok(r) => r,
+        Err(Skipped(why)) => {
+            println!("reference skipped: {why}; reporting ours only");
+            return Ok(ExitCode::SUCCESS);
         }
-        Ok((start.elapsed().as_secs_f64(), checksum))
-    })?;
-    let ours = a.clips as f64 / seconds;
-    println!("ours (1 thread):        {ours:>9.2} clips/s ({seconds:.3} s)");
-    // (b) the numpy reference on the same files.
-    if let Some(reference) = run_reference(a, dir)? {
-        let theirs = reference.clips as f64 / reference.seconds;
-        println!(
-            "numpy reference (1 core): {theirs:>7.2} clips/s ({:.3} s)",
-            reference.seconds
+    };
+    let their_rate = theirs.clips as f64 / theirs.seconds;
+    println!(
+        "numpy reference (1 core): {their_rate:>7.2} clips/s ({:.3} s)",
+        theirs.seconds
+    );
+    println!("ratio ours / reference: {:.2}×", rate / their_rate);
+    let agree = theirs.fps_checksum == ours.fps_checksum && theirs.clips == a.clips;
+    println!(
+        "FPS indices agree (checksum {}): {}",
+        ours.fps_checksum,
+        if agree { "yes" } else { "NO" }
+    );
+    if !agree {
+        bail!(
+            "the reference FPS checksum {} differs from ours {}",
+            theirs.fps_checksum,
+            ours.fps_checksum
         );
-        println!("ratio ours / reference: {:.2}×", ours / theirs);
-        let agree = reference.fps_checksum == checksum && reference.clips == a.clips;
-        println!(
-            "FPS indices agree (checksum {checksum}): {}",
-            if agree { "yes" } else { "NO" }
-        );
-        if !agree {
-            bail!(
-                "the reference FPS checksum {} differs from ours {checksum}",
-                reference.fps_checksum
-            );
-        }
     }
     Ok(ExitCode::SUCCESS)
 }

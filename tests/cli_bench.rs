@@ -6,7 +6,7 @@ mod common;
 use common::{any4d, text};
 
 fn preset(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
 }
 
 fn p(path: &Path) -> &str {

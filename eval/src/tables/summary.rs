@@ -1,5 +1,5 @@
-//! Paper-shaped result tables (SPEC §6.1, §6.4: P-Tables 1, 2, 4, 5): per-clip records to parquet, summaries to
-//! Markdown and CSV. Each metric is averaged over clips per seed, then reported as mean ± 95 % confidence
+//! Paper-shaped result tables (docs/method.md §6.1, §6.4: P-Tables 1, 2, 4, 5): per-clip records to parquet, summaries
+//! to Markdown and CSV. Each metric is averaged over clips per seed, then reported as mean ± 95 % confidence
 //! half-width over seeds, t_{0.975, n−1} · sd / √n (Student t with n − 1 degrees of freedom, sample sd).
 
 use std::collections::BTreeMap;
@@ -10,60 +10,22 @@ use any4d_data::DataError;
 use polars::prelude::{Column, DataFrame, ParquetReader, ParquetWriter, SerReader};
 use serde::{Deserialize, Serialize};
 
+use any4d_model::bench::median;
+
 use crate::protocol::write_atomic;
+use crate::tables::timing;
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
 
-/// Which paper table a protocol run reproduces.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TableKind {
-    /// P-Table 1: short horizon, 16 frames, K_x = 0..3; RMSE, Chamfer, DTW × 100.
-    Table1,
-    /// P-Table 2: long horizon, 31 frames, keyframes {0, 15, 30}; RMSE, Chamfer, DTW × 100, seam jerk.
-    Table2,
-    /// P-Table 4: end-to-end seconds per vertex count and frame count.
-    Table4,
-    /// P-Table 5: VAE reconstruction RMSE and Chamfer over all frames, unscaled.
-    Table5,
-}
-
-impl TableKind {
+/// How a table is laid out: its title, its metric columns and whether rows carry their own K_x.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Layout {
     /// Title line of the Markdown summary.
-    pub fn title(&self) -> &'static str {
-        match self {
-            TableKind::Table1 => "Table 1: short-horizon completion (16 frames, K_x extra keyframes)",
-            TableKind::Table2 => "Table 2: long-horizon completion (31 frames, two-stage rollout, keyframes 0/15/30)",
-            TableKind::Table4 => "Table 4: end-to-end inference seconds (encode → sample → decode)",
-            TableKind::Table5 => "Table 5: VAE reconstruction on validation clips",
-        }
-    }
-
-    /// The metric columns of the table: (record key, header, scale).
-    pub fn columns(&self) -> &'static [MetricColumn] {
-        const SHORT: &[MetricColumn] = &[
-            col("rmse", "RMSE ×100", 100.0),
-            col("chamfer", "Chamfer ×100", 100.0),
-            col("dtw", "DTW ×100", 100.0),
-            col("mae_elem", "MAE ×100", 100.0),
-            col("jerk_ratio", "jerk / GT", 1.0),
-            col("energy_ratio", "motion / GT", 1.0),
-        ];
-        const LONG: &[MetricColumn] = &[
-            col("rmse", "RMSE ×100", 100.0),
-            col("chamfer", "Chamfer ×100", 100.0),
-            col("dtw", "DTW ×100", 100.0),
-            col("jerk_ratio", "jerk / GT", 1.0),
-            col("seam_jerk_ratio", "seam jerk / GT", 1.0),
-        ];
-        const VAE: &[MetricColumn] = &[col("rmse", "RMSE", 1.0), col("chamfer", "Chamfer", 1.0)];
-        match self {
-            TableKind::Table1 => SHORT,
-            TableKind::Table2 => LONG,
-            TableKind::Table4 => &[],
-            TableKind::Table5 => VAE,
-        }
-    }
+    pub title: &'static str,
+    /// The metric columns: (record key, header, scale).
+    pub columns: &'static [MetricColumn],
+    /// Whether the K_x column shows each row's extra keyframes (`false`: fixed keyframes, printed as `–`).
+    pub k_column: bool,
 }
 
 /// One metric column of a summary table.
@@ -78,7 +40,7 @@ pub struct MetricColumn {
 }
 
 /// A metric column: record key, header, scale (100 where the paper prints × 100).
-const fn col(key: &'static str, header: &'static str, scale: f64) -> MetricColumn {
+pub const fn col(key: &'static str, header: &'static str, scale: f64) -> MetricColumn {
     MetricColumn { key, header, scale }
 }
 
@@ -160,8 +122,8 @@ pub fn mean_ci95(xs: &[f64]) -> Estimate {
 
 /// Group records by (method, placement, K_x), average each column over clips per seed, then over seeds.
 /// Rows keep the order in which their methods first appear, then ascending K_x.
-pub fn summarize(records: &[ClipRecord], kind: TableKind) -> Result<Vec<SummaryRow>> {
-    let columns = kind.columns();
+pub fn summarize(records: &[ClipRecord], layout: &Layout) -> Result<Vec<SummaryRow>> {
+    let columns = layout.columns;
     let mut method_order: Vec<&str> = Vec::new();
     // (method, placement, k) → seed → (sums per column, clip count)
     type PerSeed = BTreeMap<u64, (Vec<f64>, usize)>;
@@ -332,8 +294,8 @@ fn fmt_estimate(e: &Estimate, scale: f64) -> String {
     }
 }
 
-fn header_lines(kind: TableKind, header: &TableHeader, seeds: usize) -> String {
-    let mut s = format!("# {}\n\n", kind.title());
+fn header_lines(title: &str, header: &TableHeader, seeds: usize) -> String {
+    let mut s = format!("# {title}\n\n");
     let _ = writeln!(s, "- data: {}", header.data);
     let _ = writeln!(s, "- manifest: {}", header.manifest);
     let _ = writeln!(s, "- text encoder: {}", header.text_encoder);
@@ -354,14 +316,14 @@ fn header_lines(kind: TableKind, header: &TableHeader, seeds: usize) -> String {
 
 /// The Markdown summary of a table: a header naming data, manifest, text encoder and checkpoints, then one row per
 /// method and keyframe setting, values scaled as in the paper.
-pub fn markdown(kind: TableKind, rows: &[SummaryRow], header: &TableHeader) -> String {
+pub fn markdown(layout: &Layout, rows: &[SummaryRow], header: &TableHeader) -> String {
     let seeds = rows
         .iter()
         .flat_map(|r| r.values.iter().map(|v| v.n))
         .max()
         .unwrap_or(0);
-    let mut s = header_lines(kind, header, seeds);
-    let cols = kind.columns();
+    let mut s = header_lines(layout.title, header, seeds);
+    let cols = layout.columns;
     s.push_str("| Method | Placement | K_x | Clips |");
     for c in cols {
         let _ = write!(s, " {} |", c.header);
@@ -371,10 +333,10 @@ pub fn markdown(kind: TableKind, rows: &[SummaryRow], header: &TableHeader) -> S
     s.push('\n');
     for r in rows {
         // P-Table 2 has fixed keyframes every 15 frames, no K_x column of its own.
-        let k = if kind == TableKind::Table2 {
-            "–".to_string()
-        } else {
+        let k = if layout.k_column {
             r.k_extra.to_string()
+        } else {
+            "–".to_string()
         };
         let _ = write!(s, "| {} | {} | {} | {} |", r.method, r.placement, k, r.clips);
         for (v, c) in r.values.iter().zip(cols) {
@@ -387,8 +349,8 @@ pub fn markdown(kind: TableKind, rows: &[SummaryRow], header: &TableHeader) -> S
 
 /// The CSV summary: one row per method and setting, `<key>_mean` and `<key>_ci95` per column (scaled as in the
 /// Markdown; empty CI with one seed), and the checkpoint, text encoder and data on every row.
-pub fn csv(kind: TableKind, rows: &[SummaryRow], header: &TableHeader) -> String {
-    let cols = kind.columns();
+pub fn csv(layout: &Layout, rows: &[SummaryRow], header: &TableHeader) -> String {
+    let cols = layout.columns;
     let mut s = String::from("method,placement,k_extra,clips,seeds");
     for c in cols {
         let _ = write!(s, ",{0}_mean,{0}_ci95", c.key);
@@ -445,21 +407,6 @@ pub struct TimingRecord {
     pub seconds: Vec<f64>,
 }
 
-/// Median of a non-empty slice (mean of the two middle values for even lengths).
-pub fn median(xs: &[f64]) -> f64 {
-    let mut v = xs.to_vec();
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n == 0 {
-        return f64::NAN;
-    }
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
-
 /// P-Table 4 in Markdown and CSV: one row per (method, frames), one column per vertex count (median seconds), and
 /// the mean over vertex counts.
 pub fn timing_tables(records: &[TimingRecord], header: &TableHeader) -> (String, String) {
@@ -473,7 +420,7 @@ pub fn timing_tables(records: &[TimingRecord], header: &TableHeader) -> (String,
         }
     }
     let reps = records.iter().map(|r| r.seconds.len()).max().unwrap_or(0);
-    let mut md = header_lines(TableKind::Table4, header, 1);
+    let mut md = header_lines(timing::LAYOUT.title, header, 1);
     let _ = writeln!(md, "Median of {reps} timed runs after one warm-up, batch 1, seconds.\n");
     md.push_str("| Method | Frames |");
     let mut csv = String::from("method,frames");

@@ -1,5 +1,6 @@
-//! `any4d bench …`: each benchmark lives with its subcommand group and runs its reference in the same process or
-//! script, reporting ratios.
+//! `any4d bench …`: each benchmark's measurement lives in the crate it measures (`any4d_data::bench`,
+//! `any4d_model::bench`, `any4d_train::bench`, `any4d_eval::bench`); its arguments and report live with its
+//! subcommand group here, and its Python reference runs through `crate::reference`.
 
 use std::process::ExitCode;
 
@@ -12,16 +13,16 @@ pub enum BenchCmd {
     /// VAE encode+decode and RF forward+backward time per clip.
     Model(super::model::BenchArgs),
     /// Training steps/s for a preset: RF presets on random latents with model FLOP/s, VAE presets on a store.
-    Train(super::bench_train::BenchArgs),
+    Train(super::train::BenchArgs),
     /// Metric throughput against the numpy/scipy reference.
     Metrics(super::eval::BenchArgs),
 }
 
-pub fn run(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
+pub fn exec(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
     match cmd {
         BenchCmd::Data(args) => super::data::bench(args),
         BenchCmd::Model(args) => super::model::bench(args),
-        BenchCmd::Train(args) => super::bench_train::bench(args),
+        BenchCmd::Train(args) => super::train::bench(args),
         BenchCmd::Metrics(args) => super::eval::bench(args),
     }
 }

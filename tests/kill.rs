@@ -1,4 +1,4 @@
-//! The real `any4d` binary interrupted mid-run (issue 5, "survive being killed"), driven as a child process:
+//! The real `any4d` binary interrupted mid-run, driven as a child process:
 //! `kill -9` leaves a readable run folder that loses at most the step in progress and, resumed, ends with the
 //! same parameters as an uninterrupted run; a new run with the same name never touches the killed run's folder;
 //! Ctrl-C saves a checkpoint, exits with 130 and resumes to completion.
@@ -14,13 +14,14 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::thread::sleep;
 use std::time::{Duration, Instant};
 
+use any4d_model::any_vae::AnyMeshVaeConfig;
 use any4d_model::frame_vae::FrameVae;
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::checkpoint;
 use any4d_train::run_folder::{CHECKPOINTS_DIR, LOG_FILE, METRICS_FILE, RunFolder, Table, VALID_FILE, read_table};
 use any4d_train::runs::{LoadedVae, load_vae_run};
-use any4d_train::vae_loop::{LATENT_STATS_FILE, VaeModelConfig, VaeRunConfig};
-use common::{params, synth_store, tiny_vae};
+use any4d_train::vae_loop::{LATENT_STATS_FILE, VaeRunConfig};
+use common::fixtures::{params, synth_store, tiny_vae};
 use tempfile::TempDir;
 
 /// Optimiser steps of every run. A step takes about 0.1 s in a debug build, so a run killed after its second
@@ -104,7 +105,7 @@ impl Fixture {
 
     /// The frame-wise VAE of the fixture's config, freshly initialised on the CPU.
     fn fresh_model(&self) -> FrameVae {
-        let VaeModelConfig::Framewise(m) = &self.cfg.model else {
+        let AnyMeshVaeConfig::Framewise(m) = &self.cfg.model else {
             panic!("configs/vae/tiny.toml is frame-wise")
         };
         m.init(&cpu())

@@ -1,21 +1,25 @@
-//! Run configs (STYLE.md §4, issue 5 item 1): plain serde structs with `deny_unknown_fields` for the tables this
-//! crate owns (`[train]`, `[optim]`, `[device]`, …), and a strict key check of the model's burn `Config` under
-//! `[model]` (burn's derive accepts unknown keys silently). Every hyper-parameter comes from TOML; SPEC §3.5
-//! (VAE) and §4.7 (RF) give the paper values in `configs/{vae,rf}/paper.toml`.
+//! Run configs: plain serde structs with `deny_unknown_fields` for every table, the model's included (one idiom
+//! across the crates), read through [`resolve`] (`extends` chains and `--set` overrides). Every hyper-parameter
+//! comes from TOML; docs/method.md §3.5 (VAE) and §4.7 (RF) give the paper values in `configs/{vae,rf}/paper.toml`.
 
 use std::path::Path;
 
-use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use crate::backend::{Backend, Precision};
 use crate::error::{Result, TrainError};
+use crate::rf_loop::RfRunConfig;
+use crate::vae_loop::VaeRunConfig;
+
+pub mod resolve;
+
+pub use resolve::{ConfigSource, Embedded, Files, Override};
 
 /// How long a run trains.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum Duration {
-    /// Passes over the training set (SPEC §3.5: 200 VAE, §4.7: 1000 RF); rounded up to whole steps.
+    /// Passes over the training set (docs/method.md §3.5: 200 VAE, §4.7: 1000 RF); rounded up to whole steps.
     Epochs(u64),
     /// A fixed number of optimiser steps (tests, benchmarks).
     Steps(u64),
@@ -35,11 +39,11 @@ impl Duration {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrainConfig {
-    /// Seed of initialisation, data order and every random draw (SPEC §3.5, §4.7: 666).
+    /// Seed of initialisation, data order and every random draw (docs/method.md §3.5, §4.7: 666).
     pub seed: u64,
     /// Training length.
     pub duration: Duration,
-    /// Global batch: examples per optimiser step (SPEC §1.1: 256).
+    /// Global batch: examples per optimiser step (docs/method.md §1.1: 256).
     pub batch_size: usize,
     /// Examples per forward/backward pass; `batch_size` must be a multiple (gradient accumulation).
     pub micro_batch: usize,
@@ -94,7 +98,7 @@ impl LrSchedule {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OptimConfig {
-    /// Peak learning rate (SPEC §3.5: 1e-4 VAE; §4.7: 2e-4 RF, both constant).
+    /// Peak learning rate (docs/method.md §3.5: 1e-4 VAE; §4.7: 2e-4 RF, both constant).
     pub lr: f64,
     /// Schedule of the learning rate around `lr` (paper: constant).
     pub schedule: LrSchedule,
@@ -116,7 +120,7 @@ pub struct OptimConfig {
 pub struct DeviceConfig {
     /// Compute backend.
     pub backend: Backend,
-    /// Float precision (SPEC: FP32).
+    /// Float precision (the paper: FP32).
     pub precision: Precision,
 }
 
@@ -198,20 +202,6 @@ impl OptimConfig {
     }
 }
 
-/// Parses TOML text into the strict run-config type `C`; `file` names the source in errors.
-pub fn parse_strict<C: DeserializeOwned>(text: &str, file: &Path) -> Result<C> {
-    toml::from_str(text).map_err(|e| TrainError::Config {
-        path: file.to_path_buf(),
-        reason: e.to_string(),
-    })
-}
-
-/// Reads a TOML file into `C`.
-pub fn load_strict<C: DeserializeOwned>(file: &Path) -> Result<C> {
-    let text = std::fs::read_to_string(file).map_err(crate::error::io_err("read config", file))?;
-    parse_strict(&text, file)
-}
-
 /// Serialises a resolved config to TOML (the run folder's `config.toml`).
 pub fn to_toml<C: Serialize>(config: &C) -> Result<String> {
     toml::to_string(config).map_err(|e| TrainError::Config {
@@ -220,37 +210,42 @@ pub fn to_toml<C: Serialize>(config: &C) -> Result<String> {
     })
 }
 
-/// Deserialises a model `Config` (lenient in burn) from `table` and rejects any key it does not know or any
-/// key it needs that is absent: the parsed config is serialised again and the two key trees must agree.
-/// `section` names the table in errors (e.g. `model`).
-pub fn strict_model_config<M>(table: &toml::Value, section: &str, file: &Path) -> Result<M>
-where
-    M: DeserializeOwned + Serialize,
-{
-    let err = |reason: String| TrainError::Config {
-        path: file.to_path_buf(),
-        reason,
-    };
-    let parsed: M = table.clone().try_into().map_err(|e| err(format!("[{section}]: {e}")))?;
-    let back = toml::Value::try_from(&parsed).map_err(|e| err(format!("[{section}]: {e}")))?;
-    compare_keys(table, &back, section).map_err(err)?;
-    Ok(parsed)
+/// A run config of either kind, told apart by its tables: `[vae]` → [`VaeRunConfig`], `[rf]` → [`RfRunConfig`].
+#[derive(Clone, Debug)]
+pub enum RunConfig {
+    /// A `configs/vae/*.toml` run.
+    Vae(Box<VaeRunConfig>),
+    /// A `configs/rf/*.toml` run.
+    Rf(Box<RfRunConfig>),
 }
 
-fn compare_keys(given: &toml::Value, known: &toml::Value, path: &str) -> std::result::Result<(), String> {
-    let (toml::Value::Table(given), toml::Value::Table(known)) = (given, known) else {
-        return Ok(());
-    };
-    if let Some(k) = given.keys().find(|k| !known.contains_key(*k)) {
-        return Err(format!("unknown key `{path}.{k}`"));
+impl RunConfig {
+    /// Reads `path` from `source` with its `extends` chain and `overrides`, and parses it as the run config its
+    /// tables announce; errors name the file, the dotted key and the reason.
+    pub fn load_with(source: &dyn ConfigSource, path: &Path, overrides: &[Override]) -> Result<Self> {
+        Self::from_table(resolve::resolve(source, path, overrides)?, path)
     }
-    if let Some(k) = known.keys().find(|k| !given.contains_key(*k)) {
-        return Err(format!("missing key `{path}.{k}`"));
+
+    /// [`RunConfig::load_with`] from the file system.
+    pub fn load(path: &Path, overrides: &[Override]) -> Result<Self> {
+        Self::load_with(&Files, path, overrides)
     }
-    for (k, v) in given {
-        compare_keys(v, &known[k], &format!("{path}.{k}"))?;
+
+    /// Parses a resolved table.
+    pub fn from_table(table: toml::Table, path: &Path) -> Result<Self> {
+        if table.contains_key("rf") {
+            Ok(RunConfig::Rf(Box::new(RfRunConfig::from_table(table, path)?)))
+        } else if table.contains_key("vae") {
+            Ok(RunConfig::Vae(Box::new(VaeRunConfig::from_table(table, path)?)))
+        } else {
+            Err(TrainError::Config {
+                path: path.to_path_buf(),
+                reason: "neither an RF run config (no [rf] table, see configs/rf/) nor a VAE run config (no [vae] \
+                         table, see configs/vae/)"
+                    .into(),
+            })
+        }
     }
-    Ok(())
 }
 
 #[cfg(test)]
@@ -290,6 +285,10 @@ backend = "flex"
 precision = "f32"
 "#;
 
+    fn parse_strict(text: &str, p: &Path) -> Result<Run> {
+        resolve::from_table(toml::from_str(text).unwrap(), p)
+    }
+
     #[test]
     fn round_trip_and_unknown_keys_are_rejected() {
         let p = Path::new("t.toml");
@@ -300,36 +299,12 @@ precision = "f32"
         assert_eq!(back, run);
 
         let typo = TEXT.replace("keep_last", "keep_lats");
-        let err = parse_strict::<Run>(&typo, p).unwrap_err().to_string();
+        let err = parse_strict(&typo, p).unwrap_err().to_string();
         assert!(err.contains("keep_lats") && err.contains("t.toml"), "{err}");
         let missing = TEXT.replace("eps = 1e-8\n", "");
-        assert!(
-            parse_strict::<Run>(&missing, p)
-                .unwrap_err()
-                .to_string()
-                .contains("eps")
-        );
+        assert!(parse_strict(&missing, p).unwrap_err().to_string().contains("eps"));
         let bad_backend = TEXT.replace("\"flex\"", "\"tpu\"");
-        assert!(parse_strict::<Run>(&bad_backend, p).is_err());
-    }
-
-    #[test]
-    fn model_tables_are_checked_key_by_key() {
-        #[derive(Debug, Serialize, Deserialize)]
-        struct Inner {
-            width: usize,
-        }
-        #[derive(Debug, Serialize, Deserialize)]
-        struct Lenient {
-            d: usize,
-            inner: Inner,
-        }
-        let ok: toml::Value = toml::from_str("d = 4\n[inner]\nwidth = 2\n").unwrap();
-        let m: Lenient = strict_model_config(&ok, "model", Path::new("m.toml")).unwrap();
-        assert_eq!((m.d, m.inner.width), (4, 2));
-        let extra: toml::Value = toml::from_str("d = 4\n[inner]\nwidth = 2\nheads = 3\n").unwrap();
-        let err = strict_model_config::<Lenient>(&extra, "model", Path::new("m.toml")).unwrap_err();
-        assert!(err.to_string().contains("unknown key `model.inner.heads`"), "{err}");
+        assert!(parse_strict(&bad_backend, p).is_err());
     }
 
     #[test]

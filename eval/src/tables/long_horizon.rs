@@ -1,0 +1,112 @@
+//! P-Table 2 (docs/method.md §7): 31-frame sequences completed by the two-stage rollout (H1)–(H4) with keyframes 0,
+//! 15, 30, scored by (E1)–(E3) over the non-keyframes and the seam jerk around frame 15.
+
+use std::collections::BTreeMap;
+
+use any4d_data::{Clip, DataError};
+
+use super::summary::{Layout, MetricColumn, col};
+use super::{Items, TableOptions, TableReport, run_completion};
+use crate::methods::{Method, metrics_map};
+use crate::metrics::{Motion, evaluate_clip, replace_keyframes};
+use crate::protocol::ManifestOptions;
+use crate::rollout::{OverlapSource, RolloutSpec, rollout, seam_jerk};
+
+type Result<T, E = DataError> = std::result::Result<T, E>;
+
+/// Title and columns of P-Table 2.
+pub const LAYOUT: Layout = Layout {
+    title: "Table 2: long-horizon completion (31 frames, two-stage rollout, keyframes 0/15/30)",
+    columns: COLUMNS,
+    k_column: false,
+};
+
+const COLUMNS: &[MetricColumn] = &[
+    col("rmse", "RMSE ×100", 100.0),
+    col("chamfer", "Chamfer ×100", 100.0),
+    col("dtw", "DTW ×100", 100.0),
+    col("jerk_ratio", "jerk / GT", 1.0),
+    col("seam_jerk_ratio", "seam jerk / GT", 1.0),
+];
+
+/// Frames on each side of a seam whose jerk is reported (docs/method.md §7: a ±2-frame band).
+pub const SEAM_HALF_WIDTH: usize = 2;
+
+/// The options of P-Table 2.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LongHorizon {
+    /// Which items (pairs of windows sharing a frame).
+    pub items: Items,
+    /// Reference of stage 2 (docs/method.md §7, §8 A8; ground truth by default).
+    pub overlap_source: OverlapSource,
+}
+
+impl LongHorizon {
+    /// Runs the table.
+    pub fn run(&self, opts: &TableOptions) -> Result<TableReport> {
+        let draw = ManifestOptions::table2(opts.data.display().to_string());
+        run_completion(opts, &LAYOUT, &self.items, draw, self.overlap_source, false)
+    }
+}
+
+/// A prediction and its metrics by name.
+/// A prediction and its metrics by name.
+pub(crate) type Scored = (Vec<[f32; 3]>, BTreeMap<String, f64>);
+
+/// One long-horizon generation (docs/method.md §7) scored by (E1)–(E7) over 𝒰 = {0..30} \ {0, 15, 30} plus the seam
+/// jerk.
+pub(crate) fn long_horizon(
+    method: &dyn Method,
+    gt: &Clip,
+    keyframes: &[usize],
+    captions: &[String],
+    seed: u64,
+    overlap_source: OverlapSource,
+) -> Result<Scored> {
+    let spec = RolloutSpec {
+        overlap_source,
+        ..RolloutSpec::paper()
+    };
+    let prompts: Vec<&str> = captions.iter().map(String::as_str).collect();
+    let n = gt.n_vertices;
+    let label = method.kind().label();
+    let r = rollout(&gt.vertices, n, keyframes, &prompts, spec, |w| {
+        let window = Clip::new(
+            &gt.id,
+            w.vertices.clone(),
+            spec.window,
+            n,
+            gt.faces.clone(),
+            w.caption,
+            &gt.source,
+        )?;
+        let mut pred = method.complete(&window, &w.keyframes, w.caption, seed.wrapping_add(w.index as u64))?;
+        // The window's assembly (docs/method.md §4.6, §7 step 2): its keyframes are the meshes it was given, so the
+        // overlap frame a later window starts from is the keyframe itself.
+        for &k in w.keyframes.iter().filter(|&&k| k < spec.window) {
+            pred[k * n..(k + 1) * n].copy_from_slice(&w.vertices[k * n..(k + 1) * n]);
+        }
+        Ok(pred)
+    })?;
+    let err = |e: crate::metrics::EvalError| DataError::new(&gt.id, &label, e.to_string());
+    let pred = Motion::new(&r.vertices, gt.frames, n).map_err(err)?;
+    let truth = Motion::from_clip(gt).map_err(err)?;
+    let mut metrics = metrics_map(&evaluate_clip(pred, truth, keyframes).map_err(err)?);
+    let assembled = replace_keyframes(pred, truth, keyframes).map_err(err)?;
+    let (mut sum_p, mut sum_g, mut seams) = (0.0, 0.0, 0usize);
+    for &s in &r.starts[1..] {
+        if let (Some(p), Some(g)) = (
+            seam_jerk(&assembled, n, s, SEAM_HALF_WIDTH, 1.0),
+            seam_jerk(&gt.vertices, n, s, SEAM_HALF_WIDTH, 1.0),
+        ) {
+            sum_p += p;
+            sum_g += g;
+            seams += 1;
+        }
+    }
+    let seams = seams.max(1) as f64;
+    metrics.insert("seam_jerk".into(), sum_p / seams);
+    metrics.insert("seam_jerk_gt".into(), sum_g / seams);
+    metrics.insert("seam_jerk_ratio".into(), sum_p / sum_g);
+    Ok((r.vertices, metrics))
+}

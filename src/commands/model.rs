@@ -1,0 +1,380 @@
+//! `any4d model …` and `any4d bench model`: parameter counts of the network a run config describes, and the
+//! timings of `any4d_model::bench` (RF forward+backward, VAE encode+decode), optionally beside AnimateAnyMesh's
+//! PyTorch networks run by `scripts/bench_torch_reference.py` on the same shapes and thread count.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use any4d_model::any_vae::AnyMeshVaeConfig;
+use any4d_model::bench::{BenchSizes, ModelTimings, StepTiming, time_networks};
+use any4d_model::summary::{format_report, param_report};
+use any4d_train::config::RunConfig;
+use anyhow::{Context, bail};
+use burn::prelude::Device;
+use clap::{Args, Subcommand, ValueEnum};
+
+use super::train::ConfigArgs;
+use crate::reference::{PythonReference, Skipped};
+
+#[derive(Subcommand, Debug)]
+pub enum ModelCmd {
+    /// Parameter counts per submodule of the network in a run config's `[model]` table.
+    Summary(SummaryArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct SummaryArgs {
+    /// A run config (e.g. configs/rf/paper.toml).
+    #[arg(long)]
+    pub config: PathBuf,
+    #[command(flatten)]
+    pub overrides: ConfigArgs,
+}
+
+/// Network size benchmarked by `any4d bench model`.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum BenchSize {
+    /// configs/rf/paper.toml sizes (W 512, 12 blocks, P 512, L 77); VAE d 128 on N 2048 vertices.
+    Paper,
+    /// MmditConfig::tiny() with P 64, L 8; FrameVaeConfig::tiny() on N 256.
+    Tiny,
+}
+
+impl BenchSize {
+    fn sizes(self) -> BenchSizes {
+        match self {
+            BenchSize::Paper => BenchSizes::paper(),
+            BenchSize::Tiny => BenchSizes::tiny(),
+        }
+    }
+
+    /// The name `scripts/bench_torch_reference.py --size` takes.
+    fn name(self) -> &'static str {
+        match self {
+            BenchSize::Paper => "paper",
+            BenchSize::Tiny => "tiny",
+        }
+    }
+}
+
+/// CPU backend of the benchmark.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum CpuBackend {
+    Flex,
+    Ndarray,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Network size.
+    #[arg(long, value_enum, default_value = "paper")]
+    pub size: BenchSize,
+    /// Clips per step.
+    #[arg(long, default_value_t = 1)]
+    pub batch: usize,
+    /// Timed steps (after one warm-up step).
+    #[arg(long, default_value_t = 3)]
+    pub iters: usize,
+    /// CPU backend.
+    #[arg(long, value_enum, default_value = "flex")]
+    pub backend: CpuBackend,
+    /// CPU threads for our timings (a rayon pool of this size: burn-flex's gemm and kernels and burn-ndarray
+    /// run on the current rayon pool) and for the PyTorch reference (torch.set_num_threads). Default: all cores.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// AnimateAnyMesh checkout (holds networks/dymeshvae.py): also time its PyTorch networks on the same shapes
+    /// and print a table with ratios. Without Python, torch or the folder, says why and reports ours only.
+    #[arg(long, value_name = "DIR")]
+    pub torch_reference: Option<PathBuf>,
+    /// The PyTorch reference script.
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/bench_torch_reference.py"))]
+    pub script: PathBuf,
+    /// Python interpreter for the reference.
+    #[arg(long, default_value = "python3")]
+    pub python: PathBuf,
+}
+
+pub fn exec(cmd: ModelCmd) -> anyhow::Result<ExitCode> {
+    match cmd {
+        ModelCmd::Summary(args) => summary(&args.config, &args.overrides),
+    }
+}
+
+fn summary(path: &Path, overrides: &ConfigArgs) -> anyhow::Result<ExitCode> {
+    let device = Device::flex();
+    let (title, rows) = match RunConfig::load(path, &overrides.set)? {
+        RunConfig::Rf(cfg) => (
+            format!(
+                "{}: rectified-flow MMDiT, conditioning {:?}, {} input / {} output channels per token",
+                path.display(),
+                cfg.model.conditioning,
+                cfg.model.in_channels(),
+                cfg.model.out_channels()
+            ),
+            param_report(&cfg.model.init(&device)),
+        ),
+        RunConfig::Vae(cfg) => match &cfg.model {
+            AnyMeshVaeConfig::Framewise(m) => (
+                format!("{}: frame-wise mesh VAE", path.display()),
+                param_report(&m.init(&device)),
+            ),
+            AnyMeshVaeConfig::Sequencewise(m) => (
+                format!("{}: sequence-wise DyMeshVAE", path.display()),
+                param_report(&m.init(&device)),
+            ),
+        },
+    };
+    print!("{}", format_report(&title, &rows));
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `any4d bench model`: [`time_networks`] in a pool of `--threads`, then the PyTorch reference when asked.
+pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
+    if args.batch == 0 || args.iters == 0 {
+        bail!("--batch and --iters must be positive");
+    }
+    let threads = match args.threads {
+        Some(0) => bail!("--threads must be positive"),
+        Some(n) => n,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    let sz = args.size.sizes();
+    // burn 0.22 deprecates ndarray; the design card keeps it as the second CPU backend.
+    #[allow(deprecated)]
+    let device = match args.backend {
+        CpuBackend::Flex => Device::flex(),
+        CpuBackend::Ndarray => Device::ndarray(),
+    };
+    if cfg!(debug_assertions) {
+        println!(
+            "note: debug build of our crates (dependencies are optimised); `cargo run --release -- bench model` \
+             gives representative numbers"
+        );
+    }
+    // Our part runs inside a rayon pool of `threads` threads: burn-flex has no pool of its own (gemm's
+    // Parallelism::Rayon(0) and its parallel iterators use the current pool), so this bounds it.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("bench model: cannot build the rayon pool")?;
+    let ours = pool
+        .install(|| time_networks(&sz, args.batch, args.iters, &device))
+        .map_err(|msg| anyhow::anyhow!("bench model: {msg}"))?;
+    print_ours(&args, &sz, &ours, threads);
+    let Some(dir) = &args.torch_reference else {
+        return Ok(ExitCode::SUCCESS);
+    };
+    let torch = match run_torch_reference(&args, dir, threads)? {
+        Ok(torch) => Some(torch),
+        Err(Skipped(why)) => {
+            println!("PyTorch reference skipped: {why}; reporting ours only");
+            None
+        }
+    };
+    if let Some(t) = &torch {
+        println!(
+            "PyTorch reference: torch {}, {} threads, AnimateAnyMesh at {}",
+            t.torch,
+            t.threads,
+            dir.display()
+        );
+    }
+    let per_clip = |t: &StepTiming| t.median_ms / args.batch as f64;
+    let rows = [
+        (
+            "RF forward+backward",
+            &ours.rf,
+            ours.rf_params,
+            torch.as_ref().map(|t| &t.rf),
+        ),
+        (
+            "frame-wise VAE encode+decode",
+            &ours.vae,
+            ours.vae_params,
+            torch.as_ref().map(|t| &t.vae_framewise),
+        ),
+        (
+            "sequence-wise DyMeshVAE enc+dec",
+            &ours.dymesh,
+            ours.dymesh_params,
+            torch.as_ref().map(|t| &t.vae_sequencewise),
+        ),
+    ];
+    println!(
+        "{:<32} {:>13} {:>16} {:>13} {:>12} {:>15}",
+        "network", "ours ms/clip", "PyTorch ms/clip", "ours/PyTorch", "params ours", "params PyTorch"
+    );
+    for (name, ours_t, ours_p, theirs) in rows {
+        let ours_ms = per_clip(ours_t);
+        match theirs {
+            Some(th) => {
+                let theirs_ms = th.median_ms / args.batch as f64;
+                println!(
+                    "{name:<32} {ours_ms:>13.1} {theirs_ms:>16.1} {:>13.2} {ours_p:>12} {:>15}",
+                    ours_ms / theirs_ms,
+                    th.params
+                );
+            }
+            None => println!(
+                "{name:<32} {ours_ms:>13.1} {:>16} {:>13} {ours_p:>12} {:>15}",
+                "-", "-", "-"
+            ),
+        }
+    }
+    println!("(ours/PyTorch is a time ratio: below 1 means ours is faster)");
+    Ok(ExitCode::SUCCESS)
+}
+
+/// One line per network of our timings.
+fn print_ours(args: &BenchArgs, sz: &BenchSizes, ours: &ModelTimings, threads: usize) {
+    let per_clip = |t: &StepTiming| t.median_ms / args.batch as f64;
+    let common = format!(
+        "{:?}, batch {}, {} iters, {threads} threads",
+        args.backend, args.batch, args.iters
+    );
+    println!(
+        "bench model: RF forward+backward, {:?} size (W {}, {} blocks, P {}, L {}), {common}: median {:.1} ms/step, \
+         {:.1} ms/clip",
+        args.size,
+        sz.rf.width,
+        sz.rf.blocks,
+        sz.tokens,
+        sz.text_len,
+        ours.rf.median_ms,
+        per_clip(&ours.rf)
+    );
+    println!(
+        "bench model: frame-wise VAE encode+decode (posterior mean, no gradients), d {}, N {}, P {}, T {}, {common}: \
+         median {:.1} ms/step, {:.1} ms/clip",
+        sz.vae.body.width,
+        sz.vertices,
+        sz.tokens,
+        sz.rf.frames,
+        ours.vae.median_ms,
+        per_clip(&ours.vae)
+    );
+    println!(
+        "bench model: sequence-wise DyMeshVAE encode+decode (posterior mean, no gradients), d {}, N {}, P {}, T {}, \
+         {common}: median {:.1} ms/step, {:.1} ms/clip",
+        sz.dymesh.body.width,
+        sz.vertices,
+        sz.tokens,
+        sz.dymesh.frames,
+        ours.dymesh.median_ms,
+        per_clip(&ours.dymesh)
+    );
+}
+
+/// One network's result in the PyTorch reference's JSON.
+#[derive(Debug, serde::Deserialize)]
+struct TorchNet {
+    median_ms: f64,
+    params: usize,
+}
+
+/// What `scripts/bench_torch_reference.py --json` prints.
+#[derive(Debug, serde::Deserialize)]
+struct TorchReference {
+    torch: String,
+    threads: usize,
+    rf: TorchNet,
+    vae_framewise: TorchNet,
+    vae_sequencewise: TorchNet,
+}
+
+/// Runs the PyTorch reference on `dir`, an AnimateAnyMesh checkout (`Err(Skipped)` when it is not one, or when
+/// Python or torch is missing).
+fn run_torch_reference(
+    args: &BenchArgs,
+    dir: &Path,
+    threads: usize,
+) -> anyhow::Result<Result<TorchReference, Skipped>> {
+    if !dir.join("networks").join("dymeshvae.py").is_file() {
+        return Ok(Err(Skipped(format!(
+            "--torch-reference {}: networks/dymeshvae.py not found (not an AnimateAnyMesh checkout)",
+            dir.display()
+        ))));
+    }
+    PythonReference {
+        python: &args.python,
+        script: &args.script,
+        args: vec![
+            "--aam".into(),
+            dir.display().to_string(),
+            "--size".into(),
+            args.size.name().into(),
+            "--batch".into(),
+            args.batch.to_string(),
+            "--iters".into(),
+            args.iters.to_string(),
+            "--threads".into(),
+            threads.to_string(),
+            "--json".into(),
+        ],
+        threads,
+    }
+    .json()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Arguments that run `sh SCRIPT` as the "Python" reference.
+    fn args(script: &Path) -> BenchArgs {
+        BenchArgs {
+            size: BenchSize::Tiny,
+            batch: 2,
+            iters: 1,
+            backend: CpuBackend::Flex,
+            threads: Some(3),
+            torch_reference: None,
+            script: script.to_path_buf(),
+            python: PathBuf::from("sh"),
+        }
+    }
+
+    /// A folder that looks like an AnimateAnyMesh checkout, and a fake reference script with `body`.
+    fn setup(body: &str) -> (tempfile::TempDir, PathBuf, PathBuf) {
+        let tmp = tempfile::tempdir().expect("temp dir");
+        let aam = tmp.path().join("aam");
+        std::fs::create_dir_all(aam.join("networks")).expect("mkdir");
+        std::fs::write(aam.join("networks/dymeshvae.py"), "").expect("write");
+        let script = tmp.path().join("fake.sh");
+        std::fs::write(&script, body).expect("write");
+        (tmp, aam, script)
+    }
+
+    #[test]
+    fn reference_json_is_parsed_and_gets_our_sizes_and_threads() {
+        // Arguments: --aam DIR --size S --batch B --iters K --threads N --json; echo S, B and N back.
+        let (_tmp, aam, script) = setup(
+            r#"echo "{\"torch\": \"$4\", \"threads\": ${10}, \"rf\": {\"median_ms\": $6.5, \"params\": 7},
+\"vae_framewise\": {\"median_ms\": 1.0, \"params\": 8}, \"vae_sequencewise\": {\"median_ms\": 2.0, \"params\": 9}}" | tr -d '\n'
+echo"#,
+        );
+        let parsed = run_torch_reference(&args(&script), &aam, 3)
+            .expect("runs")
+            .expect("available");
+        assert_eq!(parsed.torch, "tiny");
+        assert_eq!(parsed.threads, 3);
+        assert_eq!(parsed.rf.median_ms, 2.5);
+        assert_eq!(
+            (
+                parsed.rf.params,
+                parsed.vae_framewise.params,
+                parsed.vae_sequencewise.params
+            ),
+            (7, 8, 9)
+        );
+    }
+
+    #[test]
+    fn a_folder_that_is_not_a_checkout_is_a_reason() {
+        let (tmp, _aam, script) = setup("exit 0\n");
+        let why = run_torch_reference(&args(&script), tmp.path(), 1)
+            .expect("runs")
+            .expect_err("unavailable");
+        assert!(why.0.contains("not an AnimateAnyMesh checkout"), "{why:?}");
+    }
+}

@@ -1,0 +1,56 @@
+//! The `any4d` binary: parses the command line and calls one library function per command (`src/commands/`).
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod commands;
+mod reference;
+
+/// Keyframe-conditioned 4D mesh completion (CompletionAny4D) in Rust.
+#[derive(Parser, Debug)]
+#[command(name = "any4d", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Clip files and datasets: convert, import, synth, inspect, render.
+    #[command(subcommand)]
+    Data(commands::data::DataCmd),
+    /// Model inspection: parameter counts.
+    #[command(subcommand)]
+    Model(commands::model::ModelCmd),
+    /// Train the VAE or the rectified flow.
+    #[command(subcommand)]
+    Train(commands::train::TrainCmd),
+    /// Metrics, baselines and paper tables.
+    #[command(subcommand)]
+    Eval(commands::eval::EvalCmd),
+    /// Throughput benchmarks against reference implementations.
+    #[command(subcommand)]
+    Bench(commands::bench::BenchCmd),
+    /// The whole method on procedural clips in minutes: synth → VAE → RFs → evaluation table.
+    Quickstart(commands::quickstart::QuickstartArgs),
+}
+
+/// Every error is printed once, with its chain, and gives a non-zero exit code.
+fn main() -> ExitCode {
+    let result = match Cli::parse().command {
+        Command::Data(cmd) => commands::data::exec(cmd),
+        Command::Model(cmd) => commands::model::exec(cmd),
+        Command::Train(cmd) => commands::train::exec(cmd),
+        Command::Eval(cmd) => commands::eval::exec(cmd),
+        Command::Bench(cmd) => commands::bench::exec(cmd),
+        Command::Quickstart(args) => commands::quickstart::exec(args),
+    };
+    match result {
+        Ok(code) => code,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,251 @@
+//! What `any4d bench train` measures: the training throughput of a run preset on a backend. An RF preset times the
+//! RF training step at the preset's size on random standardised latents — no VAE run and no store needed — with its
+//! analytic model FLOPs; a VAE preset trains on a store through [`train_vae`] and reads the throughput from
+//! `metrics.csv`.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use any4d_model::bench::median;
+use any4d_model::rectified_flow::{RfBatch, rf_training_loss};
+use burn::optim::GradientsParams;
+use burn::prelude::{Bool, Device, Int, Tensor, TensorData};
+use burn::tensor::Distribution;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::config::Duration;
+use crate::error::{Result, TrainError};
+use crate::loop_common::{RunOptions, StopFlag, clip_global_norm, scalar, step_seed};
+use crate::progress::ProgressMode;
+use crate::rf_loop::{RfRunConfig, training_mask};
+use crate::run_folder::{METRICS_FILE, read_table};
+use crate::vae_loop::{VaeRunConfig, train_vae};
+
+/// Sizes of the timed RF batch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RfShape {
+    /// Clips per step B.
+    pub batch: usize,
+    /// FPS tokens P.
+    pub tokens: usize,
+    /// Caption tokens L (`text.max_len`).
+    pub text_len: usize,
+}
+
+/// Model FLOPs of one RF training step at `shape` (3 × forward, MMDiT plus caption encoder), and the two parts per
+/// clip.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RfStepFlops {
+    /// FLOPs of the whole step (B clips).
+    pub step: f64,
+    /// MMDiT training FLOPs per clip.
+    pub mmdit_per_clip: u64,
+    /// Caption-encoder training FLOPs per clip.
+    pub text_per_clip: u64,
+}
+
+/// The analytic FLOPs of an RF training step of `cfg` at `shape`.
+pub fn rf_step_flops(cfg: &RfRunConfig, shape: RfShape) -> RfStepFlops {
+    let mmdit = cfg.model.forward_flops(shape.tokens, shape.text_len).training_step();
+    let text = cfg
+        .model_config(cfg.text.vocab_size)
+        .text
+        .forward_flops()
+        .training_step();
+    RfStepFlops {
+        step: (mmdit + text) as f64 * shape.batch as f64,
+        mmdit_per_clip: mmdit,
+        text_per_clip: text,
+    }
+}
+
+/// The inputs of one RF step, drawn before the clock starts.
+struct RfInputs {
+    z0: Tensor<3>,
+    z: Tensor<4>,
+    mask: Tensor<2>,
+    ids: Tensor<2, Int>,
+    pad: Tensor<2, Bool>,
+    keep_txt: Tensor<1>,
+    eps: Tensor<4>,
+    tau: Tensor<1>,
+}
+
+/// Random standardised latents z₀ `[B, P, C]` and Z `[B, P, T, C]` ~ N(0, I) (what docs/method.md §3.4's
+/// standardisation aims at), keyframe masks from [`training_mask`], uniform token ids without padding, keep_txt with
+/// the preset's CFG dropout, ε and τ as in training. Host draws from `rng`, the rest from the device stream.
+fn rf_inputs(cfg: &RfRunConfig, shape: RfShape, rng: &mut ChaCha8Rng, device: &Device) -> RfInputs {
+    let RfShape {
+        batch: b,
+        tokens: p,
+        text_len: l,
+    } = shape;
+    let (t, c) = (cfg.model.frames, cfg.model.channels);
+    let normal = Distribution::Normal(0.0, 1.0);
+    let mask: Vec<f32> = (0..b)
+        .flat_map(|_| training_mask(&cfg.rf, cfg.model.conditioning, t, rng))
+        .map(|m| f32::from(u8::from(m)))
+        .collect();
+    let ids: Vec<i64> = (0..b * l)
+        .map(|_| rng.random_range(0..cfg.text.vocab_size as i64))
+        .collect();
+    let keep: Vec<f32> = (0..b)
+        .map(|_| f32::from(u8::from(!rng.random_bool(cfg.rf.text_dropout))))
+        .collect();
+    RfInputs {
+        z0: Tensor::random([b, p, c], normal, device),
+        z: Tensor::random([b, p, t, c], normal, device),
+        mask: Tensor::from_data(TensorData::new(mask, [b, t]), device),
+        ids: Tensor::from_data(TensorData::new(ids, [b, l]), device),
+        pad: Tensor::from_data(TensorData::new(vec![false; b * l], [b, l]), device),
+        keep_txt: Tensor::from_data(TensorData::new(keep, [b]), device),
+        eps: Tensor::random([b, p, t, c], normal, device),
+        tau: cfg.rf.tau_sampler.sample(b, device),
+    }
+}
+
+/// Seconds of each of `steps` RF training steps on `device` (the first is the warm-up): caption encoder forward,
+/// (R5) through [`rf_training_loss`] as the RF objective computes it, backward, global-norm clipping and the AdamW
+/// step of the training loop, then a device sync. The model is built at the preset's size with the preset's largest
+/// vocabulary; `impute_until` uses Z as its keyframe latents (the VAE encoding of noisy keyframes is not timed).
+pub fn time_rf_steps(cfg: &RfRunConfig, shape: RfShape, steps: u64, device: &Device) -> Result<Vec<f64>> {
+    let ad = device.clone().autodiff();
+    ad.seed(cfg.train.seed);
+    let mut model = cfg.model_config(cfg.text.vocab_size).init(&ad);
+    let mut optim = cfg.optim.init();
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.train.seed);
+    let loss_options = cfg.loss_options();
+    let sync = |what: &str| {
+        ad.sync()
+            .map_err(|e| TrainError::Devices(format!("device sync {what}: {e:?}")))
+    };
+    let mut secs = Vec::new();
+    for step in 1..=steps {
+        ad.seed(step_seed(cfg.train.seed, step));
+        let x = rf_inputs(cfg, shape, &mut rng, &ad);
+        sync("before the step")?;
+        let start = Instant::now();
+        let text = model.text.forward(x.ids, x.pad);
+        let batch = RfBatch {
+            z0: x.z0,
+            z: x.z.clone(),
+            z_key: x.z,
+            mask: x.mask,
+            text,
+            keep_txt: x.keep_txt,
+        };
+        let loss = rf_training_loss(&model.mmdit, &batch, x.eps, x.tau, &loss_options); // (R5)
+        let value = scalar(loss.clone());
+        let grads = GradientsParams::from_grads(loss.backward(), &model);
+        let (grads, norm) = clip_global_norm(&model, grads, cfg.optim.grad_clip);
+        model = optim.step(cfg.optim.lr, model, grads);
+        sync("after the step")?;
+        secs.push(start.elapsed().as_secs_f64());
+        if !(value.is_finite() && norm.is_finite()) {
+            return Err(TrainError::NonFinite {
+                step,
+                what: format!("loss {value} or gradient norm {norm}"),
+                value: if value.is_finite() { norm } else { value },
+                last_good: None,
+            });
+        }
+    }
+    Ok(secs)
+}
+
+/// Throughput of a VAE preset: medians over the steps after the first (which includes start-up).
+#[derive(Clone, Debug, PartialEq)]
+pub struct VaeThroughput {
+    /// Median optimiser steps per second.
+    pub steps_per_s: f64,
+    /// Median clips per second.
+    pub samples_per_s: f64,
+    /// Wall seconds of the whole run, start-up and validation included.
+    pub wall_s: f64,
+    /// The run folder it wrote.
+    pub run: PathBuf,
+}
+
+/// Trains `cfg` for `steps` steps on the store `data` into a run named `name` under `runs_dir` (checkpoints and
+/// validation only at the end) and reads its throughput from `metrics.csv`.
+pub fn time_vae_steps(
+    cfg: &VaeRunConfig,
+    data: &Path,
+    steps: u64,
+    runs_dir: &Path,
+    name: &str,
+) -> Result<VaeThroughput> {
+    let mut cfg = cfg.clone();
+    cfg.train.duration = Duration::Steps(steps);
+    cfg.train.checkpoint_every = steps;
+    cfg.train.valid_every = steps;
+    let opts = RunOptions {
+        data: data.to_path_buf(),
+        runs_dir: runs_dir.to_path_buf(),
+        name: name.to_string(),
+        progress: ProgressMode::Quiet,
+        stop: StopFlag::new(),
+        parallel: None,
+    };
+    let t0 = Instant::now();
+    let (run, _) = train_vae(&cfg, &opts)?;
+    let wall_s = t0.elapsed().as_secs_f64();
+    let table = read_table(&run.path(METRICS_FILE))?;
+    let col = |name: &str| table.header.iter().position(|h| h == name).map(|i| i - 1);
+    let (Some(sps), Some(xps)) = (col("steps_per_s"), col("samples_per_s")) else {
+        return Err(crate::error::run_err(
+            run.root(),
+            "metrics.csv lacks the throughput columns",
+        ));
+    };
+    let median_of = |c: usize| median(&table.rows.iter().skip(1).map(|r| r.1[c]).collect::<Vec<_>>());
+    Ok(VaeThroughput {
+        steps_per_s: median_of(sps),
+        samples_per_s: median_of(xps),
+        wall_s,
+        run: run.root().to_path_buf(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::RunConfig;
+
+    fn root() -> &'static Path {
+        Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+    }
+
+    #[test]
+    fn rf_steps_run_and_are_timed() {
+        let RunConfig::Rf(cfg) = RunConfig::load(&root().join("configs/rf/tiny.toml"), &[]).expect("loads") else {
+            panic!("configs/rf/tiny.toml is not detected as an RF preset");
+        };
+        let shape = RfShape {
+            batch: 2,
+            tokens: 8,
+            text_len: cfg.text.max_len,
+        };
+        let secs = time_rf_steps(&cfg, shape, 2, &Device::flex()).expect("steps run");
+        assert_eq!(secs.len(), 2);
+        assert!(secs.iter().all(|&s| s > 0.0), "{secs:?}");
+        let flops = rf_step_flops(&cfg, shape);
+        assert_eq!(flops.step, 2.0 * (flops.mmdit_per_clip + flops.text_per_clip) as f64);
+    }
+
+    #[test]
+    fn presets_are_told_apart_and_others_are_refused() {
+        assert!(matches!(
+            RunConfig::load(&root().join("configs/vae/tiny.toml"), &[]),
+            Ok(RunConfig::Vae(_))
+        ));
+        let tmp = tempfile::tempdir().expect("temp dir");
+        let other = tmp.path().join("other.toml");
+        std::fs::write(&other, "[train]\nseed = 1\n").expect("write");
+        let err = RunConfig::load(&other, &[])
+            .expect_err("neither RF nor VAE")
+            .to_string();
+        assert!(err.contains("other.toml") && err.contains("neither an RF"), "{err}");
+    }
+}

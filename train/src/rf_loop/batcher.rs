@@ -1,0 +1,375 @@
+//! The batches of the RF objective (docs/method.md §4.5, §5.4): frozen-VAE latents of a split (cached or encoded
+//! per batch), a posterior draw standardised by the VAE's statistics (§3.4), keyframe masks, keyframe latents (clean,
+//! or SceneMI's noisy keyframes for `impute_until`), captions through the text model, CFG dropout, ε and τ.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use any4d_data::keyframes::sample_keyframes;
+use any4d_data::store::{Split, Store};
+use any4d_model::frame_vae::FrameVae;
+use any4d_model::latent_stats::LatentStats;
+use any4d_model::mesh_vae::{self, MeshVae};
+use any4d_model::mmdit::KeyframeConditioning;
+use any4d_model::rectified_flow::RfBatch;
+use any4d_model::text::scratch::ScratchTokenizer;
+use burn::prelude::{Device, Tensor, TensorData};
+use burn::tensor::Distribution;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+use crate::error::{Result, TrainError};
+use crate::runs::LoadedVae;
+use crate::vae_loop::{load_clips, vae_batch};
+
+use super::config::{LatentCache, LatentDraw, RfRunConfig, RfSection};
+use super::latents::{LatentSet, encode_latents};
+use super::network::RfModel;
+
+/// Whether a batch applies the CFG caption dropout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TextDropout {
+    /// keep_txt ~ Bernoulli(1 − rf.text_dropout) (training).
+    Apply,
+    /// keep_txt = 1 (validation).
+    Off,
+}
+
+/// Which split a batch is drawn from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Subset {
+    /// The TRAIN split.
+    Train,
+    /// The VAL split.
+    Valid,
+}
+
+/// One RF batch with the noise and times of (R1).
+pub struct RfStep {
+    /// Standardized latents, keyframe mask, text.
+    pub batch: RfBatch,
+    /// ε ~ N(0, I), `[B, P, T, C]`.
+    pub eps: Tensor<4>,
+    /// τ per sample, `[B]`.
+    pub tau: Tensor<1>,
+}
+
+/// The clips of one split: their store indices and, with [`LatentCache::Memory`], their latents.
+struct SplitLatents {
+    store_indices: Vec<usize>,
+    cached: Option<LatentSet>,
+}
+
+/// Builds RF batches of one store on a frozen VAE: the data half of the RF objective.
+pub struct RfBatcher {
+    cfg: RfRunConfig,
+    stats: LatentStats,
+    tokenizer: Arc<ScratchTokenizer>,
+    vae: FrameVae,
+    /// FPS tokens P of the VAE run (`vae.tokens`).
+    tokens: usize,
+    store: Store,
+    train: SplitLatents,
+    valid: SplitLatents,
+}
+
+/// The keyframe mask m of one training window of `frames` frames (true = observed keyframe), drawn with
+/// `rf.kf_sampler` (docs/method.md §4.5, §5.4). Modes trained without keyframes (`replace_noised`, `none`) get
+/// all-false masks and consume no random numbers.
+pub fn training_mask(
+    rf: &RfSection,
+    conditioning: KeyframeConditioning,
+    frames: usize,
+    rng: &mut impl Rng,
+) -> Vec<bool> {
+    if !conditioning.has_mask_channels() {
+        return vec![false; frames];
+    }
+    sample_keyframes(&rf.kf_sampler.strategy(rf.k_max), frames, rng)
+}
+
+impl RfBatcher {
+    /// Checks that the RF config fits the VAE and the store in `data`; with [`LatentCache::Memory`] encodes the
+    /// TRAIN and VAL clips once with the frozen VAE (on the inference `device`).
+    pub fn new(
+        cfg: &RfRunConfig,
+        data: &Path,
+        vae: &LoadedVae,
+        tokenizer: ScratchTokenizer,
+        device: &Device,
+    ) -> Result<Self> {
+        let store = open_store(data)?;
+        check_compatible(cfg, &store, vae)?;
+        let frame_vae = vae.frame_vae()?.clone();
+        let split = |split: Split| -> Result<SplitLatents> {
+            let store_indices = store.indices(split);
+            let cached = match cfg.rf.latent_cache {
+                LatentCache::Memory => Some(encode_latents(
+                    &frame_vae,
+                    &store,
+                    &store_indices,
+                    cfg.train.micro_batch,
+                    vae.tokens(),
+                    device,
+                )?),
+                LatentCache::PerBatch => None,
+            };
+            Ok(SplitLatents { store_indices, cached })
+        };
+        let (train, valid) = (split(Split::Train)?, split(Split::Val)?);
+        Ok(RfBatcher {
+            cfg: cfg.clone(),
+            stats: vae.stats,
+            tokenizer: Arc::new(tokenizer),
+            vae: frame_vae,
+            tokens: vae.tokens(),
+            store,
+            train,
+            valid,
+        })
+    }
+
+    /// Number of TRAIN clips.
+    pub fn train_len(&self) -> usize {
+        self.train.store_indices.len()
+    }
+
+    /// Number of VAL clips.
+    pub fn valid_len(&self) -> usize {
+        self.valid.store_indices.len()
+    }
+
+    /// Host bytes of the cached latents (0 with [`LatentCache::PerBatch`]).
+    pub fn cached_bytes(&self) -> usize {
+        [&self.train, &self.valid]
+            .iter()
+            .filter_map(|s| s.cached.as_ref())
+            .map(LatentSet::bytes)
+            .sum()
+    }
+
+    /// The run config.
+    pub fn config(&self) -> &RfRunConfig {
+        &self.cfg
+    }
+
+    /// The store the clips come from.
+    pub fn store(&self) -> &Store {
+        &self.store
+    }
+
+    /// Store indices of the VAL clips, in store order.
+    pub fn valid_indices(&self) -> &[usize] {
+        &self.valid.store_indices
+    }
+
+    /// The frozen frame-wise VAE.
+    pub fn vae(&self) -> &FrameVae {
+        &self.vae
+    }
+
+    /// FPS tokens P the VAE encodes.
+    pub fn tokens(&self) -> usize {
+        self.tokens
+    }
+
+    /// The VAE's latent statistics.
+    pub fn stats(&self) -> LatentStats {
+        self.stats
+    }
+
+    /// The caption tokenizer (shared).
+    pub fn tokenizer(&self) -> &Arc<ScratchTokenizer> {
+        &self.tokenizer
+    }
+
+    /// Builds the batch of positions `indices` of `subset`: z = μ + σξ or μ (`rf.latent`), standardized (docs/method.md
+    /// §3.4), token-major; keyframe masks ([`training_mask`]); keyframe latents (Z itself, or the encoded
+    /// noisy keyframes of §5.4 for `impute_until`); captions through the text model; keep_txt; ε; τ.
+    /// Host draws (masks, keep_txt, keyframe noise) come from `rng`; ξ, ε and τ from the device stream.
+    ///
+    /// # Shapes
+    /// - output batch: z0 `[B, P, C]`, z/z_key/eps `[B, P, T, C]`, mask `[B, T]`, text `[B, L, D_txt]`, keep_txt
+    ///   and tau `[B]`
+    pub fn batch(
+        &self,
+        model: &RfModel,
+        subset: Subset,
+        indices: &[usize],
+        rng: &mut ChaCha8Rng,
+        dropout: TextDropout,
+        device: &Device,
+    ) -> Result<RfStep> {
+        let split = match subset {
+            Subset::Train => &self.train,
+            Subset::Valid => &self.valid,
+        };
+        let store_ids = indices
+            .iter()
+            .map(|&i| {
+                split.store_indices.get(i).copied().ok_or_else(|| {
+                    TrainError::Loop(format!(
+                        "{subset:?} index {i} out of range ({} clips)",
+                        split.store_indices.len()
+                    ))
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let encoded;
+        let (set, positions) = match &split.cached {
+            Some(set) => (set, indices.to_vec()),
+            None => {
+                let inference = device.clone().without_autodiff();
+                encoded = encode_latents(
+                    &self.vae,
+                    &self.store,
+                    &store_ids,
+                    store_ids.len(),
+                    self.tokens,
+                    &inference,
+                )?;
+                (&encoded, (0..store_ids.len()).collect())
+            }
+        };
+        let (b, t, p, c) = (indices.len(), set.frames, set.tokens, set.channels);
+        let mut z0 = Vec::with_capacity(b * p * c);
+        let mut mu = Vec::with_capacity(b * t * p * c);
+        let mut logvar = Vec::with_capacity(b * t * p * c);
+        let mut captions = Vec::with_capacity(b);
+        for &i in &positions {
+            let clip = &set.clips[i];
+            z0.extend_from_slice(&clip.z0);
+            mu.extend_from_slice(&clip.mu);
+            logvar.extend_from_slice(&clip.logvar);
+            captions.push(clip.caption.clone());
+        }
+        let z0: Tensor<3> = Tensor::from_data(TensorData::new(z0, [b, p, c]), device);
+        let mu: Tensor<4> = Tensor::from_data(TensorData::new(mu, [b, t, p, c]), device);
+        let z = match self.cfg.rf.latent {
+            LatentDraw::Sample => {
+                let logvar = Tensor::from_data(TensorData::new(logvar, [b, t, p, c]), device);
+                mesh_vae::sample(mu, logvar) // z = μ + σξ
+            }
+            LatentDraw::Mean => mu,
+        };
+        // docs/method.md §3.4: (z − mean)/std; VAE layout [B, T, P, C] → token-major [B, P, T, C].
+        let z = self.stats.standardize_motion(z.swap_dims(1, 2));
+        let z0 = self.stats.standardize_shape(z0);
+
+        let conditioning = self.cfg.model.conditioning;
+        let mask: Vec<bool> = (0..b)
+            .flat_map(|_| training_mask(&self.cfg.rf, conditioning, t, rng))
+            .collect();
+        let z_key = match conditioning {
+            KeyframeConditioning::ImputeUntil => self.noisy_keyframe_latents(&store_ids, &mask, rng, device)?,
+            KeyframeConditioning::InputMask | KeyframeConditioning::ReplaceNoised | KeyframeConditioning::None => {
+                z.clone()
+            }
+        };
+        let mask = Tensor::from_data(
+            TensorData::new(mask.iter().map(|&m| f32::from(u8::from(m))).collect::<Vec<_>>(), [b, t]),
+            device,
+        );
+        let keep: Vec<f32> = (0..b)
+            .map(|_| match dropout {
+                TextDropout::Apply => f32::from(u8::from(!rng.random_bool(self.cfg.rf.text_dropout))),
+                TextDropout::Off => 1.0,
+            })
+            .collect();
+        let text = model.encode_text(&self.tokenizer, &captions, self.cfg.text.max_len, device)?;
+        let eps = Tensor::random([b, p, t, c], Distribution::Normal(0.0, 1.0), device);
+        let tau = self.cfg.rf.tau_sampler.sample(b, device);
+        Ok(RfStep {
+            batch: RfBatch {
+                z0,
+                z,
+                z_key,
+                mask,
+                text,
+                keep_txt: Tensor::from_data(TensorData::new(keep, [b]), device),
+            },
+            eps,
+            tau,
+        })
+    }
+
+    /// docs/method.md §5.4 (SceneMI): keyframe vertices + i.i.d. N(0, (l · rf.keyframe_noise)²) with l ~ U(0, 1) per
+    /// sample, first and last frames clean, real vertices only; encoded by the frozen VAE (posterior mean,
+    /// docs/method.md §9 item 16) and standardized. Non-keyframe slots hold the clean frames' latents (unused: the mask
+    /// hides them).
+    ///
+    /// # Shapes
+    /// - mask: `B · T` row-major; output `[B, P, T, C]` on `device`
+    fn noisy_keyframe_latents(
+        &self,
+        store_ids: &[usize],
+        mask: &[bool],
+        rng: &mut ChaCha8Rng,
+        device: &Device,
+    ) -> Result<Tensor<4>> {
+        let inference = device.clone().without_autodiff();
+        let (mut clips, _) = load_clips(&self.store, store_ids, &inference)?;
+        let [b, t, n, _] = clips.vertices.dims();
+        let mut noise = vec![0.0f32; b * t * n * 3];
+        for (bi, &n_real) in clips.n_real.iter().enumerate() {
+            let std = rng.random::<f64>() * self.cfg.rf.keyframe_noise; // l · 0.02
+            for f in 1..t.saturating_sub(1) {
+                if !mask[bi * t + f] {
+                    continue;
+                }
+                let row = &mut noise[(bi * t + f) * n * 3..][..n_real * 3];
+                for x in row.iter_mut() {
+                    *x = (standard_normal(rng) * std) as f32;
+                }
+            }
+        }
+        clips.vertices = clips.vertices + Tensor::from_data(TensorData::new(noise, [b, t, n, 3]), &inference);
+        let enc = self.vae.encode_vae_batch(&vae_batch(&clips, self.tokens, &inference)?);
+        let z_key = self.stats.standardize_motion(enc.mu.swap_dims(1, 2));
+        Ok(Tensor::from_data(z_key.into_data(), device))
+    }
+}
+
+/// One N(0, 1) draw (Box–Muller).
+fn standard_normal(rng: &mut impl Rng) -> f64 {
+    let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]: ln is finite
+    let u2: f64 = rng.random();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+pub(super) fn open_store(data: &Path) -> Result<Store> {
+    Ok(Store::open(data)?)
+}
+
+/// docs/method.md §4.1: the RF slots must match the VAE latents and the store windows.
+pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
+    vae.frame_vae()?;
+    if vae.tokens() > store.p() {
+        return Err(TrainError::Setup(format!(
+            "the VAE run {} encodes P = {} FPS tokens, the store {} holds {}: import it with --p {} or more",
+            vae.run.display(),
+            vae.tokens(),
+            store.dir().display(),
+            store.p(),
+            vae.tokens()
+        )));
+    }
+    let c = vae.latent_channels();
+    if cfg.model.channels != c {
+        return Err(TrainError::Setup(format!(
+            "model.channels = {} but the VAE run {} has latent_channels = {c}: set model.channels = {c}",
+            cfg.model.channels,
+            vae.run.display()
+        )));
+    }
+    if cfg.model.frames != store.frames() {
+        return Err(TrainError::Setup(format!(
+            "model.frames = {} but the store {} holds {}-frame clips: set model.frames = {}",
+            cfg.model.frames,
+            store.dir().display(),
+            store.frames(),
+            store.frames()
+        )));
+    }
+    Ok(())
+}
