@@ -1,185 +1,15 @@
-//! Restricted unpickler and minimal pickler for DyMesh `.bin` clips (SPEC §2.1): pickle bytes are data, never code.
+//! The restricted unpickler: a stack machine over pickle opcodes that builds [`Value`]s and executes nothing.
 //!
-//! Reads protocols 2–5 into a [`Value`] tree. The only globals accepted are the ones numpy itself emits for plain
-//! arrays (`_reconstruct`, `ndarray`, `dtype`, protocol 5's `_frombuffer`) and `_codecs.encode(str, 'latin1')`, which
-//! protocol 2 uses for `bytes`; each is interpreted here as data. Any other global (`os.system`, `builtins.eval`, …)
-//! is an error naming it, raised when the global opcode is read, before any argument is looked at.
-//!
-//! Objects shared through the memo are copies; a memoised object mutated while on the stack (BUILD, SETITEMS,
-//! APPENDS) updates its memo entry when it leaves the stack, which covers what pickle emits (self-referencing
-//! containers are not representable). Nesting deeper than 256 containers and memo/DUP copies beyond 2^24 units
-//! (pickle bombs) are errors.
+//! Large payloads (text, bytes, arrays) are reference-counted while the machine runs, so memo and DUP copies cost
+//! one tree node each; every node created or copied counts against [`MAX_VALUES`], and payloads still shared when
+//! the result is built are copied out against [`MAX_SHARED_BYTES`].
 
-use std::collections::HashMap;
+use std::collections::hash_map::Entry;
+use std::collections::{HashMap, HashSet};
+use std::rc::Rc;
 
+use super::{ArrayData, ByteOrder, DType, MAX_DEPTH, MAX_SHARED_BYTES, MAX_VALUES, NdArray, Value};
 use crate::error::{DataError, Result};
-
-/// A decoded pickle value. Dicts keep insertion order.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Value {
-    None,
-    Bool(bool),
-    Int(i64),
-    Float(f64),
-    Str(String),
-    Bytes(Vec<u8>),
-    List(Vec<Value>),
-    Tuple(Vec<Value>),
-    Dict(Vec<(Value, Value)>),
-    NdArray(NdArray),
-}
-
-impl Value {
-    /// Short type name for error messages.
-    pub fn kind(&self) -> &'static str {
-        match self {
-            Value::None => "None",
-            Value::Bool(_) => "bool",
-            Value::Int(_) => "int",
-            Value::Float(_) => "float",
-            Value::Str(_) => "str",
-            Value::Bytes(_) => "bytes",
-            Value::List(_) => "list",
-            Value::Tuple(_) => "tuple",
-            Value::Dict(_) => "dict",
-            Value::NdArray(_) => "ndarray",
-        }
-    }
-
-    /// The value under string key `key` when `self` is a dict.
-    pub fn get(&self, key: &str) -> Option<&Value> {
-        match self {
-            Value::Dict(items) => items
-                .iter()
-                .find(|(k, _)| matches!(k, Value::Str(s) if s == key))
-                .map(|(_, v)| v),
-            _ => None,
-        }
-    }
-}
-
-/// Element type of a numpy array as stored in the file.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum DType {
-    F2,
-    F4,
-    F8,
-    I1,
-    I2,
-    I4,
-    I8,
-    U1,
-    U2,
-    U4,
-    U8,
-    Bool,
-}
-
-impl DType {
-    /// Parse numpy's type string (`f4`, `<i8`, …); returns the type and the byte order when the string names one.
-    pub fn parse(descr: &str) -> Option<(DType, Option<ByteOrder>)> {
-        let (order, code) = match descr.as_bytes().first() {
-            Some(b'<') => (Some(ByteOrder::Little), &descr[1..]),
-            Some(b'>') => (Some(ByteOrder::Big), &descr[1..]),
-            Some(b'=' | b'|') => (None, &descr[1..]),
-            _ => (None, descr),
-        };
-        let dtype = match code {
-            "f2" | "e" => DType::F2,
-            "f4" | "f" => DType::F4,
-            "f8" | "d" => DType::F8,
-            "i1" | "b" => DType::I1,
-            "i2" | "h" => DType::I2,
-            "i4" | "i" => DType::I4,
-            "i8" | "q" | "l" => DType::I8,
-            "u1" | "B" => DType::U1,
-            "u2" | "H" => DType::U2,
-            "u4" | "I" => DType::U4,
-            "u8" | "Q" | "L" => DType::U8,
-            "b1" | "?" => DType::Bool,
-            _ => return None,
-        };
-        Some((dtype, order))
-    }
-
-    /// numpy's type string without byte order.
-    pub fn descr(self) -> &'static str {
-        match self {
-            DType::F2 => "f2",
-            DType::F4 => "f4",
-            DType::F8 => "f8",
-            DType::I1 => "i1",
-            DType::I2 => "i2",
-            DType::I4 => "i4",
-            DType::I8 => "i8",
-            DType::U1 => "u1",
-            DType::U2 => "u2",
-            DType::U4 => "u4",
-            DType::U8 => "u8",
-            DType::Bool => "b1",
-        }
-    }
-
-    /// Bytes per element.
-    pub fn item_size(self) -> usize {
-        match self {
-            DType::I1 | DType::U1 | DType::Bool => 1,
-            DType::F2 | DType::I2 | DType::U2 => 2,
-            DType::F4 | DType::I4 | DType::U4 => 4,
-            DType::F8 | DType::I8 | DType::U8 => 8,
-        }
-    }
-
-    /// Whether elements decode to [`ArrayData::Float`].
-    pub fn is_float(self) -> bool {
-        matches!(self, DType::F2 | DType::F4 | DType::F8)
-    }
-}
-
-/// Byte order of array elements.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ByteOrder {
-    Little,
-    Big,
-}
-
-impl ByteOrder {
-    fn native() -> Self {
-        if cfg!(target_endian = "big") {
-            ByteOrder::Big
-        } else {
-            ByteOrder::Little
-        }
-    }
-}
-
-/// Array elements in C (row-major) order, widened: floats to f64, integers and bools to i64.
-#[derive(Debug, Clone, PartialEq)]
-pub enum ArrayData {
-    Float(Vec<f64>),
-    Int(Vec<i64>),
-}
-
-impl ArrayData {
-    pub fn len(&self) -> usize {
-        match self {
-            ArrayData::Float(v) => v.len(),
-            ArrayData::Int(v) => v.len(),
-        }
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-}
-
-/// A numpy array: `shape`, the file's element type, and the elements in C order.
-#[derive(Debug, Clone, PartialEq)]
-pub struct NdArray {
-    pub shape: Vec<usize>,
-    pub dtype: DType,
-    pub data: ArrayData,
-}
 
 /// The globals this unpickler knows; each is interpreted as data.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -201,19 +31,19 @@ const ALLOWED_GLOBALS: &[(&str, &str, Global)] = &[
     ("numpy._core.numeric", "_frombuffer", Global::FromBuffer),
 ];
 
-/// A stack item: a value under construction, or one of numpy's intermediate objects.
+/// A stack item: a value under construction, or one of numpy's intermediate objects. Payloads are shared.
 #[derive(Debug, Clone)]
 enum Item {
     None,
     Bool(bool),
     Int(i64),
     Float(f64),
-    Str(String),
-    Bytes(Vec<u8>),
+    Str(Rc<String>),
+    Bytes(Rc<Vec<u8>>),
     List(Vec<Item>),
     Tuple(Vec<Item>),
     Dict(Vec<(Item, Item)>),
-    Array(NdArray),
+    Array(Rc<NdArray>),
     Global(Global),
     /// `_reconstruct(ndarray, (0,), b'b')`: waits for BUILD with the array state.
     EmptyArray,
@@ -239,110 +69,136 @@ impl Item {
             Item::DTypeObj(..) => "dtype",
         }
     }
-
-    fn into_value(self) -> std::result::Result<Value, String> {
-        let all = |items: Vec<Item>| {
-            items
-                .into_iter()
-                .map(Item::into_value)
-                .collect::<std::result::Result<Vec<_>, _>>()
-        };
-        Ok(match self {
-            Item::None => Value::None,
-            Item::Bool(b) => Value::Bool(b),
-            Item::Int(i) => Value::Int(i),
-            Item::Float(f) => Value::Float(f),
-            Item::Str(s) => Value::Str(s),
-            Item::Bytes(b) => Value::Bytes(b),
-            Item::List(v) => Value::List(all(v)?),
-            Item::Tuple(v) => Value::Tuple(all(v)?),
-            Item::Dict(kv) => Value::Dict(
-                kv.into_iter()
-                    .map(|(k, v)| Ok((k.into_value()?, v.into_value()?)))
-                    .collect::<std::result::Result<Vec<_>, String>>()?,
-            ),
-            Item::Array(a) => Value::NdArray(a),
-            other => return Err(format!("a {} object is left in the data", other.kind())),
-        })
-    }
 }
 
-/// Nesting depth and size (items, array elements, 8-byte words of text) of a stack item, kept so that limits cost
-/// nothing to check.
+/// Nesting depth and node count of a stack item, kept so that limits cost nothing to check.
 #[derive(Debug, Clone, Copy, Default)]
 struct Meta {
     depth: usize,
-    size: u64,
+    nodes: u64,
 }
 
 impl Meta {
     /// Meta of a non-container item.
-    fn of(item: &Item) -> Meta {
-        let size = match item {
-            Item::Array(a) => 1 + a.data.len() as u64,
-            Item::Str(t) => 1 + t.len() as u64 / 8,
-            Item::Bytes(b) => 1 + b.len() as u64 / 8,
-            _ => 1,
-        };
-        Meta { depth: 0, size }
-    }
+    const LEAF: Meta = Meta { depth: 0, nodes: 1 };
 
-    /// Combined meta of several items (deepest depth, total size).
+    /// Combined meta of several items (deepest depth, total nodes).
     fn all(metas: impl IntoIterator<Item = Meta>) -> Meta {
         metas.into_iter().fold(Meta::default(), |a, b| Meta {
             depth: a.depth.max(b.depth),
-            size: a.size.saturating_add(b.size),
+            nodes: a.nodes.saturating_add(b.nodes),
         })
     }
 }
 
-/// A stack slot remembers the memo key it came from, so that mutations reach the memo too.
+/// A stack slot remembers the memo keys stored from it: while it is on the stack they refer to it (and see
+/// BUILD, SETITEMS and APPENDS on it); when it leaves the stack they get a copy of its final state.
 struct Slot {
     item: Item,
-    memo: Option<u64>,
     meta: Meta,
+    memo_keys: Vec<u64>,
+}
+
+impl Slot {
+    fn new(item: Item, meta: Meta) -> Self {
+        Self {
+            item,
+            meta,
+            memo_keys: Vec::new(),
+        }
+    }
+}
+
+/// A memo entry: an object still on the stack (by slot index), or a stored copy.
+enum Memo {
+    Stack(usize),
+    Stored(Item, Meta),
 }
 
 struct Machine<'a> {
     bytes: &'a [u8],
     pos: usize,
+    /// End of the current FRAME, while inside one.
+    frame_end: Option<usize>,
     stack: Vec<Slot>,
     marks: Vec<usize>,
-    memo: HashMap<u64, (Item, Meta)>,
-    /// Units copied by BINGET/DUP so far.
-    copied: u64,
+    memo: HashMap<u64, Memo>,
+    /// Nodes created or copied so far (limit [`MAX_VALUES`]).
+    values: u64,
 }
 
-/// Deepest container nesting accepted; deeper input is an error, not a stack overflow.
-const MAX_DEPTH: usize = 256;
-/// Most units that memo references and DUP may copy (on top of the input size): stops exponential "pickle bombs".
-const MAX_COPIED: u64 = 1 << 22;
-
 type Step<T> = std::result::Result<T, String>;
+
+const BOMB: &str = "(a pickle bomb?)";
 
 /// Decode pickle `bytes`. Errors name `source`, field `pickle` and the byte offset of the failing opcode.
 pub fn loads(bytes: &[u8], source: &str) -> Result<Value> {
     let mut m = Machine {
         bytes,
         pos: 0,
+        frame_end: None,
         stack: Vec::new(),
         marks: Vec::new(),
         memo: HashMap::new(),
-        copied: 0,
+        values: 0,
     };
     let mut op_pos = 0;
     let result = (|| -> Step<Value> {
         loop {
             op_pos = m.pos;
+            if m.frame_end == Some(m.pos) {
+                m.frame_end = None;
+            }
             if m.pos >= m.bytes.len() {
                 return Err("truncated: input ended before STOP".into());
             }
             if let Some(item) = m.step()? {
-                return item.into_value();
+                return m.finish(item);
             }
         }
     })();
     result.map_err(|reason| DataError::new(source, "pickle", format!("byte {op_pos}: {reason}")))
+}
+
+/// A dict key as Python compares it: `1 == 1.0 == True`; `None` for keys equal to nothing else (NaN).
+#[derive(Debug, PartialEq, Eq, Hash)]
+enum Key {
+    None,
+    Int(i64),
+    Float(u64),
+    Str(String),
+    Bytes(Vec<u8>),
+    Tuple(Vec<Key>),
+}
+
+fn key_of(v: &Value) -> Step<Option<Key>> {
+    Ok(Some(match v {
+        Value::None => Key::None,
+        Value::Bool(b) => Key::Int(i64::from(*b)),
+        Value::Int(i) => Key::Int(*i),
+        Value::Float(f) if f.is_nan() => return Ok(None),
+        // Integral floats in i64 range equal the int (-0.0 == 0); 2^63 itself is out of range.
+        Value::Float(f) if f.fract() == 0.0 && *f >= -(2f64.powi(63)) && *f < 2f64.powi(63) => Key::Int(*f as i64),
+        Value::Float(f) => Key::Float(f.to_bits()),
+        Value::Str(s) => Key::Str(s.clone()),
+        Value::Bytes(b) => Key::Bytes(b.clone()),
+        Value::Tuple(items) => {
+            let mut keys = Vec::with_capacity(items.len());
+            for item in items {
+                match key_of(item)? {
+                    Some(k) => keys.push(k),
+                    None => return Ok(None),
+                }
+            }
+            Key::Tuple(keys)
+        }
+        other => {
+            return Err(format!(
+                "dict key is a {} (unhashable: Python refuses this pickle too)",
+                other.kind()
+            ));
+        }
+    }))
 }
 
 impl Machine<'_> {
@@ -350,6 +206,14 @@ impl Machine<'_> {
         let left = self.bytes.len() - self.pos;
         if n > left {
             return Err(format!("truncated: {what} needs {n} bytes, {left} left"));
+        }
+        if let Some(end) = self.frame_end
+            && self.pos + n > end
+        {
+            return Err(format!(
+                "{what} needs {n} bytes but its FRAME ends after {} (an opcode may not cross a frame end)",
+                end - self.pos
+            ));
         }
         let s = &self.bytes[self.pos..self.pos + n];
         self.pos += n;
@@ -372,32 +236,58 @@ impl Machine<'_> {
     }
 
     fn line(&mut self, what: &str) -> Step<String> {
-        let rest = &self.bytes[self.pos..];
-        let end = rest
-            .iter()
-            .position(|&b| b == b'\n')
-            .ok_or(format!("truncated: {what} has no newline"))?;
+        let rest = &self.bytes[self.pos..self.frame_end.unwrap_or(self.bytes.len())];
+        let end = rest.iter().position(|&b| b == b'\n').ok_or(format!(
+            "truncated: {what} has no newline before the end of the input or its FRAME"
+        ))?;
         let s = String::from_utf8(rest[..end].to_vec()).map_err(|e| format!("{what}: invalid UTF-8: {e}"))?;
         self.pos += end + 1;
         Ok(s)
     }
 
+    /// FRAME: the next `len` bytes are one frame (Python: all present, no frame inside another).
+    fn frame(&mut self) -> Step<()> {
+        if self.frame_end.is_some() {
+            return Err("FRAME starts before the end of the current frame".into());
+        }
+        let len = self.uint(8, "FRAME")?;
+        let left = (self.bytes.len() - self.pos) as u64;
+        if len > left {
+            return Err(format!("FRAME claims {len} bytes, {left} left (truncated)"));
+        }
+        self.frame_end = Some(self.pos + len as usize);
+        Ok(())
+    }
+
+    /// Count `nodes` new or copied values against [`MAX_VALUES`].
+    fn charge(&mut self, nodes: u64) -> Step<()> {
+        self.values = self.values.saturating_add(nodes);
+        if self.values > MAX_VALUES {
+            return Err(format!(
+                "more than {MAX_VALUES} values, memo and DUP copies included {BOMB}"
+            ));
+        }
+        Ok(())
+    }
+
     /// Push a non-container item, or an empty container.
-    fn push(&mut self, item: Item) {
-        let meta = Meta::of(&item);
-        self.stack.push(Slot { item, memo: None, meta });
+    fn push(&mut self, item: Item) -> Step<()> {
+        self.charge(1)?;
+        self.stack.push(Slot::new(item, Meta::LEAF));
+        Ok(())
     }
 
     /// Push a container holding children of combined meta `children`.
     fn push_container(&mut self, item: Item, children: Meta) -> Step<()> {
+        self.charge(1)?;
         let meta = Meta {
             depth: children.depth + 1,
-            size: children.size.saturating_add(1),
+            nodes: children.nodes.saturating_add(1),
         };
         if meta.depth > MAX_DEPTH {
             return Err(format!("containers nest deeper than {MAX_DEPTH}"));
         }
-        self.stack.push(Slot { item, memo: None, meta });
+        self.stack.push(Slot::new(item, meta));
         Ok(())
     }
 
@@ -407,7 +297,7 @@ impl Machine<'_> {
             return Err(format!("stack underflow in {what}"));
         }
         let slot = self.stack.pop().expect("checked above");
-        Ok(self.release(slot))
+        self.release(slot, self.stack.len())
     }
 
     fn pop(&mut self, what: &str) -> Step<Item> {
@@ -426,7 +316,13 @@ impl Machine<'_> {
     fn pop_mark(&mut self, what: &str) -> Step<(Vec<Item>, Meta)> {
         let mark = self.marks.pop().ok_or(format!("{what} without MARK"))?;
         let slots = self.stack.split_off(mark);
-        let (items, metas): (Vec<Item>, Vec<Meta>) = slots.into_iter().map(|s| self.release(s)).unzip();
+        let mut items = Vec::with_capacity(slots.len());
+        let mut metas = Vec::with_capacity(slots.len());
+        for (i, slot) in slots.into_iter().enumerate() {
+            let (item, meta) = self.release(slot, mark + i)?;
+            items.push(item);
+            metas.push(meta);
+        }
         Ok((items, Meta::all(metas)))
     }
 
@@ -434,54 +330,49 @@ impl Machine<'_> {
     fn grow_top(&mut self, children: Meta) -> Step<()> {
         let slot = self.top("grow")?;
         slot.meta.depth = slot.meta.depth.max(children.depth + 1);
-        slot.meta.size = slot.meta.size.saturating_add(children.size);
+        slot.meta.nodes = slot.meta.nodes.saturating_add(children.nodes);
         if slot.meta.depth > MAX_DEPTH {
             return Err(format!("containers nest deeper than {MAX_DEPTH}"));
         }
         Ok(())
     }
 
-    /// A slot leaves the stack: its memo entry gets the final state (after BUILD, SETITEMS, APPENDS on the stack).
-    fn release(&mut self, slot: Slot) -> (Item, Meta) {
-        if let Some(key) = slot.memo {
-            self.memo.insert(key, (slot.item.clone(), slot.meta));
+    /// Slot `index` leaves the stack: the memo keys still referring to it get a (charged) copy of its final state.
+    fn release(&mut self, slot: Slot, index: usize) -> Step<(Item, Meta)> {
+        for &key in &slot.memo_keys {
+            if matches!(self.memo.get(&key), Some(Memo::Stack(i)) if *i == index) {
+                self.charge(slot.meta.nodes)?;
+                self.memo.insert(key, Memo::Stored(slot.item.clone(), slot.meta));
+            }
         }
-        (slot.item, slot.meta)
+        Ok((slot.item, slot.meta))
     }
 
+    /// PUT, BINPUT, LONG_BINPUT, MEMOIZE: the key refers to the top item.
     fn memo_put(&mut self, key: u64) -> Step<()> {
-        let slot = self.top("memo put")?;
-        slot.memo = Some(key);
-        let entry = (slot.item.clone(), slot.meta);
-        self.memo.insert(key, entry);
+        let index = self.stack.len().wrapping_sub(1);
+        self.top("memo put")?.memo_keys.push(key);
+        self.memo.insert(key, Memo::Stack(index));
         Ok(())
     }
 
-    /// Account for copying an item of `size` units (BINGET, DUP).
-    fn charge(&mut self, size: u64) -> Step<()> {
-        self.copied = self.copied.saturating_add(size);
-        if self.copied > MAX_COPIED + self.bytes.len() as u64 {
+    /// GET, BINGET, LONG_BINGET: push a (charged) copy of the object stored under `key`, in its current state.
+    fn memo_get(&mut self, key: u64) -> Step<()> {
+        let (item, meta) = match self.memo.get(&key) {
+            None => return Err(format!("memo key {key} was never stored")),
+            Some(Memo::Stack(i)) => (&self.stack[*i].item, self.stack[*i].meta),
+            Some(Memo::Stored(item, meta)) => (item, *meta),
+        };
+        let nodes = meta.nodes;
+        let values = self.values.saturating_add(nodes);
+        if values > MAX_VALUES {
             return Err(format!(
-                "memo references and DUP copy more than {MAX_COPIED} units (a pickle bomb?)"
+                "more than {MAX_VALUES} values, memo and DUP copies included {BOMB}"
             ));
         }
-        Ok(())
-    }
-
-    fn memo_get(&mut self, key: u64) -> Step<()> {
-        let size = self
-            .memo
-            .get(&key)
-            .ok_or(format!("memo key {key} was never stored"))?
-            .1
-            .size;
-        self.charge(size)?;
-        let (item, meta) = self.memo[&key].clone();
-        self.stack.push(Slot {
-            item,
-            memo: Some(key),
-            meta,
-        });
+        let item = item.clone();
+        self.values = values;
+        self.stack.push(Slot::new(item, meta));
         Ok(())
     }
 
@@ -495,6 +386,37 @@ impl Machine<'_> {
             ))
     }
 
+    /// Bytes that building the result would copy: every reference to a shared payload after its first.
+    fn shared_copies(item: &Item, seen: &mut HashSet<usize>) -> u64 {
+        let mut once = |ptr: usize, bytes: u64| if seen.insert(ptr) { 0 } else { bytes };
+        match item {
+            Item::Str(s) => once(Rc::as_ptr(s) as usize, s.len() as u64),
+            Item::Bytes(b) => once(Rc::as_ptr(b) as usize, b.len() as u64),
+            Item::Array(a) => once(Rc::as_ptr(a) as usize, 8 * a.data.len() as u64),
+            Item::List(v) | Item::Tuple(v) => v
+                .iter()
+                .fold(0u64, |acc, i| acc.saturating_add(Self::shared_copies(i, seen))),
+            Item::Dict(kv) => kv.iter().fold(0u64, |acc, (k, v)| {
+                acc.saturating_add(Self::shared_copies(k, seen))
+                    .saturating_add(Self::shared_copies(v, seen))
+            }),
+            _ => 0,
+        }
+    }
+
+    /// Convert the finished item, refusing it when shared payloads would copy more than [`MAX_SHARED_BYTES`].
+    fn finish(&mut self, item: Item) -> Step<Value> {
+        // Drop the memo first: a payload referenced only by the result then moves out without a copy.
+        self.memo.clear();
+        let copies = Self::shared_copies(&item, &mut HashSet::new());
+        if copies > MAX_SHARED_BYTES {
+            return Err(format!(
+                "objects referenced several times would copy {copies} bytes, more than {MAX_SHARED_BYTES} {BOMB}"
+            ));
+        }
+        value(item)
+    }
+
     /// One opcode; `Some(result)` at STOP.
     fn step(&mut self) -> Step<Option<Item>> {
         let op = self.take(1, "opcode")?[0];
@@ -505,15 +427,15 @@ impl Machine<'_> {
                     return Err(format!("unsupported pickle protocol {p}"));
                 }
             }
-            0x95 => {
-                self.uint(8, "FRAME")?;
-            }
+            0x95 => self.frame()?,
             b'.' => {
-                let item = self.pop("STOP")?;
-                if !self.stack.is_empty() || !self.marks.is_empty() {
-                    return Err(format!("STOP with {} items left on the stack", self.stack.len()));
+                self.top("STOP")?;
+                if self.stack.len() > 1 || !self.marks.is_empty() {
+                    return Err(format!("STOP with {} items left on the stack", self.stack.len() - 1));
                 }
-                return Ok(Some(item));
+                // The memo is dropped next, so the result leaves the stack without updating it.
+                let slot = self.stack.pop().expect("checked above");
+                return Ok(Some(slot.item));
             }
             b'(' => self.marks.push(self.stack.len()),
             b'0' => {
@@ -525,23 +447,23 @@ impl Machine<'_> {
             b'2' => {
                 let top = self.top("DUP")?;
                 let (item, meta) = (top.item.clone(), top.meta);
-                self.charge(meta.size)?;
-                self.stack.push(Slot { item, memo: None, meta });
+                self.charge(meta.nodes)?;
+                self.stack.push(Slot::new(item, meta));
             }
-            b'N' => self.push(Item::None),
-            0x88 => self.push(Item::Bool(true)),
-            0x89 => self.push(Item::Bool(false)),
+            b'N' => self.push(Item::None)?,
+            0x88 => self.push(Item::Bool(true))?,
+            0x89 => self.push(Item::Bool(false))?,
             b'J' => {
                 let v = self.uint(4, "BININT")? as u32 as i32;
-                self.push(Item::Int(v as i64));
+                self.push(Item::Int(v as i64))?;
             }
             b'K' => {
                 let v = self.uint(1, "BININT1")?;
-                self.push(Item::Int(v as i64));
+                self.push(Item::Int(v as i64))?;
             }
             b'M' => {
                 let v = self.uint(2, "BININT2")?;
-                self.push(Item::Int(v as i64));
+                self.push(Item::Int(v as i64))?;
             }
             0x8a | 0x8b => {
                 let what = if op == 0x8a { "LONG1" } else { "LONG4" };
@@ -556,42 +478,42 @@ impl Machine<'_> {
                 {
                     v -= 1i64 << (8 * b.len());
                 }
-                self.push(Item::Int(v));
+                self.push(Item::Int(v))?;
             }
             b'G' => {
                 let b: [u8; 8] = self.take(8, "BINFLOAT")?.try_into().expect("8 bytes");
-                self.push(Item::Float(f64::from_be_bytes(b)));
+                self.push(Item::Float(f64::from_be_bytes(b)))?;
             }
             b'X' => {
                 let s = self.text(4, "BINUNICODE")?;
-                self.push(Item::Str(s));
+                self.push(Item::Str(Rc::new(s)))?;
             }
             0x8c => {
                 let s = self.text(1, "SHORT_BINUNICODE")?;
-                self.push(Item::Str(s));
+                self.push(Item::Str(Rc::new(s)))?;
             }
             0x8d => {
                 let s = self.text(8, "BINUNICODE8")?;
-                self.push(Item::Str(s));
+                self.push(Item::Str(Rc::new(s)))?;
             }
             b'B' | b'T' => {
                 let b = self.sized(4, "BINBYTES")?;
-                self.push(Item::Bytes(b));
+                self.push(Item::Bytes(Rc::new(b)))?;
             }
             b'C' | b'U' => {
                 let b = self.sized(1, "SHORT_BINBYTES")?;
-                self.push(Item::Bytes(b));
+                self.push(Item::Bytes(Rc::new(b)))?;
             }
             0x8e | 0x96 => {
                 let b = self.sized(8, "BINBYTES8")?;
-                self.push(Item::Bytes(b));
+                self.push(Item::Bytes(Rc::new(b)))?;
             }
             0x98 => {
                 self.top("READONLY_BUFFER")?;
             }
-            b'}' => self.push(Item::Dict(Vec::new())),
-            b']' => self.push(Item::List(Vec::new())),
-            b')' => self.push(Item::Tuple(Vec::new())),
+            b'}' => self.push(Item::Dict(Vec::new()))?,
+            b']' => self.push(Item::List(Vec::new()))?,
+            b')' => self.push(Item::Tuple(Vec::new()))?,
             0x85..=0x87 => {
                 let n = (op - 0x84) as usize;
                 let mut items = Vec::with_capacity(n);
@@ -649,7 +571,7 @@ impl Machine<'_> {
                 let module = self.line("GLOBAL module")?;
                 let name = self.line("GLOBAL name")?;
                 let g = Self::global(&module, &name)?;
-                self.push(g);
+                self.push(g)?;
             }
             0x93 => {
                 let name = self.pop("STACK_GLOBAL")?;
@@ -658,7 +580,7 @@ impl Machine<'_> {
                     return Err("STACK_GLOBAL needs two strings".into());
                 };
                 let g = Self::global(&module, &name)?;
-                self.push(g);
+                self.push(g)?;
             }
             b'R' | 0x81 => {
                 let what = if op == b'R' { "REDUCE" } else { "NEWOBJ" };
@@ -670,14 +592,15 @@ impl Machine<'_> {
                 let Item::Global(g) = callable else {
                     return Err(format!("{what} of a {}, not an allowed global", callable.kind()));
                 };
-                self.push(call(g, args)?);
+                let item = call(g, args)?;
+                self.push(item)?;
             }
             b'b' => {
                 let state = self.pop("BUILD")?;
                 let slot = self.top("BUILD")?;
                 let obj = std::mem::replace(&mut slot.item, Item::None);
                 slot.item = build(obj, state)?;
-                slot.meta = Meta::of(&slot.item);
+                slot.meta = Meta::LEAF;
             }
             b'q' => {
                 let k = self.uint(1, "BINPUT")?;
@@ -725,6 +648,45 @@ impl Machine<'_> {
     }
 }
 
+/// The finished item as a [`Value`]; dict keys as Python's dict keeps them (last value wins).
+fn value(item: Item) -> Step<Value> {
+    Ok(match item {
+        Item::None => Value::None,
+        Item::Bool(b) => Value::Bool(b),
+        Item::Int(i) => Value::Int(i),
+        Item::Float(f) => Value::Float(f),
+        Item::Str(s) => Value::Str(unshare(s)),
+        Item::Bytes(b) => Value::Bytes(unshare(b)),
+        Item::List(v) => Value::List(v.into_iter().map(value).collect::<Step<_>>()?),
+        Item::Tuple(v) => Value::Tuple(v.into_iter().map(value).collect::<Step<_>>()?),
+        Item::Dict(kv) => {
+            let mut out: Vec<(Value, Value)> = Vec::with_capacity(kv.len());
+            let mut seen: HashMap<Key, usize> = HashMap::with_capacity(kv.len());
+            for (k, v) in kv {
+                let (k, v) = (value(k)?, value(v)?);
+                match key_of(&k)? {
+                    Some(key) => match seen.entry(key) {
+                        Entry::Occupied(e) => out[*e.get()].1 = v,
+                        Entry::Vacant(e) => {
+                            e.insert(out.len());
+                            out.push((k, v));
+                        }
+                    },
+                    None => out.push((k, v)),
+                }
+            }
+            Value::Dict(out)
+        }
+        Item::Array(a) => Value::NdArray(unshare(a)),
+        other => return Err(format!("a {} object is left in the data", other.kind())),
+    })
+}
+
+/// A payload for the result: moved out at its last reference, else copied (paid for by [`Machine::finish`]).
+fn unshare<T: Clone>(rc: Rc<T>) -> T {
+    Rc::try_unwrap(rc).unwrap_or_else(|rc| (*rc).clone())
+}
+
 fn pairs(items: Vec<Item>, what: &str) -> Step<Vec<(Item, Item)>> {
     if !items.len().is_multiple_of(2) {
         return Err(format!("{what} with an odd number ({}) of items", items.len()));
@@ -764,7 +726,7 @@ fn call(g: Global, args: Vec<Item>) -> Step<Item> {
             s.chars()
                 .map(|c| u8::try_from(c as u32).map_err(|_| format!("_codecs.encode: {c:?} is not latin1")))
                 .collect::<Step<Vec<u8>>>()
-                .map(Item::Bytes)
+                .map(|b| Item::Bytes(Rc::new(b)))
         }
         (Global::FromBuffer, [Item::Bytes(buf), Item::DTypeObj(dtype, order), shape, Item::Str(o)]) => {
             let fortran = match o.as_str() {
@@ -779,7 +741,7 @@ fn call(g: Global, args: Vec<Item>) -> Step<Item> {
                 fortran,
                 buf,
             )
-            .map(Item::Array)
+            .map(|a| Item::Array(Rc::new(a)))
         }
         (g, args) => Err(format!(
             "unsupported call of {g:?} with arguments ({})",
@@ -816,13 +778,13 @@ fn build(obj: Item, state: Item) -> Step<Item> {
                 *fortran,
                 raw,
             )
-            .map(Item::Array)
+            .map(|a| Item::Array(Rc::new(a)))
         }
         Item::DTypeObj(dtype, _) => {
             let order = match state.get(1) {
-                Some(Item::Str(s)) if s == "<" => Some(ByteOrder::Little),
-                Some(Item::Str(s)) if s == ">" => Some(ByteOrder::Big),
-                Some(Item::Str(s)) if s == "|" || s == "=" => Some(ByteOrder::native()),
+                Some(Item::Str(s)) if s.as_str() == "<" => Some(ByteOrder::Little),
+                Some(Item::Str(s)) if s.as_str() == ">" => Some(ByteOrder::Big),
+                Some(Item::Str(s)) if s.as_str() == "|" || s.as_str() == "=" => Some(ByteOrder::native()),
                 other => return Err(format!("dtype state byte order {other:?}")),
             };
             if state.len() > 3 && !matches!(state[3], Item::None) {
@@ -882,7 +844,7 @@ fn decode_array(shape: Vec<usize>, dtype: DType, order: ByteOrder, fortran: bool
 }
 
 /// Reorder column-major elements to row-major.
-fn fortran_to_c<T: Copy>(v: &[T], shape: &[usize]) -> Vec<T> {
+pub(super) fn fortran_to_c<T: Copy>(v: &[T], shape: &[usize]) -> Vec<T> {
     let mut index = vec![0usize; shape.len()];
     let mut out = Vec::with_capacity(v.len());
     for _ in 0..v.len() {
@@ -905,7 +867,7 @@ fn fortran_to_c<T: Copy>(v: &[T], shape: &[usize]) -> Vec<T> {
 }
 
 /// IEEE half to f64 (exact).
-fn f16_to_f64(h: u16) -> f64 {
+pub(super) fn f16_to_f64(h: u16) -> f64 {
     let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
     let exp = ((h >> 10) & 0x1f) as i32;
     let frac = (h & 0x3ff) as f64;
@@ -914,261 +876,5 @@ fn f16_to_f64(h: u16) -> f64 {
         31 if frac == 0.0 => f64::INFINITY,
         31 => f64::NAN,
         e => (1.0 + frac / 1024.0) * 2f64.powi(e - 15),
-    }
-}
-
-/// Encode `value` as a protocol-4 pickle that Python's `pickle.load` reads back into real numpy arrays
-/// (arrays use numpy's own `_reconstruct` + BUILD path). float16 arrays are not written.
-pub fn dumps(value: &Value) -> Result<Vec<u8>> {
-    let mut out = vec![0x80, 4];
-    write_value(&mut out, value)?;
-    out.push(b'.');
-    Ok(out)
-}
-
-fn write_str(out: &mut Vec<u8>, s: &str) {
-    if s.len() < 256 {
-        out.push(0x8c);
-        out.push(s.len() as u8);
-    } else {
-        out.push(0x8d);
-        out.extend((s.len() as u64).to_le_bytes());
-    }
-    out.extend(s.as_bytes());
-}
-
-fn write_bytes(out: &mut Vec<u8>, b: &[u8]) {
-    if b.len() < 256 {
-        out.push(b'C');
-        out.push(b.len() as u8);
-    } else {
-        out.push(0x8e);
-        out.extend((b.len() as u64).to_le_bytes());
-    }
-    out.extend(b);
-}
-
-fn write_int(out: &mut Vec<u8>, i: i64) {
-    if (0..256).contains(&i) {
-        out.extend([b'K', i as u8]);
-    } else if let Ok(v) = i32::try_from(i) {
-        out.push(b'J');
-        out.extend(v.to_le_bytes());
-    } else {
-        out.extend([0x8a, 8]);
-        out.extend(i.to_le_bytes());
-    }
-}
-
-fn write_value(out: &mut Vec<u8>, value: &Value) -> Result<()> {
-    match value {
-        Value::None => out.push(b'N'),
-        Value::Bool(b) => out.push(if *b { 0x88 } else { 0x89 }),
-        Value::Int(i) => write_int(out, *i),
-        Value::Float(f) => {
-            out.push(b'G');
-            out.extend(f.to_be_bytes());
-        }
-        Value::Str(s) => write_str(out, s),
-        Value::Bytes(b) => write_bytes(out, b),
-        Value::List(items) => {
-            out.extend([b']', b'(']);
-            for v in items {
-                write_value(out, v)?;
-            }
-            out.push(b'e');
-        }
-        Value::Tuple(items) => {
-            out.push(b'(');
-            for v in items {
-                write_value(out, v)?;
-            }
-            out.push(b't');
-        }
-        Value::Dict(items) => {
-            out.extend([b'}', b'(']);
-            for (k, v) in items {
-                write_value(out, k)?;
-                write_value(out, v)?;
-            }
-            out.push(b'u');
-        }
-        Value::NdArray(a) => write_array(out, a)?,
-    }
-    Ok(())
-}
-
-fn write_array(out: &mut Vec<u8>, a: &NdArray) -> Result<()> {
-    let count: usize = a.shape.iter().product();
-    if count != a.data.len() {
-        return Err(DataError::new(
-            "pickle",
-            "ndarray",
-            format!("shape {:?} but {} elements", a.shape, a.data.len()),
-        ));
-    }
-    let raw = encode_elements(a)?;
-    // _reconstruct(ndarray, (0,), b'b')
-    out.extend(b"cnumpy.core.multiarray\n_reconstruct\ncnumpy\nndarray\n");
-    out.extend([b'K', 0, 0x85, b'C', 1, b'b', 0x87, b'R']);
-    // BUILD state: (1, shape, dtype, is_fortran=False, raw)
-    out.extend([b'(', b'K', 1, b'(']);
-    for &d in &a.shape {
-        write_int(out, d as i64);
-    }
-    out.push(b't');
-    out.extend(b"cnumpy\ndtype\n");
-    write_str(out, a.dtype.descr());
-    out.extend([0x89, 0x88, 0x87, b'R']);
-    // dtype state: (3, byteorder, None, None, None, -1, -1, 0)
-    out.extend([b'(', b'K', 3]);
-    write_str(out, if a.dtype.item_size() == 1 { "|" } else { "<" });
-    out.extend([b'N', b'N', b'N']);
-    write_int(out, -1);
-    write_int(out, -1);
-    write_int(out, 0);
-    out.extend([b't', b'b', 0x89]);
-    write_bytes(out, &raw);
-    out.extend([b't', b'b']);
-    Ok(())
-}
-
-fn encode_elements(a: &NdArray) -> Result<Vec<u8>> {
-    let mut raw = Vec::with_capacity(a.data.len() * a.dtype.item_size());
-    let mismatch = || {
-        DataError::new(
-            "pickle",
-            "ndarray",
-            format!("dtype {} does not match the element kind", a.dtype.descr()),
-        )
-    };
-    match (&a.data, a.dtype) {
-        (ArrayData::Float(v), DType::F4) => v.iter().for_each(|&x| raw.extend((x as f32).to_le_bytes())),
-        (ArrayData::Float(v), DType::F8) => v.iter().for_each(|&x| raw.extend(x.to_le_bytes())),
-        (ArrayData::Float(_), _) => return Err(mismatch()),
-        (ArrayData::Int(_), d) if d.is_float() => return Err(mismatch()),
-        (ArrayData::Int(v), d) => {
-            let size = d.item_size();
-            for &x in v {
-                raw.extend(&x.to_le_bytes()[..size]);
-            }
-        }
-    }
-    Ok(raw)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn err(bytes: &[u8]) -> DataError {
-        loads(bytes, "t.bin").unwrap_err()
-    }
-
-    #[test]
-    fn scalars_and_containers() {
-        // protocol 2: {'a': [1, -2, 3.5, None, True], 'b': (b'xy',)}
-        let mut p = vec![0x80, 2, b'}', b'(', b'X', 1, 0, 0, 0, b'a', b']', b'('];
-        p.extend([b'K', 1, b'J', 0xfe, 0xff, 0xff, 0xff, b'G']);
-        p.extend(3.5f64.to_be_bytes());
-        p.extend([b'N', 0x88, b'e', 0x8c, 1, b'b', b'C', 2, b'x', b'y', 0x85, b'u', b'.']);
-        let v = loads(&p, "t.bin").unwrap();
-        assert_eq!(
-            v.get("a"),
-            Some(&Value::List(vec![
-                Value::Int(1),
-                Value::Int(-2),
-                Value::Float(3.5),
-                Value::None,
-                Value::Bool(true)
-            ]))
-        );
-        assert_eq!(v.get("b"), Some(&Value::Tuple(vec![Value::Bytes(b"xy".to_vec())])));
-    }
-
-    #[test]
-    fn long1_is_twos_complement() {
-        let v = loads(&[0x80, 2, 0x8a, 2, 0x00, 0xff, b'.'], "t").unwrap();
-        assert_eq!(v, Value::Int(-256));
-        let v = loads(&[0x80, 2, 0x8a, 2, 0x00, 0x01, b'.'], "t").unwrap();
-        assert_eq!(v, Value::Int(256));
-    }
-
-    #[test]
-    fn hostile_global_is_refused_by_name() {
-        let e = err(b"\x80\x02cos\nsystem\nX\x04\x00\x00\x00echo\x85R.");
-        assert_eq!(e.field, "pickle");
-        assert!(e.reason.contains("`os.system`") && e.reason.contains("byte 2"), "{e}");
-        let e = err(b"\x80\x04\x8c\x08builtins\x8c\x04eval\x93.");
-        assert!(e.reason.contains("`builtins.eval`"), "{e}");
-    }
-
-    #[test]
-    fn truncated_unknown_and_underflow() {
-        assert!(err(&[0x80, 2, b'X', 9, 0, 0, 0, b'a']).reason.contains("truncated"));
-        assert!(err(&[0x80, 2, b'N']).reason.contains("before STOP"));
-        assert!(err(&[0x80, 2, 0xff]).reason.contains("opcode 0xff"));
-        assert!(err(&[0x80, 2, b't', b'.']).reason.contains("without MARK"));
-        assert!(err(&[0x80, 2, b'(', b'.']).reason.contains("underflow"));
-        assert!(err(&[0x80, 2, b'h', 3]).reason.contains("memo key 3"));
-    }
-
-    #[test]
-    fn bombs_and_deep_nesting_are_errors() {
-        let mut bomb = vec![0x80, 4, b'N'];
-        for _ in 0..40 {
-            bomb.extend([b'2', 0x86]); // DUP, TUPLE2: doubles the size each time
-        }
-        bomb.push(b'.');
-        assert!(err(&bomb).reason.contains("pickle bomb"), "{}", err(&bomb));
-        let mut deep = vec![0x80, 4];
-        deep.extend([b']'; 300]);
-        deep.extend([b'a'; 299]);
-        deep.push(b'.');
-        assert!(err(&deep).reason.contains("deeper than 256"), "{}", err(&deep));
-        // 200 levels are fine.
-        let mut ok = vec![0x80, 4];
-        ok.extend([b']'; 200]);
-        ok.extend([b'a'; 199]);
-        ok.push(b'.');
-        assert!(loads(&ok, "t").is_ok());
-    }
-
-    #[test]
-    fn half_floats_and_fortran_order() {
-        assert_eq!(f16_to_f64(0x3c00), 1.0);
-        assert_eq!(f16_to_f64(0xc000), -2.0);
-        assert_eq!(f16_to_f64(0x0001), 2f64.powi(-24));
-        // column-major [[0,1,2],[3,4,5]] stored as 0,3,1,4,2,5
-        assert_eq!(fortran_to_c(&[0, 3, 1, 4, 2, 5], &[2, 3]), vec![0, 1, 2, 3, 4, 5]);
-    }
-
-    #[test]
-    fn writer_round_trips_through_reader() {
-        let v = Value::Dict(vec![
-            (
-                Value::Str("vertices".into()),
-                Value::NdArray(NdArray {
-                    shape: vec![2, 1, 3],
-                    dtype: DType::F4,
-                    data: ArrayData::Float(vec![0.5, -1.0, 2.0, 3.25, 1e-3f32 as f64, 7.0]),
-                }),
-            ),
-            (
-                Value::Str("faces".into()),
-                Value::NdArray(NdArray {
-                    shape: vec![1, 3],
-                    dtype: DType::I8,
-                    data: ArrayData::Int(vec![0, 1, -2]),
-                }),
-            ),
-            (Value::Str("caption".into()), Value::Str("a cat ".repeat(60))),
-            (
-                Value::Str("n".into()),
-                Value::List(vec![Value::Int(-70000), Value::Int(1 << 40), Value::Bool(false)]),
-            ),
-        ]);
-        let bytes = dumps(&v).unwrap();
-        assert_eq!(loads(&bytes, "t").unwrap(), v);
     }
 }
