@@ -1,12 +1,16 @@
 //! Import clip files (or procedural clips) into a dataset store: find sources, preprocess each window
 //! (weld, filter, normalise (D1)–(D3), FPS of SPEC §2.5), split by object (SPEC §2.2), write atomically.
 //!
-//! One bad file never aborts an import: it becomes a "rejected" row of the index with its reason. Only problems
-//! with the output folder or an existing store abort.
+//! One bad file never aborts an import: whatever goes wrong with it (an error, a panic in a reader, more than
+//! [`ImportOptions::time_limit`]) makes it a "rejected" row of the index with its reason, and the other files
+//! are imported. Only problems with the output folder or an existing store abort, and then no temporary file is
+//! left behind.
 
 use std::collections::HashSet;
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, mpsc};
+use std::time::Duration;
 
 use rayon::prelude::*;
 
@@ -14,12 +18,18 @@ use crate::clip::{Clip, object_uid};
 use crate::error::{DataError, Result};
 use crate::formats::{self, Format};
 use crate::fps::farthest_point_sampling;
+use crate::limits::{MAX_FRAMES, MAX_P};
 use crate::preprocess::{self, VertexFilter};
 use crate::synth::{self, SynthConfig};
 
 use super::{
-    CLIPS_FILE, DEFAULT_P, IndexRow, SPLIT_SEED, Split, Status, Store, StoreWriter, StoredClip, read_index, write_index,
+    CLIPS_FILE, DEFAULT_P, IndexRow, SPLIT_SEED, Split, Status, Store, StoreWriter, StoredClip, check_index,
+    read_index, write_index,
 };
+
+/// Default [`ImportOptions::time_limit`]: reading and preprocessing one file normally takes well under a second;
+/// ten minutes only stop a file that would never finish.
+pub const FILE_TIME_LIMIT: Duration = Duration::from_secs(600);
 
 /// Vertex welding before anything else (SPEC §2.1 sources with split seams).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -29,6 +39,31 @@ pub enum Weld {
     Off,
     /// Merge vertices closer than this distance (in file units).
     Eps(f32),
+}
+
+impl Weld {
+    /// `Eps` must be finite and ≥ 0 (`inf` would merge every vertex into one).
+    pub fn validate(self) -> Result<()> {
+        match self {
+            Weld::Eps(e) if !(e.is_finite() && e >= 0.0) => {
+                Err(DataError::new("weld", "epsilon", format!("{e} must be finite and ≥ 0")))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Weld `clip` ([`preprocess::weld`]); the welded clip must still be a valid clip (at least 3 vertices).
+    pub fn apply(self, clip: Clip) -> Result<Clip> {
+        self.validate()?;
+        let Weld::Eps(eps) = self else {
+            return Ok(clip);
+        };
+        let welded = preprocess::weld(&clip, eps);
+        welded
+            .validate()
+            .map_err(|e| DataError::new(&clip.source, format!("after welding at {eps}: {}", e.field), e.reason))?;
+        Ok(welded)
+    }
 }
 
 /// How files become store clips.
@@ -45,6 +80,10 @@ pub struct ImportOptions {
     /// FPS tokens P (SPEC §2.5: 512). A clip with fewer vertices gets its FPS order repeated cyclically
     /// (see [`farthest_point_sampling`]); the default filter rules that out.
     pub p: usize,
+    /// Most time one source may take to read and preprocess; a slower one is rejected and the import goes on.
+    /// Rust cannot stop a thread, so a reader past its limit keeps running in the background until it ends or the
+    /// process exits.
+    pub time_limit: Duration,
 }
 
 impl Default for ImportOptions {
@@ -55,8 +94,51 @@ impl Default for ImportOptions {
             stride: 1,
             weld: Weld::Off,
             p: DEFAULT_P,
+            time_limit: FILE_TIME_LIMIT,
         }
     }
+}
+
+impl ImportOptions {
+    /// Range checks: 2 ≤ frames ≤ [`MAX_FRAMES`], 1 ≤ stride ≤ [`MAX_FRAMES`], 1 ≤ p ≤ [`MAX_P`], filter
+    /// min ≤ max, a finite weld epsilon ≥ 0, a time limit above zero.
+    pub fn validate(&self) -> Result<()> {
+        let err = |field: &str, reason: String| Err(DataError::new("import options", field, reason));
+        if !(2..=MAX_FRAMES).contains(&self.frames) {
+            return err(
+                "frames",
+                format!("a window needs 2..={MAX_FRAMES} frames, got {}", self.frames),
+            );
+        }
+        if !(1..=MAX_FRAMES).contains(&self.stride) {
+            return err("stride", format!("must be in 1..={MAX_FRAMES}, got {}", self.stride));
+        }
+        check_p(self.p, "import options")?;
+        if self.filter.min > self.filter.max {
+            return err(
+                "vertex filter",
+                format!("min {} > max {}", self.filter.min, self.filter.max),
+            );
+        }
+        if self.time_limit.is_zero() {
+            return err("time limit", "must be above zero".into());
+        }
+        self.weld
+            .validate()
+            .map_err(|e| DataError::new("import options", "weld", e.reason))
+    }
+}
+
+/// 1 ≤ p ≤ [`MAX_P`].
+fn check_p(p: usize, what: &str) -> Result<()> {
+    if !(1..=MAX_P).contains(&p) {
+        return Err(DataError::new(
+            what,
+            "p",
+            format!("needs 1..={MAX_P} FPS tokens, got {p}"),
+        ));
+    }
+    Ok(())
 }
 
 /// Progress callback: `(sources done, sources total)`, called after each parallel chunk.
@@ -116,6 +198,7 @@ enum Outcome {
 }
 
 /// One unit of work: a file or folder found under the sources, or one procedural clip.
+#[derive(Clone)]
 enum Job {
     File {
         source: String,
@@ -166,12 +249,23 @@ pub fn import_with_progress(
     opts: &ImportOptions,
     progress: Progress,
 ) -> Result<ImportReport> {
-    check_options(opts)?;
+    opts.validate()?;
     let existing = prepare_out(out, opts.frames, opts.p)?;
     let jobs = discover(sources, out)?;
-    run_jobs(out, existing, &jobs, opts.frames, opts.p, progress, |job| {
-        process_file(job, opts)
-    })
+    let owned = opts.clone();
+    let limits = Limits {
+        frames: opts.frames,
+        p: opts.p,
+        time: opts.time_limit,
+    };
+    run_jobs(
+        out,
+        existing,
+        &jobs,
+        limits,
+        progress,
+        Arc::new(move |job: &Job| process_file(job, &owned)),
+    )
 }
 
 /// Write `cfg.clips` procedural clips into the store `out` with P = [`DEFAULT_P`].
@@ -196,10 +290,8 @@ pub fn write_synth_windows(
     stride: usize,
     progress: Progress,
 ) -> Result<ImportReport> {
-    if p == 0 {
-        return Err(DataError::new(out, "p", "needs at least 1 FPS token"));
-    }
-    if window < 2 || window > cfg.frames || stride == 0 {
+    check_p(p, "synth options")?;
+    if window < 2 || window > cfg.frames || stride == 0 || stride > MAX_FRAMES {
         return Err(DataError::new(
             out,
             "window",
@@ -217,44 +309,23 @@ pub fn write_synth_windows(
             index,
         })
         .collect();
-    run_jobs(out, existing, &jobs, window, p, progress, |job| match job {
-        Job::Synth { source, index } => match synth::generate_one(cfg, *index) {
+    let cfg = cfg.clone();
+    let limits = Limits {
+        frames: window,
+        p,
+        time: FILE_TIME_LIMIT,
+    };
+    let process = move |job: &Job| match job {
+        Job::Synth { source, index } => match synth::generate_one(&cfg, *index) {
             Ok(mut clip) => {
                 clip.source = source.clone();
-                Outcome::Clips(preprocess_windows(&clip, window, stride, p))
+                preprocess_windows(&clip, window, stride, p).unwrap_or_else(Outcome::Rejected)
             }
             Err(e) => Outcome::Rejected(reason(&e, source)),
         },
         Job::File { .. } => Outcome::Rejected("not a procedural clip".into()),
-    })
-}
-
-fn check_options(opts: &ImportOptions) -> Result<()> {
-    let err = |field: &str, reason: String| Err(DataError::new("import options", field, reason));
-    if opts.frames < 2 {
-        return err(
-            "frames",
-            format!("a window needs at least 2 frames, got {}", opts.frames),
-        );
-    }
-    if opts.stride == 0 {
-        return err("stride", "must be at least 1".into());
-    }
-    if opts.p == 0 {
-        return err("p", "needs at least 1 FPS token".into());
-    }
-    if opts.filter.min > opts.filter.max {
-        return err(
-            "vertex filter",
-            format!("min {} > max {}", opts.filter.min, opts.filter.max),
-        );
-    }
-    if let Weld::Eps(e) = opts.weld
-        && !(e.is_finite() && e >= 0.0)
-    {
-        return err("weld", format!("epsilon {e} must be finite and ≥ 0"));
-    }
-    Ok(())
+    };
+    run_jobs(out, existing, &jobs, limits, progress, Arc::new(process))
 }
 
 /// Create `out`, or open the store already in it (checking that T and P agree); refuse a non-empty folder that
@@ -274,17 +345,7 @@ fn prepare_out(out: &Path, frames: usize, p: usize) -> Result<Option<(Store, Vec
             ));
         }
         let rows = read_index(out)?;
-        let ok = rows.iter().filter(|r| r.status == Status::Ok).count();
-        if ok != store.len() {
-            return Err(DataError::new(
-                out,
-                "index.parquet",
-                format!(
-                    "lists {ok} stored clips but clips.bin holds {}: the store is inconsistent",
-                    store.len()
-                ),
-            ));
-        }
+        check_index(&store, &rows)?;
         return Ok(Some((store, rows)));
     }
     if out.exists() {
@@ -391,9 +452,10 @@ fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
         Err(e) => return Outcome::Rejected(reason(&e, source)),
     };
     clip.source = source.clone();
-    if let Weld::Eps(eps) = opts.weld {
-        clip = preprocess::weld(&clip, eps);
-    }
+    clip = match opts.weld.apply(clip) {
+        Ok(c) => c,
+        Err(e) => return Outcome::Rejected(reason(&e, source)),
+    };
     if let Err(e) = opts.filter.check(&clip) {
         return Outcome::Rejected(reason(&e, source));
     }
@@ -403,36 +465,47 @@ fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
             clip.id, clip.frames, opts.frames
         ));
     }
-    Outcome::Clips(preprocess_windows(&clip, opts.frames, opts.stride, opts.p))
+    preprocess_windows(&clip, opts.frames, opts.stride, opts.p).unwrap_or_else(Outcome::Rejected)
 }
 
 /// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 (SPEC §2.5)
-/// and assign the split of the clip's object (SPEC §2.2). Returns each window with its object uid.
-fn preprocess_windows(clip: &Clip, frames: usize, stride: usize, p: usize) -> Vec<(StoredClip, String)> {
+/// and assign the split of the clip's object (SPEC §2.2). Returns each window with its object uid, or the reject
+/// reason when a window does not normalise to finite numbers (finite coordinates near ±3.4e38 overflow f32).
+fn preprocess_windows(clip: &Clip, frames: usize, stride: usize, p: usize) -> std::result::Result<Outcome, String> {
     // The uid of the whole clip, so every window of one animation shares its split.
     let object = object_uid(&clip.id).to_owned();
     let split = Split::of_object(&object, SPLIT_SEED);
-    preprocess::windows(clip, frames, stride)
-        .iter()
-        .map(|w| {
-            let (clip, normalization) = preprocess::normalize(w);
-            let fps = farthest_point_sampling(clip.frame(0), p);
-            (
-                StoredClip {
-                    clip,
-                    fps,
-                    normalization,
-                    split,
-                },
-                object.clone(),
-            )
-        })
-        .collect()
+    let mut out = Vec::new();
+    for (k, w) in preprocess::windows(clip, frames, stride).iter().enumerate() {
+        let (clip, normalization) = preprocess::normalize(w);
+        let finite = normalization.center.iter().all(|c| c.is_finite())
+            && normalization.scale.is_finite()
+            && normalization.scale > 0.0
+            && clip.vertices.iter().flatten().all(|x| x.is_finite());
+        if !finite {
+            return Err(format!(
+                "vertices: normalising window {k} by its frame 0 (centre {:?}, scale {}) gives non-finite \
+                 coordinates: values this large overflow f32; rescale the file",
+                normalization.center, normalization.scale
+            ));
+        }
+        let fps = farthest_point_sampling(clip.frame(0), p);
+        out.push((
+            StoredClip {
+                clip,
+                fps,
+                normalization,
+                split,
+            },
+            object.clone(),
+        ));
+    }
+    Ok(Outcome::Clips(out))
 }
 
 /// The index row of a stored clip; called after [`StoreWriter::append`] accepted it, which checked that the
 /// counts fit in u32.
-fn ok_row(c: &StoredClip, format: &str, object: String) -> IndexRow {
+fn ok_row(c: &StoredClip, format: &str, object: String, checksum: u64) -> IndexRow {
     let to_u32 = |v: usize| Some(v as u32);
     IndexRow {
         id: c.clip.id.clone(),
@@ -446,6 +519,7 @@ fn ok_row(c: &StoredClip, format: &str, object: String) -> IndexRow {
         status: Status::Ok,
         reason: String::new(),
         object,
+        checksum: Some(checksum),
     }
 }
 
@@ -466,31 +540,69 @@ fn rejected_row(job: &Job, reason: String) -> IndexRow {
         split: None,
         status: Status::Rejected,
         reason,
+        checksum: None,
     }
 }
 
 /// Sources processed in parallel per chunk, written in order.
 const CHUNK: usize = 64;
 
+/// The per-source work of an import or a synth run.
+type Process = Arc<dyn Fn(&Job) -> Outcome + Send + Sync>;
+
+/// The store shape of a run and its per-source time limit.
+#[derive(Debug, Clone, Copy)]
+struct Limits {
+    frames: usize,
+    p: usize,
+    time: Duration,
+}
+
+/// Run `process` on `job` in its own thread, so that neither a panic nor a source slower than `limit` stops the
+/// import: both become a rejection. A thread past its limit is left to finish on its own.
+fn run_one(job: &Job, process: &Process, limit: Duration) -> Outcome {
+    let (tx, rx) = mpsc::channel();
+    let (job, process) = (job.clone(), Arc::clone(process));
+    let spawned = std::thread::Builder::new().name("any4d-import".into()).spawn(move || {
+        let source = PathBuf::from(job.source());
+        let outcome = formats::guard(&source, || Ok(process(&job)))
+            .unwrap_or_else(|e| Outcome::Rejected(format!("{}: {}", e.field, e.reason)));
+        // The receiver is gone when the time limit passed; nothing is waiting for this result then.
+        let _ = tx.send(outcome);
+    });
+    if let Err(e) = spawned {
+        return Outcome::Rejected(format!("import: could not start a thread for this source: {e}"));
+    }
+    match rx.recv_timeout(limit) {
+        Ok(outcome) => outcome,
+        Err(mpsc::RecvTimeoutError::Timeout) => Outcome::Rejected(format!(
+            "time limit: reading and preprocessing took more than {limit:?}; skipped"
+        )),
+        Err(mpsc::RecvTimeoutError::Disconnected) => {
+            Outcome::Rejected("import: the thread for this source ended without a result".into())
+        }
+    }
+}
+
 /// Rewrite the store in `out` from the kept part of `existing` plus the outcome of `jobs`.
 fn run_jobs(
     out: &Path,
     existing: Option<(Store, Vec<IndexRow>)>,
     jobs: &[Job],
-    frames: usize,
-    p: usize,
+    limits: Limits,
     progress: Progress,
-    process: impl Fn(&Job) -> Outcome + Sync,
+    process: Process,
 ) -> Result<ImportReport> {
     let replaced: HashSet<&str> = jobs.iter().map(Job::source).collect();
-    let mut writer = StoreWriter::create(&out.join(CLIPS_FILE), frames, p)?;
+    // Dropped without `finish` (any error below), the writer removes its temporary file.
+    let mut writer = StoreWriter::create(&out.join(CLIPS_FILE), limits.frames, limits.p)?;
     let mut ok_rows = Vec::new();
     let mut rejected_rows = Vec::new();
     let mut kept = 0;
     if let Some((store, rows)) = existing {
         let (old_ok, old_rejected): (Vec<IndexRow>, Vec<IndexRow>) =
             rows.into_iter().partition(|r| r.status == Status::Ok);
-        for (i, row) in old_ok.into_iter().enumerate() {
+        for (i, mut row) in old_ok.into_iter().enumerate() {
             if replaced.contains(row.source.as_str()) {
                 continue;
             }
@@ -506,7 +618,16 @@ fn run_jobs(
                     ),
                 ));
             }
-            writer.append_encoded(&raw, store.split(i)?)?;
+            let sum = writer.append_encoded(&raw, store.split(i)?)?;
+            if row.checksum.is_some_and(|old| old != sum) {
+                return Err(DataError::new(
+                    out.join(CLIPS_FILE),
+                    format!("clip {i} ({})", row.id),
+                    "fails its checksum: the existing store is damaged; import into a new folder",
+                ));
+            }
+            // A store written before checksums gets them for its kept clips.
+            row.checksum = Some(sum);
             ok_rows.push(row);
             kept += 1;
         }
@@ -519,13 +640,16 @@ fn run_jobs(
     let mut rejected = Vec::new();
     let mut added = 0;
     for (c, chunk) in jobs.chunks(CHUNK).enumerate() {
-        let outcomes: Vec<Outcome> = chunk.par_iter().map(&process).collect();
+        let outcomes: Vec<Outcome> = chunk
+            .par_iter()
+            .map(|job| run_one(job, &process, limits.time))
+            .collect();
         for (job, outcome) in chunk.iter().zip(outcomes) {
             match outcome {
                 Outcome::Clips(clips) => {
                     for (clip, object) in clips {
-                        writer.append(&clip)?;
-                        ok_rows.push(ok_row(&clip, job.format_name(), object));
+                        let sum = writer.append(&clip)?;
+                        ok_rows.push(ok_row(&clip, job.format_name(), object, sum));
                         added += 1;
                     }
                 }
@@ -563,4 +687,56 @@ fn run_jobs(
 fn record_id(raw: &[u8]) -> Option<&str> {
     let len = u32::from_le_bytes(raw.get(..4)?.try_into().ok()?) as usize;
     std::str::from_utf8(raw.get(4..4 + len)?).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn job(name: &str) -> Job {
+        Job::File {
+            source: format!("/src/{name}"),
+            path: PathBuf::from(format!("/src/{name}")),
+            format: Ok(Format::Bin),
+        }
+    }
+
+    fn reason(outcome: Outcome) -> String {
+        match outcome {
+            Outcome::Rejected(r) => r,
+            Outcome::Clips(c) => panic!("{} clips, expected a rejection", c.len()),
+        }
+    }
+
+    #[test]
+    fn a_panicking_or_slow_source_is_rejected_and_the_rest_goes_on() {
+        let process: Process = Arc::new(|job: &Job| match job.source() {
+            "/src/panics.bin" => panic!("reader bug"),
+            "/src/hangs.bin" => {
+                std::thread::sleep(Duration::from_secs(30));
+                Outcome::Rejected("finished".into())
+            }
+            _ => Outcome::Clips(Vec::new()),
+        });
+        // Generous limits where the work is instant (a panic's backtrace can take a while on a busy machine).
+        let generous = Duration::from_secs(120);
+        let r = reason(run_one(&job("panics.bin"), &process, generous));
+        assert!(r.starts_with("panic: ") && r.contains("reader bug"), "{r}");
+        let r = reason(run_one(&job("hangs.bin"), &process, Duration::from_millis(200)));
+        assert!(r.starts_with("time limit:"), "{r}");
+        assert!(matches!(
+            run_one(&job("fine.bin"), &process, generous),
+            Outcome::Clips(_)
+        ));
+    }
+
+    #[test]
+    fn a_dropped_writer_removes_its_temporary_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let dest = dir.path().join(CLIPS_FILE);
+        let writer = StoreWriter::create(&dest, 16, 8).unwrap();
+        assert!(dest.with_extension("bin.tmp").exists());
+        drop(writer);
+        assert!(std::fs::read_dir(dir.path()).unwrap().next().is_none());
+    }
 }
