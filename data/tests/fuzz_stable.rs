@@ -7,7 +7,7 @@
 //!
 //! ```sh
 //! ANY4D_FUZZ_SECS=600 ANY4D_FUZZ_TARGETS=pickle,gltf,glb,obj,store \
-//!     nice -n 15 cargo test --release -p any4d-data --test fuzz_stable -- --ignored --nocapture
+//!     nice -n 15 cargo test -p any4d-data --test fuzz_stable -- --ignored --nocapture
 //! ```
 //!
 //! It prints the inputs run, how many read `Ok`, and the slowest input per reader. A failing input is written to

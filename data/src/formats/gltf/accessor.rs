@@ -289,3 +289,80 @@ pub(super) fn read_u32(
         .map(|x| x as u32)
         .collect())
 }
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+
+    fn root(accessors: &str) -> Root {
+        let json = format!(
+            r#"{{"asset": {{"version": "2.0"}}, "buffers": [{{"byteLength": 24}}],
+               "bufferViews": [{{"buffer": 0, "byteLength": 12}}, {{"buffer": 0, "byteOffset": 12, "byteLength": 2}},
+                               {{"buffer": 0, "byteOffset": 16, "byteLength": 8}}],
+               "accessors": [{accessors}]}}"#
+        );
+        gltf::json::deserialize::from_str(&json).unwrap()
+    }
+
+    fn buffer() -> Vec<Vec<u8>> {
+        let mut b: Vec<u8> = [1.0f32, 2.0, 3.0].iter().flat_map(|x| x.to_le_bytes()).collect();
+        b.extend([2, 0, 0, 0]); // sparse indices (u8): 2, 0
+        b.extend(9.0f32.to_le_bytes());
+        b.extend(7.0f32.to_le_bytes());
+        vec![b]
+    }
+
+    fn read1(root: &Root, ty: Type, allowed: &[Form]) -> Result<Vec<f64>> {
+        read(
+            Ctx {
+                path: Path::new("t.gltf"),
+            },
+            root,
+            &buffer(),
+            0,
+            "x",
+            ty,
+            allowed,
+        )
+    }
+
+    #[test]
+    fn sparse_values_replace_the_base() {
+        let sparse = r#""sparse": {"count": 2, "indices": {"bufferView": 1, "componentType": 5121},
+                                  "values": {"bufferView": 2}}"#;
+        let r = root(&format!(
+            r#"{{"bufferView": 0, "componentType": 5126, "count": 3, "type": "SCALAR", {sparse}}}"#
+        ));
+        // Indices 2, 0 are not increasing: refused.
+        let e = read1(&r, Type::Scalar, FLOAT).unwrap_err();
+        assert!(e.reason.contains("must increase"), "{e}");
+        // Without a buffer view the base is zeros; one sparse value at index 2.
+        let r = root(&format!(
+            r#"{{"componentType": 5126, "count": 3, "type": "SCALAR", {}}}"#,
+            sparse.replace(r#""count": 2"#, r#""count": 1"#)
+        ));
+        assert_eq!(read1(&r, Type::Scalar, FLOAT).unwrap(), vec![0.0, 0.0, 9.0]);
+    }
+
+    #[test]
+    fn normalized_integers_map_to_unit_range_and_types_must_match() {
+        // The first bytes of the buffer as normalised u8 (0x00 0x00 0x80 0x3f = 1.0f32) and as i8.
+        let r = root(r#"{"bufferView": 0, "componentType": 5121, "normalized": true, "count": 4, "type": "SCALAR"}"#);
+        assert_eq!(
+            read1(&r, Type::Scalar, WEIGHTS).unwrap(),
+            vec![0.0, 0.0, 128.0 / 255.0, 63.0 / 255.0]
+        );
+        let r = root(r#"{"bufferView": 0, "componentType": 5120, "normalized": true, "count": 4, "type": "SCALAR"}"#);
+        assert_eq!(read1(&r, Type::Scalar, FLOAT_OR_NORMALIZED).unwrap()[2], -1.0);
+        let e = read1(&r, Type::Scalar, WEIGHTS).unwrap_err();
+        assert!(e.reason.contains("is SCALAR of normalized BYTE"), "{e}");
+        let e = read1(&r, Type::Vec3, FLOAT_OR_NORMALIZED).unwrap_err();
+        assert!(e.reason.contains("expected VEC3"), "{e}");
+        // 4 elements of 4 bytes do not fit a 12-byte view.
+        let r = root(r#"{"bufferView": 0, "componentType": 5126, "count": 4, "type": "SCALAR"}"#);
+        let e = read1(&r, Type::Scalar, FLOAT).unwrap_err();
+        assert!(e.reason.contains("which has 12 bytes"), "{e}");
+    }
+}
