@@ -468,9 +468,10 @@ fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
     preprocess_windows(&clip, opts.frames, opts.stride, opts.p).unwrap_or_else(Outcome::Rejected)
 }
 
-/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 (SPEC §2.5)
-/// and assign the split of the clip's object (SPEC §2.2). Returns each window with its object uid, or the reject
-/// reason when a window does not normalise to finite numbers (finite coordinates near ±3.4e38 overflow f32).
+/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 and assign
+/// the split of the clip's object (module doc of [`crate::store`]). Returns each window with its object uid, or
+/// the reject reason when a window does not normalise to finite numbers (finite coordinates near ±3.4e38
+/// overflow f32).
 fn preprocess_windows(clip: &Clip, frames: usize, stride: usize, p: usize) -> std::result::Result<Outcome, String> {
     // The uid of the whole clip, so every window of one animation shares its split.
     let object = object_uid(&clip.id).to_owned();

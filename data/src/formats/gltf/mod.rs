@@ -1,4 +1,4 @@
-//! glTF 2.0 / GLB clips (SPEC §2.1): animation baked to per-frame world-space vertex positions, and a writer that
+//! glTF 2.0 / GLB clips: animation baked to per-frame world-space vertex positions, and a writer that
 //! stores a clip as frame-0 mesh + one morph target per frame.
 //!
 //! Reading takes the first animation and the first triangle primitive of the chosen mesh, samples every channel

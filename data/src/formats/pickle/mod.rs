@@ -1,4 +1,4 @@
-//! Restricted unpickler and minimal pickler for DyMesh `.bin` clips (SPEC §2.1): pickle bytes are data, never code.
+//! Restricted unpickler and minimal pickler for DyMesh `.bin` clips: pickle bytes are data, never code.
 //!
 //! [`loads`] reads protocols 2–5 into a [`Value`] tree. The only globals accepted are the ones numpy itself emits
 //! for plain arrays (`_reconstruct`, `ndarray`, `dtype`, protocol 5's `_frombuffer`) and
