@@ -9,7 +9,7 @@
 use std::collections::HashSet;
 use std::fmt;
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, mpsc};
+use std::sync::Arc;
 use std::time::Duration;
 
 use rayon::prelude::*;
@@ -21,6 +21,8 @@ use crate::fps::farthest_point_sampling;
 use crate::limits::{MAX_FRAMES, MAX_P};
 use crate::preprocess::{self, VertexFilter};
 use crate::synth::{self, SynthConfig};
+
+use super::jobs::{Job, Outcome, Process, run_one};
 
 use super::{
     CLIPS_FILE, DEFAULT_P, IndexRow, SPLIT_SEED, Split, Status, Store, StoreWriter, StoredClip, check_index,
@@ -188,51 +190,6 @@ impl fmt::Display for ImportReport {
             writeln!(f, "  rejected {}: {}", r.source, r.reason)?;
         }
         Ok(())
-    }
-}
-
-/// What one source turned into.
-enum Outcome {
-    Clips(Vec<(StoredClip, String)>),
-    Rejected(String),
-}
-
-/// One unit of work: a file or folder found under the sources, or one procedural clip.
-#[derive(Clone)]
-enum Job {
-    File {
-        source: String,
-        path: PathBuf,
-        format: Result<Format>,
-    },
-    Synth {
-        source: String,
-        index: usize,
-    },
-}
-
-impl Job {
-    fn source(&self) -> &str {
-        match self {
-            Job::File { source, .. } | Job::Synth { source, .. } => source,
-        }
-    }
-
-    fn format_name(&self) -> &'static str {
-        match self {
-            Job::File { format: Ok(f), .. } => format_name(f),
-            Job::File { format: Err(_), .. } => "",
-            Job::Synth { .. } => "synth",
-        }
-    }
-}
-
-fn format_name(f: &Format) -> &'static str {
-    match f {
-        Format::Bin => "bin",
-        Format::ObjSeq => "obj-seq",
-        Format::Gltf => "gltf",
-        Format::Glb => "glb",
     }
 }
 
@@ -548,41 +505,12 @@ fn rejected_row(job: &Job, reason: String) -> IndexRow {
 /// Sources processed in parallel per chunk, written in order.
 const CHUNK: usize = 64;
 
-/// The per-source work of an import or a synth run.
-type Process = Arc<dyn Fn(&Job) -> Outcome + Send + Sync>;
-
 /// The store shape of a run and its per-source time limit.
 #[derive(Debug, Clone, Copy)]
 struct Limits {
     frames: usize,
     p: usize,
     time: Duration,
-}
-
-/// Run `process` on `job` in its own thread, so that neither a panic nor a source slower than `limit` stops the
-/// import: both become a rejection. A thread past its limit is left to finish on its own.
-fn run_one(job: &Job, process: &Process, limit: Duration) -> Outcome {
-    let (tx, rx) = mpsc::channel();
-    let (job, process) = (job.clone(), Arc::clone(process));
-    let spawned = std::thread::Builder::new().name("any4d-import".into()).spawn(move || {
-        let source = PathBuf::from(job.source());
-        let outcome = formats::guard(&source, || Ok(process(&job)))
-            .unwrap_or_else(|e| Outcome::Rejected(format!("{}: {}", e.field, e.reason)));
-        // The receiver is gone when the time limit passed; nothing is waiting for this result then.
-        let _ = tx.send(outcome);
-    });
-    if let Err(e) = spawned {
-        return Outcome::Rejected(format!("import: could not start a thread for this source: {e}"));
-    }
-    match rx.recv_timeout(limit) {
-        Ok(outcome) => outcome,
-        Err(mpsc::RecvTimeoutError::Timeout) => Outcome::Rejected(format!(
-            "time limit: reading and preprocessing took more than {limit:?}; skipped"
-        )),
-        Err(mpsc::RecvTimeoutError::Disconnected) => {
-            Outcome::Rejected("import: the thread for this source ended without a result".into())
-        }
-    }
 }
 
 /// Rewrite the store in `out` from the kept part of `existing` plus the outcome of `jobs`.
@@ -688,56 +616,4 @@ fn run_jobs(
 fn record_id(raw: &[u8]) -> Option<&str> {
     let len = u32::from_le_bytes(raw.get(..4)?.try_into().ok()?) as usize;
     std::str::from_utf8(raw.get(4..4 + len)?).ok()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn job(name: &str) -> Job {
-        Job::File {
-            source: format!("/src/{name}"),
-            path: PathBuf::from(format!("/src/{name}")),
-            format: Ok(Format::Bin),
-        }
-    }
-
-    fn reason(outcome: Outcome) -> String {
-        match outcome {
-            Outcome::Rejected(r) => r,
-            Outcome::Clips(c) => panic!("{} clips, expected a rejection", c.len()),
-        }
-    }
-
-    #[test]
-    fn a_panicking_or_slow_source_is_rejected_and_the_rest_goes_on() {
-        let process: Process = Arc::new(|job: &Job| match job.source() {
-            "/src/panics.bin" => panic!("reader bug"),
-            "/src/hangs.bin" => {
-                std::thread::sleep(Duration::from_secs(30));
-                Outcome::Rejected("finished".into())
-            }
-            _ => Outcome::Clips(Vec::new()),
-        });
-        // Generous limits where the work is instant (a panic's backtrace can take a while on a busy machine).
-        let generous = Duration::from_secs(120);
-        let r = reason(run_one(&job("panics.bin"), &process, generous));
-        assert!(r.starts_with("panic: ") && r.contains("reader bug"), "{r}");
-        let r = reason(run_one(&job("hangs.bin"), &process, Duration::from_millis(200)));
-        assert!(r.starts_with("time limit:"), "{r}");
-        assert!(matches!(
-            run_one(&job("fine.bin"), &process, generous),
-            Outcome::Clips(_)
-        ));
-    }
-
-    #[test]
-    fn a_dropped_writer_removes_its_temporary_file() {
-        let dir = tempfile::tempdir().unwrap();
-        let dest = dir.path().join(CLIPS_FILE);
-        let writer = StoreWriter::create(&dest, 16, 8).unwrap();
-        assert!(dest.with_extension("bin.tmp").exists());
-        drop(writer);
-        assert!(std::fs::read_dir(dir.path()).unwrap().next().is_none());
-    }
 }

@@ -47,6 +47,7 @@
 mod format;
 mod import;
 mod index;
+mod jobs;
 mod verify;
 
 use std::fs::File;

@@ -17,7 +17,9 @@
 //! (copies included) and [`MAX_SHARED_BYTES`] the array, bytes and text payload that sharing duplicates, so a small
 //! file cannot ask for gigabytes (pickle bombs); [`MAX_DEPTH`] bounds nesting. [`dumps`] writes protocol 4.
 
+mod numpy;
 mod read;
+mod result;
 mod write;
 
 pub use read::loads;

@@ -4,16 +4,17 @@
 //! one tree node each; every node created or copied counts against [`MAX_VALUES`], and payloads still shared when
 //! the result is built are copied out against [`MAX_SHARED_BYTES`].
 
-use std::collections::hash_map::Entry;
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
 
-use super::{ArrayData, ByteOrder, DType, MAX_DEPTH, MAX_SHARED_BYTES, MAX_VALUES, NdArray, Value};
+use super::numpy::{build, call};
+use super::result::value;
+use super::{ByteOrder, DType, MAX_DEPTH, MAX_SHARED_BYTES, MAX_VALUES, NdArray, Value};
 use crate::error::{DataError, Result};
 
 /// The globals this unpickler knows; each is interpreted as data.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Global {
+pub(super) enum Global {
     Reconstruct,
     NdArrayType,
     DTypeType,
@@ -33,7 +34,7 @@ const ALLOWED_GLOBALS: &[(&str, &str, Global)] = &[
 
 /// A stack item: a value under construction, or one of numpy's intermediate objects. Payloads are shared.
 #[derive(Debug, Clone)]
-enum Item {
+pub(super) enum Item {
     None,
     Bool(bool),
     Int(i64),
@@ -52,7 +53,7 @@ enum Item {
 }
 
 impl Item {
-    fn kind(&self) -> &'static str {
+    pub(super) fn kind(&self) -> &'static str {
         match self {
             Item::None => "None",
             Item::Bool(_) => "bool",
@@ -127,7 +128,7 @@ struct Machine<'a> {
     values: u64,
 }
 
-type Step<T> = std::result::Result<T, String>;
+pub(super) type Step<T> = std::result::Result<T, String>;
 
 const BOMB: &str = "(a pickle bomb?)";
 
@@ -158,47 +159,6 @@ pub fn loads(bytes: &[u8], source: &str) -> Result<Value> {
         }
     })();
     result.map_err(|reason| DataError::new(source, "pickle", format!("byte {op_pos}: {reason}")))
-}
-
-/// A dict key as Python compares it: `1 == 1.0 == True`; `None` for keys equal to nothing else (NaN).
-#[derive(Debug, PartialEq, Eq, Hash)]
-enum Key {
-    None,
-    Int(i64),
-    Float(u64),
-    Str(String),
-    Bytes(Vec<u8>),
-    Tuple(Vec<Key>),
-}
-
-fn key_of(v: &Value) -> Step<Option<Key>> {
-    Ok(Some(match v {
-        Value::None => Key::None,
-        Value::Bool(b) => Key::Int(i64::from(*b)),
-        Value::Int(i) => Key::Int(*i),
-        Value::Float(f) if f.is_nan() => return Ok(None),
-        // Integral floats in i64 range equal the int (-0.0 == 0); 2^63 itself is out of range.
-        Value::Float(f) if f.fract() == 0.0 && *f >= -(2f64.powi(63)) && *f < 2f64.powi(63) => Key::Int(*f as i64),
-        Value::Float(f) => Key::Float(f.to_bits()),
-        Value::Str(s) => Key::Str(s.clone()),
-        Value::Bytes(b) => Key::Bytes(b.clone()),
-        Value::Tuple(items) => {
-            let mut keys = Vec::with_capacity(items.len());
-            for item in items {
-                match key_of(item)? {
-                    Some(k) => keys.push(k),
-                    None => return Ok(None),
-                }
-            }
-            Key::Tuple(keys)
-        }
-        other => {
-            return Err(format!(
-                "dict key is a {} (unhashable: Python refuses this pickle too)",
-                other.kind()
-            ));
-        }
-    }))
 }
 
 impl Machine<'_> {
@@ -648,45 +608,6 @@ impl Machine<'_> {
     }
 }
 
-/// The finished item as a [`Value`]; dict keys as Python's dict keeps them (last value wins).
-fn value(item: Item) -> Step<Value> {
-    Ok(match item {
-        Item::None => Value::None,
-        Item::Bool(b) => Value::Bool(b),
-        Item::Int(i) => Value::Int(i),
-        Item::Float(f) => Value::Float(f),
-        Item::Str(s) => Value::Str(unshare(s)),
-        Item::Bytes(b) => Value::Bytes(unshare(b)),
-        Item::List(v) => Value::List(v.into_iter().map(value).collect::<Step<_>>()?),
-        Item::Tuple(v) => Value::Tuple(v.into_iter().map(value).collect::<Step<_>>()?),
-        Item::Dict(kv) => {
-            let mut out: Vec<(Value, Value)> = Vec::with_capacity(kv.len());
-            let mut seen: HashMap<Key, usize> = HashMap::with_capacity(kv.len());
-            for (k, v) in kv {
-                let (k, v) = (value(k)?, value(v)?);
-                match key_of(&k)? {
-                    Some(key) => match seen.entry(key) {
-                        Entry::Occupied(e) => out[*e.get()].1 = v,
-                        Entry::Vacant(e) => {
-                            e.insert(out.len());
-                            out.push((k, v));
-                        }
-                    },
-                    None => out.push((k, v)),
-                }
-            }
-            Value::Dict(out)
-        }
-        Item::Array(a) => Value::NdArray(unshare(a)),
-        other => return Err(format!("a {} object is left in the data", other.kind())),
-    })
-}
-
-/// A payload for the result: moved out at its last reference, else copied (paid for by [`Machine::finish`]).
-fn unshare<T: Clone>(rc: Rc<T>) -> T {
-    Rc::try_unwrap(rc).unwrap_or_else(|rc| (*rc).clone())
-}
-
 fn pairs(items: Vec<Item>, what: &str) -> Step<Vec<(Item, Item)>> {
     if !items.len().is_multiple_of(2) {
         return Err(format!("{what} with an odd number ({}) of items", items.len()));
@@ -697,184 +618,4 @@ fn pairs(items: Vec<Item>, what: &str) -> Step<Vec<(Item, Item)>> {
         out.push((k, v));
     }
     Ok(out)
-}
-
-fn shape_of(item: &Item) -> Step<Vec<usize>> {
-    let Item::Tuple(dims) = item else {
-        return Err(format!("array shape is a {}, not a tuple", item.kind()));
-    };
-    dims.iter()
-        .map(|d| match d {
-            Item::Int(n) if *n >= 0 => Ok(*n as usize),
-            other => Err(format!("array dimension {other:?} is not a non-negative int")),
-        })
-        .collect()
-}
-
-/// Interpret a call of an allowed global as data. Nothing is executed.
-fn call(g: Global, args: Vec<Item>) -> Step<Item> {
-    match (g, args.as_slice()) {
-        (Global::Reconstruct, [Item::Global(Global::NdArrayType), _, _]) => Ok(Item::EmptyArray),
-        (Global::DTypeType, [Item::Str(descr), ..]) => {
-            let (dtype, order) = DType::parse(descr).ok_or(format!("unsupported dtype `{descr}`"))?;
-            Ok(Item::DTypeObj(dtype, order))
-        }
-        (Global::CodecsEncode, [Item::Str(s), Item::Str(enc)]) => {
-            if !matches!(enc.to_ascii_lowercase().as_str(), "latin1" | "latin-1" | "iso-8859-1") {
-                return Err(format!("_codecs.encode with encoding `{enc}`; only latin1 is data"));
-            }
-            s.chars()
-                .map(|c| u8::try_from(c as u32).map_err(|_| format!("_codecs.encode: {c:?} is not latin1")))
-                .collect::<Step<Vec<u8>>>()
-                .map(|b| Item::Bytes(Rc::new(b)))
-        }
-        (Global::FromBuffer, [Item::Bytes(buf), Item::DTypeObj(dtype, order), shape, Item::Str(o)]) => {
-            let fortran = match o.as_str() {
-                "C" => false,
-                "F" => true,
-                _ => return Err(format!("_frombuffer order `{o}`")),
-            };
-            decode_array(
-                shape_of(shape)?,
-                *dtype,
-                order.unwrap_or(ByteOrder::native()),
-                fortran,
-                buf,
-            )
-            .map(|a| Item::Array(Rc::new(a)))
-        }
-        (g, args) => Err(format!(
-            "unsupported call of {g:?} with arguments ({})",
-            args.iter().map(Item::kind).collect::<Vec<_>>().join(", ")
-        )),
-    }
-}
-
-/// BUILD: numpy `__setstate__` of an array or a dtype.
-fn build(obj: Item, state: Item) -> Step<Item> {
-    let Item::Tuple(state) = state else {
-        return Err(format!("BUILD state is a {}, not a tuple", state.kind()));
-    };
-    match obj {
-        Item::EmptyArray => {
-            // (version, shape, dtype, is_fortran, raw data); numpy ≤ 1.x may omit the version.
-            let s = if state.len() == 5 { &state[1..] } else { &state[..] };
-            let [shape, Item::DTypeObj(dtype, order), Item::Bool(fortran), raw] = s else {
-                return Err(format!(
-                    "ndarray state of {} items is not (version, shape, dtype, fortran, data)",
-                    state.len()
-                ));
-            };
-            let Item::Bytes(raw) = raw else {
-                return Err(format!(
-                    "ndarray data is a {} (object arrays are not supported)",
-                    raw.kind()
-                ));
-            };
-            decode_array(
-                shape_of(shape)?,
-                *dtype,
-                order.unwrap_or(ByteOrder::native()),
-                *fortran,
-                raw,
-            )
-            .map(|a| Item::Array(Rc::new(a)))
-        }
-        Item::DTypeObj(dtype, _) => {
-            let order = match state.get(1) {
-                Some(Item::Str(s)) if s.as_str() == "<" => Some(ByteOrder::Little),
-                Some(Item::Str(s)) if s.as_str() == ">" => Some(ByteOrder::Big),
-                Some(Item::Str(s)) if s.as_str() == "|" || s.as_str() == "=" => Some(ByteOrder::native()),
-                other => return Err(format!("dtype state byte order {other:?}")),
-            };
-            if state.len() > 3 && !matches!(state[3], Item::None) {
-                return Err("structured dtypes (with field names) are not supported".into());
-            }
-            Ok(Item::DTypeObj(dtype, order))
-        }
-        other => Err(format!("BUILD on a {} is not supported", other.kind())),
-    }
-}
-
-/// Decode raw array bytes to C-order widened elements.
-fn decode_array(shape: Vec<usize>, dtype: DType, order: ByteOrder, fortran: bool, raw: &[u8]) -> Step<NdArray> {
-    let count = shape
-        .iter()
-        .try_fold(1usize, |a, &d| a.checked_mul(d))
-        .ok_or("array shape overflows")?;
-    let size = dtype.item_size();
-    if count.checked_mul(size) != Some(raw.len()) {
-        return Err(format!(
-            "array of shape {shape:?} and dtype {} needs {} bytes, found {}",
-            dtype.descr(),
-            count.saturating_mul(size),
-            raw.len()
-        ));
-    }
-    let word = |chunk: &[u8]| -> u64 {
-        let fold = |acc: u64, &x: &u8| (acc << 8) | x as u64;
-        match order {
-            ByteOrder::Little => chunk.iter().rev().fold(0, fold),
-            ByteOrder::Big => chunk.iter().fold(0, fold),
-        }
-    };
-    let chunks = raw.chunks_exact(size).map(word);
-    let mut data = match dtype {
-        DType::F2 => ArrayData::Float(chunks.map(|w| f16_to_f64(w as u16)).collect()),
-        DType::F4 => ArrayData::Float(chunks.map(|w| f32::from_bits(w as u32) as f64).collect()),
-        DType::F8 => ArrayData::Float(chunks.map(f64::from_bits).collect()),
-        DType::I1 => ArrayData::Int(chunks.map(|w| w as u8 as i8 as i64).collect()),
-        DType::I2 => ArrayData::Int(chunks.map(|w| w as u16 as i16 as i64).collect()),
-        DType::I4 => ArrayData::Int(chunks.map(|w| w as u32 as i32 as i64).collect()),
-        DType::I8 => ArrayData::Int(chunks.map(|w| w as i64).collect()),
-        DType::U1 | DType::U2 | DType::U4 | DType::Bool => ArrayData::Int(chunks.map(|w| w as i64).collect()),
-        DType::U8 => ArrayData::Int(
-            chunks
-                .map(|w| i64::try_from(w).map_err(|_| format!("u8 element {w} does not fit i64")))
-                .collect::<Step<Vec<_>>>()?,
-        ),
-    };
-    if fortran && shape.len() > 1 {
-        data = match data {
-            ArrayData::Float(v) => ArrayData::Float(fortran_to_c(&v, &shape)),
-            ArrayData::Int(v) => ArrayData::Int(fortran_to_c(&v, &shape)),
-        };
-    }
-    Ok(NdArray { shape, dtype, data })
-}
-
-/// Reorder column-major elements to row-major.
-pub(super) fn fortran_to_c<T: Copy>(v: &[T], shape: &[usize]) -> Vec<T> {
-    let mut index = vec![0usize; shape.len()];
-    let mut out = Vec::with_capacity(v.len());
-    for _ in 0..v.len() {
-        let mut offset = 0;
-        let mut stride = 1;
-        for (i, d) in index.iter().zip(shape) {
-            offset += i * stride;
-            stride *= d;
-        }
-        out.push(v[offset]);
-        for axis in (0..shape.len()).rev() {
-            index[axis] += 1;
-            if index[axis] < shape[axis] {
-                break;
-            }
-            index[axis] = 0;
-        }
-    }
-    out
-}
-
-/// IEEE half to f64 (exact).
-pub(super) fn f16_to_f64(h: u16) -> f64 {
-    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
-    let exp = ((h >> 10) & 0x1f) as i32;
-    let frac = (h & 0x3ff) as f64;
-    sign * match exp {
-        0 => frac * 2f64.powi(-24),
-        31 if frac == 0.0 => f64::INFINITY,
-        31 => f64::NAN,
-        e => (1.0 + frac / 1024.0) * 2f64.powi(e - 15),
-    }
 }

@@ -1,6 +1,6 @@
 //! Tests of the pickle reader and writer: opcodes, hostile input (globals, bombs, frames), Python's dict rules.
 
-use super::read::{f16_to_f64, fortran_to_c};
+use super::numpy::{f16_to_f64, fortran_to_c};
 use super::*;
 use crate::error::DataError;
 
