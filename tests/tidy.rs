@@ -13,14 +13,6 @@ const MAX_LINES: usize = 600;
 /// test, so the list only shrinks.
 const LONG_FILES: &[(&str, &str)] = &[
     (
-        "data/src/formats/pickle.rs",
-        "one restricted unpickler: the opcode table, its guards and the writer must be read together",
-    ),
-    (
-        "data/src/formats/gltf.rs",
-        "one glTF reader: accessors, morph targets and skins share the same validated buffer views",
-    ),
-    (
         "eval/src/learned.rs",
         "the VAE codec and the samplers built on it are one pipeline: encode, sample, decode",
     ),

@@ -10,7 +10,7 @@ use serde::Serialize;
 use crate::clip::object_uid;
 use crate::error::{DataError, Result};
 use crate::formats::{self, Format};
-use crate::store::{CLIPS_FILE, IndexRow, Split, Status, read_index};
+use crate::store::{CLIPS_FILE, IndexRow, Split, Status, Store, check_index, read_index};
 
 /// Lower edge of the vertex histogram (docs/method.md §2.2 filter).
 pub const HIST_MIN: u32 = 512;
@@ -45,6 +45,9 @@ pub struct Summary {
     pub objects: usize,
     /// Stored clips whose caption is empty (unconditional).
     pub empty_captions: usize,
+    /// Stored clips whose index row has a checksum (0 for a store written before checksums: re-import to add
+    /// them); `data verify` checks them.
+    pub checksums: usize,
     /// Vertex counts of stored clips in [`HIST_BINS`] bins over [`HIST_MIN`]..=[`HIST_MAX`].
     pub vertex_histogram: Vec<Bin>,
     /// Stored clips below [`HIST_MIN`] / above [`HIST_MAX`] vertices.
@@ -113,9 +116,13 @@ pub fn inspect(path: &Path) -> Result<Inspection> {
     summarize_file(path).map(Inspection::File)
 }
 
-/// Summarise the store in `dir` from its index.
+/// Summarise the store in `dir` from its index, after checking that `clips.bin` holds the clips the index lists
+/// (count and record sizes; [`check_index`]). A missing, truncated or mismatched `clips.bin` is an error.
 pub fn summarize(dir: &Path) -> Result<Summary> {
-    Ok(summarize_rows(dir, &read_index(dir)?))
+    let rows = read_index(dir)?;
+    let store = Store::open(dir)?;
+    check_index(&store, &rows)?;
+    Ok(summarize_rows(dir, &rows))
 }
 
 /// Summarise index rows (the pure part of [`summarize`]).
@@ -141,6 +148,7 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
         val: 0,
         objects: 0,
         empty_captions: 0,
+        checksums: 0,
         vertex_histogram: Vec::new(),
         vertices_below: 0,
         vertices_above: 0,
@@ -174,6 +182,7 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
                 }
                 objects.insert(r.object.as_str());
                 s.empty_captions += usize::from(r.caption.is_empty());
+                s.checksums += usize::from(r.checksum.is_some());
                 if let Some(t) = r.frames {
                     *s.frames.entry(t).or_default() += 1;
                 }
@@ -256,6 +265,17 @@ impl Summary {
             self.train, self.val, self.objects
         );
         let _ = writeln!(o, "empty captions     {}", self.empty_captions);
+        let _ = writeln!(
+            o,
+            "clips.bin          matches the index (count, sizes); {} of {} clips have a checksum{}",
+            self.checksums,
+            self.ok,
+            if self.checksums < self.ok {
+                " (re-import to add them)"
+            } else {
+                " (`data verify` checks them)"
+            }
+        );
         map_line(&mut o, "frames", &self.frames);
         map_line(&mut o, "formats", &self.formats);
         let _ = writeln!(
@@ -309,6 +329,7 @@ mod tests {
             status,
             reason: reason.into(),
             object: object_uid(id).into(),
+            checksum: (status == Status::Ok).then_some(7),
         }
     }
 
@@ -341,7 +362,7 @@ mod tests {
         ];
         let s = summarize_rows(Path::new("d"), &rows);
         assert_eq!((s.clips, s.ok, s.rejected, s.train, s.val), (5, 4, 1, 3, 1));
-        assert_eq!(s.empty_captions, 1);
+        assert_eq!((s.empty_captions, s.checksums), (1, 4));
         assert_eq!(s.vertex_histogram.len(), 8);
         assert_eq!(
             s.vertex_histogram[0],

@@ -11,6 +11,7 @@ pub mod formats;
 pub mod fps;
 pub mod inspect;
 pub mod keyframes;
+pub mod limits;
 pub mod preprocess;
 pub mod render;
 pub mod rng;

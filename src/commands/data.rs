@@ -27,8 +27,10 @@ pub enum DataCmd {
     Import(ImportArgs),
     /// Write procedural clips into a dataset store.
     Synth(SynthArgs),
-    /// Summarise a dataset store or one clip file.
+    /// Summarise a dataset store (checking clips.bin against its index) or one clip file.
     Inspect(InspectArgs),
+    /// Check every clip of a dataset store: checksum, decoding, index row. Exit code 1 when any clip fails.
+    Verify(VerifyArgs),
     /// Render a clip (file, or one clip of a store) as a contact sheet PNG.
     Render(RenderArgs),
 }
@@ -123,6 +125,12 @@ pub struct InspectArgs {
 }
 
 #[derive(Args, Debug)]
+pub struct VerifyArgs {
+    /// A store folder.
+    pub dir: PathBuf,
+}
+
+#[derive(Args, Debug)]
 pub struct RenderArgs {
     /// A clip file, or a store folder.
     pub path: PathBuf,
@@ -150,6 +158,15 @@ pub fn exec(cmd: DataCmd) -> anyhow::Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        DataCmd::Verify(a) => {
+            let report = store::verify_store(&a.dir)?;
+            emit(&report.to_string())?;
+            Ok(if report.is_ok() {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            })
+        }
         DataCmd::Render(a) => render(a),
     }
 }
@@ -167,10 +184,7 @@ fn weld(eps: Option<f32>) -> Weld {
 }
 
 fn convert(a: ConvertArgs) -> anyhow::Result<ExitCode> {
-    let mut clip = formats::read_clip(&a.input)?;
-    if let Weld::Eps(eps) = weld(a.weld) {
-        clip = preprocess::weld(&clip, eps);
-    }
+    let mut clip = weld(a.weld).apply(formats::read_clip(&a.input)?)?;
     if a.normalize {
         clip = preprocess::normalize(&clip).0;
     }
@@ -207,7 +221,9 @@ fn import(a: ImportArgs) -> anyhow::Result<ExitCode> {
         stride: a.stride,
         weld: weld(a.weld),
         p: a.p,
+        ..ImportOptions::default()
     };
+    opts.validate()?;
     let bar = progress_bar("import");
     let tick = |done: usize, total: usize| {
         bar.set_length(total as u64);
@@ -232,6 +248,7 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
         min_vertices: a.min_vertices.unwrap_or(default.min_vertices),
         max_vertices: a.max_vertices.unwrap_or(default.max_vertices),
     };
+    cfg.validate()?;
     let bar = progress_bar("synth");
     let tick = |done: usize, total: usize| {
         bar.set_length(total as u64);

@@ -14,7 +14,7 @@ pub const MISSING_CAPTION: &str = " ";
 
 /// Read a DyMesh `.bin` clip. The id is the file stem.
 pub fn read_bin(path: &Path) -> Result<Clip> {
-    let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
+    let bytes = super::read_file(path, super::MAX_FILE_BYTES)?;
     read_bin_bytes(&bytes, &path.display().to_string())
 }
 
@@ -113,6 +113,7 @@ pub fn bin_bytes(clip: &Clip) -> Result<Vec<u8>> {
 
 /// Write `clip` as a DyMesh `.bin` that Python's `pickle.load` reads into numpy arrays. Atomic (temp + rename).
 pub fn write_bin(path: &Path, clip: &Clip) -> Result<()> {
+    clip.validate()?;
     let bytes = bin_bytes(clip).map_err(|e| e.at(path))?;
     write_atomic(path, &bytes)
 }

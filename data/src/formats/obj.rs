@@ -14,6 +14,8 @@ use crate::error::{DataError, Result};
 
 /// Name of the caption file inside an OBJ sequence folder.
 pub const CAPTION_FILE: &str = "caption.txt";
+/// Largest caption file read: 1 MiB (captions are a sentence).
+pub const MAX_CAPTION_BYTES: u64 = 1 << 20;
 
 /// Read an OBJ sequence folder. The id is the folder name, the source the folder path.
 pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
@@ -24,7 +26,9 @@ pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
     let mut vertices = Vec::new();
     let mut first: Option<(usize, Vec<[u32; 3]>)> = None;
     for file in &files {
-        let text = std::fs::read_to_string(file).map_err(|e| DataError::io(file, e))?;
+        let bytes = super::read_file(file, super::MAX_FILE_BYTES)?;
+        let text =
+            String::from_utf8(bytes).map_err(|e| DataError::new(file, "file", format!("not UTF-8 text: {e}")))?;
         let (v, f) = parse_obj(&text, file)?;
         match &first {
             None => first = Some((v.len(), f)),
@@ -49,14 +53,17 @@ pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
     }
     let (n_vertices, faces) = first.expect("at least one file");
     let caption_path = dir.join(CAPTION_FILE);
-    let caption = match std::fs::read_to_string(&caption_path) {
-        Ok(s) => s
-            .strip_suffix('\n')
-            .map(|s| s.strip_suffix('\r').unwrap_or(s))
-            .unwrap_or(&s)
-            .to_string(),
+    let caption = match std::fs::metadata(&caption_path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => MISSING_CAPTION.to_string(),
-        Err(e) => return Err(DataError::io(&caption_path, e)),
+        _ => {
+            let bytes = super::read_file(&caption_path, MAX_CAPTION_BYTES)?;
+            let s = String::from_utf8(bytes)
+                .map_err(|e| DataError::new(&caption_path, "caption", format!("not UTF-8 text: {e}")))?;
+            s.strip_suffix('\n')
+                .map(|s| s.strip_suffix('\r').unwrap_or(s))
+                .unwrap_or(&s)
+                .to_string()
+        }
     };
     let id = dir
         .file_name()
@@ -183,6 +190,7 @@ pub fn parse_obj(text: &str, path: &Path) -> Result<ObjFrame> {
 /// Write `clip` as `dir/frame_0000.obj`, … plus `dir/caption.txt`. Refuses a folder that already holds `.obj`
 /// files, so that stale frames never join the sequence.
 pub fn write_obj_seq(dir: &Path, clip: &Clip) -> Result<()> {
+    clip.validate()?;
     std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))?;
     if let Some(old) = frame_files(dir)?.first() {
         return Err(DataError::new(

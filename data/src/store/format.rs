@@ -29,10 +29,15 @@ pub const ENTRY_LEN: u64 = 9;
 
 /// Appends encoded clips to a temporary file next to `clips.bin`; [`StoreWriter::finish`] writes the table and
 /// renames it into place (atomic on one file system).
+///
+/// A writer dropped before [`StoreWriter::finish`] (an error or a panic on the way) removes its temporary file.
 pub struct StoreWriter {
+    /// Set by [`StoreWriter::finish`]; until then the temporary file is removed on drop.
+    finished: bool,
     tmp: PathBuf,
     dest: PathBuf,
-    out: BufWriter<File>,
+    /// `None` once [`StoreWriter::finish`] has taken it.
+    out: Option<BufWriter<File>>,
     pos: u64,
     entries: Vec<(u64, Split)>,
     frames: u32,
@@ -48,9 +53,10 @@ impl StoreWriter {
         let frames = u32_field(frames, dest, "header.frames")?;
         let p = u32_field(p, dest, "header.p")?;
         let mut w = Self {
+            finished: false,
             tmp,
             dest: dest.to_path_buf(),
-            out: BufWriter::new(file),
+            out: Some(BufWriter::new(file)),
             pos: 0,
             entries: Vec::new(),
             frames,
@@ -75,8 +81,9 @@ impl StoreWriter {
         self.entries.is_empty()
     }
 
-    /// Append one clip; its frame count and FPS length must match the header.
-    pub fn append(&mut self, clip: &StoredClip) -> Result<()> {
+    /// Append one clip; its frame count and FPS length must match the header. Returns the record's
+    /// [`checksum`].
+    pub fn append(&mut self, clip: &StoredClip) -> Result<u64> {
         if clip.clip.frames != self.frames as usize || clip.fps.len() != self.p as usize {
             return Err(DataError::new(
                 &clip.clip.source,
@@ -95,11 +102,13 @@ impl StoreWriter {
         self.append_encoded(&bytes, clip.split)
     }
 
-    /// Append a record already encoded by [`encode`] (used to copy clips from an older store unchanged).
-    pub fn append_encoded(&mut self, record: &[u8], split: Split) -> Result<()> {
+    /// Append a record already encoded by [`encode`] (used to copy clips from an older store unchanged). Returns
+    /// the record's [`checksum`].
+    pub fn append_encoded(&mut self, record: &[u8], split: Split) -> Result<u64> {
         // `pos` counts every byte written so far, header included, so the record starts there.
         self.entries.push((self.pos, split));
-        self.write(record)
+        self.write(record)?;
+        Ok(checksum(record))
     }
 
     /// Write the entry table and trailer, flush to disk and rename over `dest`.
@@ -116,17 +125,41 @@ impl StoreWriter {
         self.write(&table)?;
         let file = self
             .out
+            .take()
+            .ok_or_else(|| DataError::new(&self.tmp, "store", "finished twice"))?
             .into_inner()
             .map_err(|e| DataError::io(&self.tmp, e.into_error()))?;
         file.sync_all().map_err(|e| DataError::io(&self.tmp, e))?;
-        std::fs::rename(&self.tmp, &self.dest).map_err(|e| DataError::io(&self.dest, e))
+        std::fs::rename(&self.tmp, &self.dest).map_err(|e| DataError::io(&self.dest, e))?;
+        self.finished = true;
+        Ok(())
     }
 
     fn write(&mut self, bytes: &[u8]) -> Result<()> {
-        self.out.write_all(bytes).map_err(|e| DataError::io(&self.tmp, e))?;
+        let out = self
+            .out
+            .as_mut()
+            .ok_or_else(|| DataError::new(&self.tmp, "store", "written after finish"))?;
+        out.write_all(bytes).map_err(|e| DataError::io(&self.tmp, e))?;
         self.pos += bytes.len() as u64;
         Ok(())
     }
+}
+
+impl Drop for StoreWriter {
+    fn drop(&mut self) {
+        if !self.finished {
+            drop(self.out.take());
+            // Best effort: the caller is already handling the error (or panic) that stopped the writer.
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// The checksum of an encoded record: xxh3-64, stored per clip in the index and checked by
+/// [`super::verify_store`].
+pub fn checksum(record: &[u8]) -> u64 {
+    xxhash_rust::xxh3::xxh3_64(record)
 }
 
 fn u32_field(v: usize, path: &Path, field: &str) -> Result<u32> {
@@ -194,6 +227,32 @@ pub struct Catalog {
 pub fn read_catalog(path: &Path) -> Result<Catalog> {
     let mut file = File::open(path).map_err(|e| DataError::io(path, e))?;
     let size = file.metadata().map_err(|e| DataError::io(path, e))?.len();
+    catalog_of(&mut file, size, path)
+}
+
+/// [`read_catalog`] of a `clips.bin` held in memory; `path` names it in errors.
+pub fn read_catalog_bytes(bytes: &[u8], path: &Path) -> Result<Catalog> {
+    catalog_of(&mut std::io::Cursor::new(bytes), bytes.len() as u64, path)
+}
+
+/// Decode clip `index` of a `clips.bin` held in memory, as [`super::Store::get`] decodes it from the file.
+pub fn decode_clip_bytes(bytes: &[u8], catalog: &Catalog, index: usize, path: &Path) -> Result<StoredClip> {
+    let e = catalog.entries.get(index).copied().ok_or_else(|| {
+        DataError::new(
+            path,
+            "clip index",
+            format!("clip {index} requested, the store holds {}", catalog.entries.len()),
+        )
+    })?;
+    let record = usize::try_from(e.offset)
+        .ok()
+        .zip(usize::try_from(e.offset + e.len).ok())
+        .and_then(|(start, end)| bytes.get(start..end))
+        .ok_or_else(|| DataError::new(path, format!("clip {index}"), "record lies outside these bytes"))?;
+    decode(record, e.offset, path, index, e.split, catalog.frames, catalog.p)
+}
+
+fn catalog_of<R: Read + Seek>(file: &mut R, size: u64, path: &Path) -> Result<Catalog> {
     let err = |field: &str, reason: String| DataError::new(path, field, reason);
     if size < HEADER_LEN + TRAILER_LEN {
         return Err(err(
@@ -204,7 +263,7 @@ pub fn read_catalog(path: &Path) -> Result<Catalog> {
             ),
         ));
     }
-    let header = read_at(&mut file, path, 0, HEADER_LEN as usize, "header")?;
+    let header = read_at(file, path, 0, HEADER_LEN as usize, "header")?;
     if &header[..8] != MAGIC {
         return Err(err(
             "header.magic at byte 0",
@@ -231,7 +290,7 @@ pub fn read_catalog(path: &Path) -> Result<Catalog> {
     }
     let (frames, p) = (word(1) as usize, word(2) as usize);
     let trailer_at = size - TRAILER_LEN;
-    let trailer = read_at(&mut file, path, trailer_at, TRAILER_LEN as usize, "trailer")?;
+    let trailer = read_at(file, path, trailer_at, TRAILER_LEN as usize, "trailer")?;
     if &trailer[16..] != END_MAGIC {
         return Err(err(
             &format!("trailer.magic at byte {}", trailer_at + 16),
@@ -251,13 +310,7 @@ pub fn read_catalog(path: &Path) -> Result<Catalog> {
             format!("table offset {table_offset} and clip count {count} do not fit a {size}-byte file"),
         ));
     }
-    let table = read_at(
-        &mut file,
-        path,
-        table_offset,
-        (trailer_at - table_offset) as usize,
-        "table",
-    )?;
+    let table = read_at(file, path, table_offset, (trailer_at - table_offset) as usize, "table")?;
     let mut entries = Vec::with_capacity(count as usize);
     for i in 0..count as usize {
         let at = i * ENTRY_LEN as usize;
@@ -300,7 +353,7 @@ fn u64_at(b: &[u8], at: usize) -> u64 {
 }
 
 /// Read `len` bytes at `offset`; the caller has checked the range against the file size.
-pub fn read_at(file: &mut File, path: &Path, offset: u64, len: usize, field: &str) -> Result<Vec<u8>> {
+pub fn read_at<R: Read + Seek>(file: &mut R, path: &Path, offset: u64, len: usize, field: &str) -> Result<Vec<u8>> {
     let mut buf = vec![0u8; len];
     file.seek(SeekFrom::Start(offset))
         .and_then(|_| file.read_exact(&mut buf))
@@ -434,6 +487,19 @@ pub fn decode(
         center: [norm[0], norm[1], norm[2]],
         scale: norm[3],
     };
+    if !(norm.iter().all(|x| x.is_finite()) && normalization.scale > 0.0) {
+        return Err(DataError::new(
+            path,
+            format!(
+                "clip {index} normalization at byte {}",
+                offset + record.len() as u64 - 16
+            ),
+            format!(
+                "center {:?} and scale {} do not undo a normalisation",
+                normalization.center, normalization.scale
+            ),
+        ));
+    }
     Ok(StoredClip {
         clip,
         fps,

@@ -2,12 +2,16 @@
 //! (weld, filter, normalise (D1)–(D3), FPS of docs/method.md §2.5), split by object (docs/method.md §2.2), write
 //! atomically.
 //!
-//! One bad file never aborts an import: it becomes a "rejected" row of the index with its reason. Only problems
-//! with the output folder or an existing store abort.
+//! One bad file never aborts an import: whatever goes wrong with it (an error, a panic in a reader, more than
+//! [`ImportOptions::time_limit`]) makes it a "rejected" row of the index with its reason, and the other files
+//! are imported. Only problems with the output folder or an existing store abort, and then no temporary file is
+//! left behind.
 
 use std::collections::HashSet;
 use std::fmt;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
 
 use rayon::prelude::*;
 
@@ -15,50 +19,18 @@ use crate::clip::{Clip, object_uid};
 use crate::error::{DataError, Result};
 use crate::formats::{self, Format};
 use crate::fps::farthest_point_sampling;
-use crate::preprocess::{self, VertexFilter};
+use crate::limits::MAX_FRAMES;
+use crate::preprocess;
 use crate::synth::{self, SynthConfig};
 
+use super::jobs::{Job, Outcome, Process, run_one};
+use super::options::check_p;
+pub use super::options::{FILE_TIME_LIMIT, ImportOptions, Weld};
+
 use super::{
-    CLIPS_FILE, DEFAULT_P, IndexRow, SPLIT_SEED, Split, Status, Store, StoreWriter, StoredClip, read_index, write_index,
+    CLIPS_FILE, DEFAULT_P, IndexRow, SPLIT_SEED, Split, Status, Store, StoreWriter, StoredClip, check_index,
+    read_index, write_index,
 };
-
-/// Vertex welding before anything else (docs/method.md §2.1 sources with split seams).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub enum Weld {
-    /// Keep the file's vertices as they are (default).
-    #[default]
-    Off,
-    /// Merge vertices closer than this distance (in file units).
-    Eps(f32),
-}
-
-/// How files become store clips.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ImportOptions {
-    /// Accepted vertex counts (docs/method.md §2.2: 512..=4096).
-    pub filter: VertexFilter,
-    /// Window length T (docs/method.md §2.6: 16).
-    pub frames: usize,
-    /// Frames between window starts (docs/method.md §2.6: 1).
-    pub stride: usize,
-    /// Welding (default off).
-    pub weld: Weld,
-    /// FPS tokens P (docs/method.md §2.5: 512). A clip with fewer vertices gets its FPS order repeated cyclically
-    /// (see [`farthest_point_sampling`]); the default filter rules that out.
-    pub p: usize,
-}
-
-impl Default for ImportOptions {
-    fn default() -> Self {
-        Self {
-            filter: VertexFilter::default(),
-            frames: 16,
-            stride: 1,
-            weld: Weld::Off,
-            p: DEFAULT_P,
-        }
-    }
-}
 
 /// Progress callback: `(sources done, sources total)`, called after each parallel chunk.
 pub type Progress<'a> = Option<&'a (dyn Fn(usize, usize) + Sync)>;
@@ -110,52 +82,7 @@ impl fmt::Display for ImportReport {
     }
 }
 
-/// What one source turned into.
-enum Outcome {
-    Clips(Vec<(StoredClip, String)>),
-    Rejected(String),
-}
-
-/// One unit of work: a file or folder found under the sources, or one procedural clip.
-enum Job {
-    File {
-        source: String,
-        path: PathBuf,
-        format: Result<Format>,
-    },
-    Synth {
-        source: String,
-        index: usize,
-    },
-}
-
-impl Job {
-    fn source(&self) -> &str {
-        match self {
-            Job::File { source, .. } | Job::Synth { source, .. } => source,
-        }
-    }
-
-    fn format_name(&self) -> &'static str {
-        match self {
-            Job::File { format: Ok(f), .. } => format_name(f),
-            Job::File { format: Err(_), .. } => "",
-            Job::Synth { .. } => "synth",
-        }
-    }
-}
-
-fn format_name(f: &Format) -> &'static str {
-    match f {
-        Format::Bin => "bin",
-        Format::ObjSeq => "obj-seq",
-        Format::Gltf => "gltf",
-        Format::Glb => "glb",
-    }
-}
-
-/// Import `sources` (files, or folders searched recursively for `.bin`/`.pkl`/`.pickle`/`.gltf`/`.glb` files and
-/// folders of
+/// Import `sources` (files, or folders searched recursively for `.bin`/`.pkl`/`.pickle`/`.gltf`/`.glb` files and folders of
 /// `.obj` frames) into the store folder `out`; see the [`crate::store`] module doc for re-imports.
 pub fn import(sources: &[PathBuf], out: &Path, opts: &ImportOptions) -> Result<ImportReport> {
     import_with_progress(sources, out, opts, None)
@@ -168,12 +95,23 @@ pub fn import_with_progress(
     opts: &ImportOptions,
     progress: Progress,
 ) -> Result<ImportReport> {
-    check_options(opts)?;
+    opts.validate()?;
     let existing = prepare_out(out, opts.frames, opts.p)?;
     let jobs = discover(sources, out)?;
-    run_jobs(out, existing, &jobs, opts.frames, opts.p, progress, |job| {
-        process_file(job, opts)
-    })
+    let owned = opts.clone();
+    let limits = Limits {
+        frames: opts.frames,
+        p: opts.p,
+        time: opts.time_limit,
+    };
+    run_jobs(
+        out,
+        existing,
+        &jobs,
+        limits,
+        progress,
+        Arc::new(move |job: &Job| process_file(job, &owned)),
+    )
 }
 
 /// Write `cfg.clips` procedural clips into the store `out` with P = [`DEFAULT_P`].
@@ -198,10 +136,8 @@ pub fn write_synth_windows(
     stride: usize,
     progress: Progress,
 ) -> Result<ImportReport> {
-    if p == 0 {
-        return Err(DataError::new(out, "p", "needs at least 1 FPS token"));
-    }
-    if window < 2 || window > cfg.frames || stride == 0 {
+    check_p(p, "synth options")?;
+    if window < 2 || window > cfg.frames || stride == 0 || stride > MAX_FRAMES {
         return Err(DataError::new(
             out,
             "window",
@@ -219,44 +155,23 @@ pub fn write_synth_windows(
             index,
         })
         .collect();
-    run_jobs(out, existing, &jobs, window, p, progress, |job| match job {
-        Job::Synth { source, index } => match synth::generate_one(cfg, *index) {
+    let cfg = cfg.clone();
+    let limits = Limits {
+        frames: window,
+        p,
+        time: FILE_TIME_LIMIT,
+    };
+    let process = move |job: &Job| match job {
+        Job::Synth { source, index } => match synth::generate_one(&cfg, *index) {
             Ok(mut clip) => {
                 clip.source = source.clone();
-                Outcome::Clips(preprocess_windows(&clip, window, stride, p))
+                preprocess_windows(&clip, window, stride, p).unwrap_or_else(Outcome::Rejected)
             }
             Err(e) => Outcome::Rejected(reason(&e, source)),
         },
         Job::File { .. } => Outcome::Rejected("not a procedural clip".into()),
-    })
-}
-
-fn check_options(opts: &ImportOptions) -> Result<()> {
-    let err = |field: &str, reason: String| Err(DataError::new("import options", field, reason));
-    if opts.frames < 2 {
-        return err(
-            "frames",
-            format!("a window needs at least 2 frames, got {}", opts.frames),
-        );
-    }
-    if opts.stride == 0 {
-        return err("stride", "must be at least 1".into());
-    }
-    if opts.p == 0 {
-        return err("p", "needs at least 1 FPS token".into());
-    }
-    if opts.filter.min > opts.filter.max {
-        return err(
-            "vertex filter",
-            format!("min {} > max {}", opts.filter.min, opts.filter.max),
-        );
-    }
-    if let Weld::Eps(e) = opts.weld
-        && !(e.is_finite() && e >= 0.0)
-    {
-        return err("weld", format!("epsilon {e} must be finite and ≥ 0"));
-    }
-    Ok(())
+    };
+    run_jobs(out, existing, &jobs, limits, progress, Arc::new(process))
 }
 
 /// Create `out`, or open the store already in it (checking that T and P agree); refuse a non-empty folder that
@@ -276,17 +191,7 @@ fn prepare_out(out: &Path, frames: usize, p: usize) -> Result<Option<(Store, Vec
             ));
         }
         let rows = read_index(out)?;
-        let ok = rows.iter().filter(|r| r.status == Status::Ok).count();
-        if ok != store.len() {
-            return Err(DataError::new(
-                out,
-                "index.parquet",
-                format!(
-                    "lists {ok} stored clips but clips.bin holds {}: the store is inconsistent",
-                    store.len()
-                ),
-            ));
-        }
+        check_index(&store, &rows)?;
         return Ok(Some((store, rows)));
     }
     if out.exists() {
@@ -393,9 +298,10 @@ fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
         Err(e) => return Outcome::Rejected(reason(&e, source)),
     };
     clip.source = source.clone();
-    if let Weld::Eps(eps) = opts.weld {
-        clip = preprocess::weld(&clip, eps);
-    }
+    clip = match opts.weld.apply(clip) {
+        Ok(c) => c,
+        Err(e) => return Outcome::Rejected(reason(&e, source)),
+    };
     if let Err(e) = opts.filter.check(&clip) {
         return Outcome::Rejected(reason(&e, source));
     }
@@ -405,36 +311,48 @@ fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
             clip.id, clip.frames, opts.frames
         ));
     }
-    Outcome::Clips(preprocess_windows(&clip, opts.frames, opts.stride, opts.p))
+    preprocess_windows(&clip, opts.frames, opts.stride, opts.p).unwrap_or_else(Outcome::Rejected)
 }
 
-/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 (docs/method.md
-/// §2.5) and assign the split of the clip's object (docs/method.md §2.2). Returns each window with its object uid.
-fn preprocess_windows(clip: &Clip, frames: usize, stride: usize, p: usize) -> Vec<(StoredClip, String)> {
+/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 and assign
+/// the split of the clip's object (module doc of [`crate::store`]). Returns each window with its object uid, or
+/// the reject reason when a window does not normalise to finite numbers (finite coordinates near ±3.4e38
+/// overflow f32).
+fn preprocess_windows(clip: &Clip, frames: usize, stride: usize, p: usize) -> std::result::Result<Outcome, String> {
     // The uid of the whole clip, so every window of one animation shares its split.
     let object = object_uid(&clip.id).to_owned();
     let split = Split::of_object(&object, SPLIT_SEED);
-    preprocess::windows(clip, frames, stride)
-        .iter()
-        .map(|w| {
-            let (clip, normalization) = preprocess::normalize(w);
-            let fps = farthest_point_sampling(clip.frame(0), p);
-            (
-                StoredClip {
-                    clip,
-                    fps,
-                    normalization,
-                    split,
-                },
-                object.clone(),
-            )
-        })
-        .collect()
+    let mut out = Vec::new();
+    for (k, w) in preprocess::windows(clip, frames, stride).iter().enumerate() {
+        let (clip, normalization) = preprocess::normalize(w);
+        let finite = normalization.center.iter().all(|c| c.is_finite())
+            && normalization.scale.is_finite()
+            && normalization.scale > 0.0
+            && clip.vertices.iter().flatten().all(|x| x.is_finite());
+        if !finite {
+            return Err(format!(
+                "vertices: normalising window {k} by its frame 0 (centre {:?}, scale {}) gives non-finite \
+                 coordinates: values this large overflow f32; rescale the file",
+                normalization.center, normalization.scale
+            ));
+        }
+        let fps = farthest_point_sampling(clip.frame(0), p);
+        out.push((
+            StoredClip {
+                clip,
+                fps,
+                normalization,
+                split,
+            },
+            object.clone(),
+        ));
+    }
+    Ok(Outcome::Clips(out))
 }
 
 /// The index row of a stored clip; called after [`StoreWriter::append`] accepted it, which checked that the
 /// counts fit in u32.
-fn ok_row(c: &StoredClip, format: &str, object: String) -> IndexRow {
+fn ok_row(c: &StoredClip, format: &str, object: String, checksum: u64) -> IndexRow {
     let to_u32 = |v: usize| Some(v as u32);
     IndexRow {
         id: c.clip.id.clone(),
@@ -448,6 +366,7 @@ fn ok_row(c: &StoredClip, format: &str, object: String) -> IndexRow {
         status: Status::Ok,
         reason: String::new(),
         object,
+        checksum: Some(checksum),
     }
 }
 
@@ -468,31 +387,40 @@ fn rejected_row(job: &Job, reason: String) -> IndexRow {
         split: None,
         status: Status::Rejected,
         reason,
+        checksum: None,
     }
 }
 
 /// Sources processed in parallel per chunk, written in order.
 const CHUNK: usize = 64;
 
+/// The store shape of a run and its per-source time limit.
+#[derive(Debug, Clone, Copy)]
+struct Limits {
+    frames: usize,
+    p: usize,
+    time: Duration,
+}
+
 /// Rewrite the store in `out` from the kept part of `existing` plus the outcome of `jobs`.
 fn run_jobs(
     out: &Path,
     existing: Option<(Store, Vec<IndexRow>)>,
     jobs: &[Job],
-    frames: usize,
-    p: usize,
+    limits: Limits,
     progress: Progress,
-    process: impl Fn(&Job) -> Outcome + Sync,
+    process: Process,
 ) -> Result<ImportReport> {
     let replaced: HashSet<&str> = jobs.iter().map(Job::source).collect();
-    let mut writer = StoreWriter::create(&out.join(CLIPS_FILE), frames, p)?;
+    // Dropped without `finish` (any error below), the writer removes its temporary file.
+    let mut writer = StoreWriter::create(&out.join(CLIPS_FILE), limits.frames, limits.p)?;
     let mut ok_rows = Vec::new();
     let mut rejected_rows = Vec::new();
     let mut kept = 0;
     if let Some((store, rows)) = existing {
         let (old_ok, old_rejected): (Vec<IndexRow>, Vec<IndexRow>) =
             rows.into_iter().partition(|r| r.status == Status::Ok);
-        for (i, row) in old_ok.into_iter().enumerate() {
+        for (i, mut row) in old_ok.into_iter().enumerate() {
             if replaced.contains(row.source.as_str()) {
                 continue;
             }
@@ -508,7 +436,16 @@ fn run_jobs(
                     ),
                 ));
             }
-            writer.append_encoded(&raw, store.split(i)?)?;
+            let sum = writer.append_encoded(&raw, store.split(i)?)?;
+            if row.checksum.is_some_and(|old| old != sum) {
+                return Err(DataError::new(
+                    out.join(CLIPS_FILE),
+                    format!("clip {i} ({})", row.id),
+                    "fails its checksum: the existing store is damaged; import into a new folder",
+                ));
+            }
+            // A store written before checksums gets them for its kept clips.
+            row.checksum = Some(sum);
             ok_rows.push(row);
             kept += 1;
         }
@@ -521,13 +458,16 @@ fn run_jobs(
     let mut rejected = Vec::new();
     let mut added = 0;
     for (c, chunk) in jobs.chunks(CHUNK).enumerate() {
-        let outcomes: Vec<Outcome> = chunk.par_iter().map(&process).collect();
+        let outcomes: Vec<Outcome> = chunk
+            .par_iter()
+            .map(|job| run_one(job, &process, limits.time))
+            .collect();
         for (job, outcome) in chunk.iter().zip(outcomes) {
             match outcome {
                 Outcome::Clips(clips) => {
                     for (clip, object) in clips {
-                        writer.append(&clip)?;
-                        ok_rows.push(ok_row(&clip, job.format_name(), object));
+                        let sum = writer.append(&clip)?;
+                        ok_rows.push(ok_row(&clip, job.format_name(), object, sum));
                         added += 1;
                     }
                 }

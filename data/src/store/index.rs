@@ -50,7 +50,13 @@ pub struct IndexRow {
     pub reason: String,
     /// Object uid used by the split.
     pub object: String,
+    /// xxh3-64 of the clip's record in `clips.bin` ([`super::checksum`]); `None` for a rejected file and for every
+    /// row of a store written before checksums existed (re-import to add them).
+    pub checksum: Option<u64>,
 }
+
+/// Name of the checksum column (absent in stores made before it existed).
+pub const CHECKSUM_COLUMN: &str = "checksum";
 
 fn polars_err(path: &Path, field: &str, e: PolarsError) -> DataError {
     DataError::new(path, field, e.to_string())
@@ -76,15 +82,26 @@ pub fn write_index(dir: &Path, rows: &[IndexRow]) -> Result<()> {
         Column::new("status".into(), strings(|r| r.status.as_str())),
         Column::new("reason".into(), strings(|r| &r.reason)),
         Column::new("object".into(), strings(|r| &r.object)),
+        Column::new(
+            CHECKSUM_COLUMN.into(),
+            rows.iter().map(|r| r.checksum).collect::<Vec<_>>(),
+        ),
     ];
     let mut df = DataFrame::new(rows.len(), columns).map_err(|e| polars_err(&path, "columns", e))?;
-    let file = File::create(&tmp).map_err(|e| DataError::io(&tmp, e))?;
-    ParquetWriter::new(&file)
-        .with_compression(ParquetCompression::Uncompressed)
-        .finish(&mut df)
-        .map_err(|e| polars_err(&tmp, "parquet", e))?;
-    file.sync_all().map_err(|e| DataError::io(&tmp, e))?;
-    std::fs::rename(&tmp, &path).map_err(|e| DataError::io(&path, e))
+    let written = (|| {
+        let file = File::create(&tmp).map_err(|e| DataError::io(&tmp, e))?;
+        ParquetWriter::new(&file)
+            .with_compression(ParquetCompression::Uncompressed)
+            .finish(&mut df)
+            .map_err(|e| polars_err(&tmp, "parquet", e))?;
+        file.sync_all().map_err(|e| DataError::io(&tmp, e))?;
+        std::fs::rename(&tmp, &path).map_err(|e| DataError::io(&path, e))
+    })();
+    if written.is_err() {
+        // Best effort: the error that matters is the one above.
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
 }
 
 /// Read `dir/index.parquet`; a missing column, a wrong type or an unknown status/split names the column and row.
@@ -124,6 +141,15 @@ pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
         required("object")?,
     );
     let (frames, vertices, faces, split) = (ints("frames")?, ints("vertices")?, ints("faces")?, strs("split")?);
+    // Stores written before checksums have no such column: every row reads as "no checksum".
+    let checksums: Vec<Option<u64>> = match df.column(CHECKSUM_COLUMN) {
+        Err(_) => vec![None; df.height()],
+        Ok(c) => c
+            .u64()
+            .map_err(|e| polars_err(&path, CHECKSUM_COLUMN, e))?
+            .iter()
+            .collect(),
+    };
     let mut rows = Vec::with_capacity(df.height());
     for i in 0..df.height() {
         let status = match status[i].as_str() {
@@ -156,6 +182,7 @@ pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
             status,
             reason: reason[i].clone(),
             object: object[i].clone(),
+            checksum: checksums[i],
         });
     }
     Ok(rows)

@@ -8,10 +8,15 @@
 //! - `index.parquet`: one row per accepted clip (status "ok", same order as `clips.bin`) followed by one row
 //!   per rejected source file (status "rejected" with its reason). Columns: `id`, `source`, `format`,
 //!   `frames`, `vertices`, `faces` (u32, null when rejected), `caption`, `split` ("train"/"val", null when
-//!   rejected), `status`, `reason` ("" when ok), `object` (the object uid that groups the split).
+//!   rejected), `status`, `reason` ("" when ok), `object` (the object uid that groups the split), `checksum`
+//!   (u64 xxh3-64 of the clip's record in `clips.bin`, null when rejected; stores written before this column
+//!   existed still read, with no checksums: re-import to add them).
 //!
-//! Both files are written to a temporary name and renamed into place. `clips.bin` is renamed first, the index
-//! second; [`Store::open`] reads only `clips.bin`, which is self-contained.
+//! `data inspect` checks `clips.bin` against the index by clip count and record sizes ([`check_index`]);
+//! [`verify_store`] (`data verify`) reads every clip and checks its checksum, its decoding and its index row.
+//! Both files are written to a temporary name and renamed into place (a failed write removes the temporary file).
+//! `clips.bin` is renamed first, the index second; [`Store::open`] reads only `clips.bin`, which is
+//! self-contained.
 //!
 //! # `clips.bin` layout (version 1, all integers and floats little-endian)
 //! ```text
@@ -42,6 +47,9 @@
 mod format;
 mod import;
 mod index;
+mod jobs;
+mod options;
+mod verify;
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -50,12 +58,13 @@ use crate::clip::Clip;
 use crate::error::{DataError, Result};
 use crate::preprocess::Normalization;
 
-pub use format::{Catalog, Entry, StoreWriter, encode, read_catalog};
+pub use format::{Catalog, Entry, StoreWriter, checksum, decode_clip_bytes, encode, read_catalog, read_catalog_bytes};
 pub use import::{
-    ImportOptions, ImportReport, Progress, Rejected, Weld, import, import_with_progress, write_synth,
+    FILE_TIME_LIMIT, ImportOptions, ImportReport, Progress, Rejected, Weld, import, import_with_progress, write_synth,
     write_synth_windows, write_synth_with,
 };
-pub use index::{IndexRow, Status, read_index, write_index};
+pub use index::{CHECKSUM_COLUMN, IndexRow, Status, read_index, write_index};
+pub use verify::{Problem, VerifyReport, check_index, record_len, verify_store};
 
 /// File name of the clip records inside a store folder.
 pub const CLIPS_FILE: &str = "clips.bin";

@@ -12,6 +12,7 @@ use rayon::prelude::*;
 
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
+use crate::limits::{MAX_CLIP_VERTICES, MAX_FRAMES, MAX_SYNTH_CLIPS, MAX_SYNTH_VERTICES};
 use crate::rng::{Rng, rng};
 
 type V3 = [f32; 3];
@@ -145,11 +146,34 @@ impl Default for SynthConfig {
 }
 
 impl SynthConfig {
-    /// Rejects settings the generator cannot honour: T ≥ 2, 256 ≤ min, min + 256 ≤ max.
+    /// Rejects settings the generator cannot honour or that would exhaust memory: 2 ≤ T ≤ [`MAX_FRAMES`],
+    /// 256 ≤ min, min + 256 ≤ max ≤ [`MAX_SYNTH_VERTICES`], T · max ≤ [`MAX_CLIP_VERTICES`],
+    /// clips ≤ [`MAX_SYNTH_CLIPS`].
     pub fn validate(&self) -> Result<()> {
         let err = |field: &str, reason: String| Err(DataError::new("synth config", field, reason));
-        if self.frames < 2 {
-            return err("frames", format!("needs at least 2 frames, got {}", self.frames));
+        if !(2..=MAX_FRAMES).contains(&self.frames) {
+            return err("frames", format!("needs 2..={MAX_FRAMES} frames, got {}", self.frames));
+        }
+        if self.clips > MAX_SYNTH_CLIPS {
+            return err(
+                "clips",
+                format!("at most {MAX_SYNTH_CLIPS} per run, got {}", self.clips),
+            );
+        }
+        if self.max_vertices > MAX_SYNTH_VERTICES {
+            return err(
+                "max_vertices",
+                format!("at most {MAX_SYNTH_VERTICES}, got {}", self.max_vertices),
+            );
+        }
+        if self.frames * self.max_vertices > MAX_CLIP_VERTICES {
+            return err(
+                "frames",
+                format!(
+                    "{} frames × {} vertices is more than {MAX_CLIP_VERTICES} vertex rows per clip",
+                    self.frames, self.max_vertices
+                ),
+            );
         }
         if self.min_vertices < 256 {
             return err(
@@ -157,7 +181,7 @@ impl SynthConfig {
                 format!("must be at least 256, got {}", self.min_vertices),
             );
         }
-        if self.max_vertices < self.min_vertices + 256 {
+        if self.max_vertices < self.min_vertices.saturating_add(256) {
             return err(
                 "max_vertices",
                 format!(

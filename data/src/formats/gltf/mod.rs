@@ -1,0 +1,103 @@
+//! glTF 2.0 / GLB clips: animation baked to per-frame world-space vertex positions, and a writer that
+//! stores a clip as frame-0 mesh + one morph target per frame.
+//!
+//! Reading takes the first animation and the first triangle primitive of the chosen mesh, samples every channel
+//! (STEP, LINEAR with slerp for rotations, CUBICSPLINE) at `t = f / fps` for `f = 0..=⌊duration · fps⌋`, and bakes
+//! morph targets (`p = base + Σ_k w_k · target_k`), then skinning (`v = Σ_i w_i · G(joint_i) · IBM_i · p`) or, for
+//! an unskinned mesh, the mesh node's world matrix. The caption is `asset.extras.caption` (written by
+//! [`write_gltf`]), else " ".
+//!
+//! # Hostile input
+//! The gltf crate only parses and validates the JSON. Everything after that is code of this module, which checks
+//! before use every index, accessor type, component type, stride and byte range (`accessor.rs`), and loads the
+//! buffers itself (`source.rs`): the GLB chunks inside the file, base64 `data:` URIs, and relative URIs naming a
+//! regular file inside the glTF file's folder (no absolute paths, `..`, symlinks out of the folder, FIFOs or
+//! devices), each at most [`MAX_BUFFER_BYTES`] and size-checked before it is read. The frame count is bounded by
+//! [`MAX_FRAMES`](crate::limits::MAX_FRAMES) (a longer animation is an error unless [`GltfReadOptions::max_frames`] asks for its first
+//! frames), the baked vertices by [`MAX_CLIP_VERTICES`](crate::limits::MAX_CLIP_VERTICES), accessors by [`MAX_ACCESSOR_VALUES`] and the baking
+//! work by [`MAX_BAKE_STEPS`]. One file's read runs under [`super::guard`], so a panic left anywhere below is an
+//! error naming the file rather than an abort.
+
+mod accessor;
+mod bake;
+mod read;
+mod source;
+mod write;
+
+use std::path::{Path, PathBuf};
+
+use crate::clip::Clip;
+use crate::error::{DataError, Result};
+
+pub use write::{MAX_WRITE_FRAMES, write_gltf};
+
+/// Frame rate used when none is given.
+pub const DEFAULT_FPS: f32 = 30.0;
+/// Most numbers (count × components) one accessor may decode to: 2^24 are 128 MiB as f64, a 4 M-vertex position
+/// accessor; it bounds accessors whose count no buffer bytes back (sparse or without a buffer view).
+pub const MAX_ACCESSOR_VALUES: usize = 1 << 24;
+/// Largest buffer (GLB chunk, `data:` URI or external file) read: 1 GiB.
+pub const MAX_BUFFER_BYTES: u64 = 1 << 30;
+/// Most vertex updates (per frame: vertices × (1 + morph targets with a non-zero weight + joint influences))
+/// one read may do: 2^34 is about a minute of baking, so a small file cannot keep an import busy for hours.
+pub const MAX_BAKE_STEPS: u64 = 1 << 34;
+
+/// How to bake a glTF animation into frames.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GltfReadOptions {
+    /// Sampling rate in frames per second.
+    pub fps: f32,
+    /// Keep at most this many frames. `None` bakes the whole animation and refuses one longer than [`MAX_FRAMES`](crate::limits::MAX_FRAMES);
+    /// `Some(m)` keeps the first `m` frames of an animation of any length.
+    pub max_frames: Option<usize>,
+    /// Mesh index to read; `None` = the first mesh that a node instantiates.
+    pub mesh: Option<usize>,
+}
+
+impl Default for GltfReadOptions {
+    fn default() -> Self {
+        Self {
+            fps: DEFAULT_FPS,
+            max_frames: None,
+            mesh: None,
+        }
+    }
+}
+
+/// Where buffers with a file URI may be read from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ExternalBuffers {
+    /// Relative URIs name regular files inside this folder (the glTF file's own).
+    Folder(PathBuf),
+    /// Only buffers inside the file (GLB chunk, `data:` URIs); a file URI is an error.
+    Refuse,
+}
+
+/// Read and bake a `.gltf` / `.glb` clip. Errors name the file and the glTF part (field) at fault.
+pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
+    super::guard(path, || {
+        let bytes = super::read_file(path, super::MAX_FILE_BYTES)?;
+        let folder = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        read::read(&bytes, path, opts, &ExternalBuffers::Folder(folder))
+    })
+}
+
+/// Read and bake glTF or GLB `bytes`; `path` names the file in errors and gives the clip its id and source.
+pub fn read_gltf_bytes(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: &ExternalBuffers) -> Result<Clip> {
+    super::guard(path, || read::read(bytes, path, opts, external))
+}
+
+/// Errors of one read: the file and the field at fault.
+#[derive(Clone, Copy)]
+struct Ctx<'a> {
+    path: &'a Path,
+}
+
+impl Ctx<'_> {
+    fn err(&self, field: impl Into<String>, reason: impl Into<String>) -> DataError {
+        DataError::new(self.path, field, reason)
+    }
+}

@@ -1,0 +1,125 @@
+//! How an import turns files into store clips: [`ImportOptions`] (window, stride, FPS tokens, vertex filter,
+//! welding, per-file time limit) and their range checks.
+
+use std::time::Duration;
+
+use crate::clip::Clip;
+use crate::error::{DataError, Result};
+use crate::limits::{MAX_FRAMES, MAX_P};
+use crate::preprocess::{self, VertexFilter};
+
+use super::DEFAULT_P;
+
+/// Default [`ImportOptions::time_limit`]: reading and preprocessing one file normally takes well under a second;
+/// ten minutes only stop a file that would never finish.
+pub const FILE_TIME_LIMIT: Duration = Duration::from_secs(600);
+
+/// Vertex welding before anything else (docs/method.md §2.1 sources with split seams).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Weld {
+    /// Keep the file's vertices as they are (default).
+    #[default]
+    Off,
+    /// Merge vertices closer than this distance (in file units).
+    Eps(f32),
+}
+
+impl Weld {
+    /// `Eps` must be finite and ≥ 0 (`inf` would merge every vertex into one).
+    pub fn validate(self) -> Result<()> {
+        match self {
+            Weld::Eps(e) if !(e.is_finite() && e >= 0.0) => {
+                Err(DataError::new("weld", "epsilon", format!("{e} must be finite and ≥ 0")))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Weld `clip` ([`preprocess::weld`]); the welded clip must still be a valid clip (at least 3 vertices).
+    pub fn apply(self, clip: Clip) -> Result<Clip> {
+        self.validate()?;
+        let Weld::Eps(eps) = self else {
+            return Ok(clip);
+        };
+        let welded = preprocess::weld(&clip, eps);
+        welded
+            .validate()
+            .map_err(|e| DataError::new(&clip.source, format!("after welding at {eps}: {}", e.field), e.reason))?;
+        Ok(welded)
+    }
+}
+
+/// How files become store clips.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImportOptions {
+    /// Accepted vertex counts (docs/method.md §2.2: 512..=4096).
+    pub filter: VertexFilter,
+    /// Window length T (docs/method.md §2.6: 16).
+    pub frames: usize,
+    /// Frames between window starts (docs/method.md §2.6: 1).
+    pub stride: usize,
+    /// Welding (default off).
+    pub weld: Weld,
+    /// FPS tokens P (docs/method.md §2.5: 512). A clip with fewer vertices gets its FPS order repeated cyclically
+    /// (see [`crate::fps::farthest_point_sampling`]); the default filter rules that out.
+    pub p: usize,
+    /// Most time one source may take to read and preprocess; a slower one is rejected and the import goes on.
+    /// Rust cannot stop a thread, so a reader past its limit keeps running in the background until it ends or the
+    /// process exits.
+    pub time_limit: Duration,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        Self {
+            filter: VertexFilter::default(),
+            frames: 16,
+            stride: 1,
+            weld: Weld::Off,
+            p: DEFAULT_P,
+            time_limit: FILE_TIME_LIMIT,
+        }
+    }
+}
+
+impl ImportOptions {
+    /// Range checks: 2 ≤ frames ≤ [`MAX_FRAMES`], 1 ≤ stride ≤ [`MAX_FRAMES`], 1 ≤ p ≤ [`MAX_P`], filter
+    /// min ≤ max, a finite weld epsilon ≥ 0, a time limit above zero.
+    pub fn validate(&self) -> Result<()> {
+        let err = |field: &str, reason: String| Err(DataError::new("import options", field, reason));
+        if !(2..=MAX_FRAMES).contains(&self.frames) {
+            return err(
+                "frames",
+                format!("a window needs 2..={MAX_FRAMES} frames, got {}", self.frames),
+            );
+        }
+        if !(1..=MAX_FRAMES).contains(&self.stride) {
+            return err("stride", format!("must be in 1..={MAX_FRAMES}, got {}", self.stride));
+        }
+        check_p(self.p, "import options")?;
+        if self.filter.min > self.filter.max {
+            return err(
+                "vertex filter",
+                format!("min {} > max {}", self.filter.min, self.filter.max),
+            );
+        }
+        if self.time_limit.is_zero() {
+            return err("time limit", "must be above zero".into());
+        }
+        self.weld
+            .validate()
+            .map_err(|e| DataError::new("import options", "weld", e.reason))
+    }
+}
+
+/// 1 ≤ p ≤ [`MAX_P`].
+pub(super) fn check_p(p: usize, what: &str) -> Result<()> {
+    if !(1..=MAX_P).contains(&p) {
+        return Err(DataError::new(
+            what,
+            "p",
+            format!("needs 1..={MAX_P} FPS tokens, got {p}"),
+        ));
+    }
+    Ok(())
+}
