@@ -2,6 +2,7 @@
 //! the sequence-wise DyMeshVAE ablation, text encoders. No file IO except weight loading.
 
 pub mod attention;
+pub mod bdlstm;
 pub mod dymesh_vae;
 pub mod frame_vae;
 pub mod latent_stats;
