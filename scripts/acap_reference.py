@@ -64,11 +64,59 @@ def edge_weights(ref, faces):
     return edges, np.clip(weights, WEIGHT_MIN, WEIGHT_MAX)
 
 
+def add_bridges(ref, edges, weights):
+    """Borůvka over the closest vertex pairs between connected components (ties: smaller, then larger index);
+    bridge weight WEIGHT_MIN * min(1, mean_edge_length^2 / d^2)."""
+    n = len(ref)
+    parent = list(range(n))
+
+    def find(v):
+        while parent[v] != v:
+            parent[v] = parent[parent[v]]
+            v = parent[v]
+        return v
+
+    for i, j in edges:
+        a, b = find(i), find(j)
+        parent[max(a, b)] = min(a, b)
+    mean_length = np.linalg.norm(ref[edges[:, 0]] - ref[edges[:, 1]], axis=1).mean() if len(edges) else 0.0
+    new_edges, new_weights = [], []
+    while True:
+        roots = np.array([find(v) for v in range(n)])
+        if (roots == roots[0]).all():
+            break
+        nearest, dist = np.zeros(n, dtype=np.int64), np.zeros(n)
+        for start in range(0, n, 512):
+            block = ref[start:start + 512]
+            diff = block[:, None, :] - ref[None, :, :]
+            d2 = diff[:, :, 0] ** 2 + diff[:, :, 1] ** 2 + diff[:, :, 2] ** 2
+            d2[roots[start:start + 512, None] == roots[None, :]] = np.inf
+            nearest[start:start + 512] = np.argmin(d2, axis=1)
+            dist[start:start + 512] = d2[np.arange(len(block)), nearest[start:start + 512]]
+        best = {}
+        for i in range(n):
+            key = (dist[i], min(i, nearest[i]), max(i, nearest[i]))
+            if roots[i] not in best or key < best[roots[i]]:
+                best[roots[i]] = key
+        for d2, a, b in sorted(best.values()):
+            ra, rb = find(a), find(b)
+            if ra != rb:
+                parent[max(ra, rb)] = min(ra, rb)
+                new_edges.append((a, b))
+                new_weights.append(WEIGHT_MIN * min(1.0, mean_length ** 2 / d2) if d2 > 0 else WEIGHT_MIN)
+    if not new_edges:
+        return edges, weights
+    edges = np.concatenate([edges, np.array(new_edges, dtype=np.int64).reshape(-1, 2)])
+    weights = np.concatenate([weights, np.array(new_weights)])
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    return edges[order], weights[order]
+
+
 class Topology:
     def __init__(self, ref, faces):
         self.ref = np.asarray(ref, dtype=np.float64)
         self.n = n = len(self.ref)
-        self.edges, self.weights = edge_weights(self.ref, faces)
+        self.edges, self.weights = add_bridges(self.ref, *edge_weights(self.ref, faces))
         i, j = self.edges[:, 0], self.edges[:, 1]
         # Directed edge arrays (both directions) for the per-vertex sums.
         self.src = np.concatenate([i, j])

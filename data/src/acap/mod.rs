@@ -9,13 +9,16 @@
 //!   (|(b − a) × (c − a)| ≤ [`DEGENERATE_AREA`] · longest edge², or a repeated vertex index) add nothing, but
 //!   their edges stay in the graph. Every weight is then clamped to [[`WEIGHT_MIN`], [`WEIGHT_MAX`]], so the
 //!   Laplacian of the graph is positive semi-definite and connected where the mesh is.
+//! - **Bridges.** A mesh of several connected components (separate limbs, an isolated vertex) gets bridge edges
+//!   between its closest vertex pairs (Borůvka; weight [`WEIGHT_MIN`] · min(1, h̄²/d²), h̄ the mean edge length),
+//!   so the features also carry how the parts move relative to each other and the graph is connected.
 //! - **Deformation gradient** of vertex i in frame p against the reference q (one-ring least squares,
 //!   e_ij = q_i − q_j, e'_ij = p_i − p_j):
 //!   T_i = argmin Σ_j c_ij ‖e'_ij − T e_ij‖² + λ_i ‖T − K_i‖²  =  (B_i + λ_i K_i)(A_i + λ_i I)⁻¹,
 //!   A_i = Σ_j c_ij e_ij e_ijᵀ, B_i = Σ_j c_ij e'_ij e_ijᵀ, λ_i = [`TIKHONOV`] · tr(A_i)/3, and K_i the rotation
 //!   that best aligns the ring (the rotation factor of B_i). The small pull towards K_i only decides directions
 //!   the ring does not span (a planar or collinear one-ring), so a rigid motion gives T_i = R exactly there too.
-//!   **Fallback:** a vertex with tr(A_i) = 0 (isolated, or all its neighbours on top of it) gets T_i = I.
+//!   **Fallback:** a vertex with tr(A_i) = 0 (all its neighbours on top of it, or a one-vertex mesh) gets T_i = I.
 //! - **Polar decomposition** T_i = R_i S_i, R_i a rotation, S_i symmetric (for det T_i < 0 the sign sits in S_i).
 //! - **Rotation vectors, as consistent as possible.** Each R_i is an axis ω and angle θ ∈ [0, π]; every
 //!   r_i = θω + 2πkω (k ∈ ℤ, which covers the flipped axis too) is the same rotation. Per connected component of
@@ -31,8 +34,8 @@
 //!   fits the weighted one-ring moments B_i(p) = Σ_j c_ij (p_i − p_j) e_ijᵀ, which the features determine exactly
 //!   (B_i = T_i(A_i + λ_i I) − λ_i K_i), so the round trip is exact for any deformation; Gao et al.'s ARAP-style
 //!   system Σ c_ij ‖(p_i − p_j) − ½(T_i + T_j) e_ij‖² is the alternative, exact only for deformations that are
-//!   affine on every one-ring. Features do not see translations: each connected component's smallest vertex is
-//!   pinned while solving and the component is then moved so that its centroid equals its reference centroid.
+//!   affine on every one-ring. Features do not see translations: the smallest vertex is pinned while solving and
+//!   the result is moved so that its centroid equals the reference centroid.
 
 mod mat3;
 mod reconstruct;
@@ -76,6 +79,7 @@ pub struct AcapTopology {
     component_size: Vec<usize>,
     ref_centroid: Vec<Vec3>,
     solvers: reconstruct::Solvers,
+    bridges: usize,
 }
 
 /// What vertex i's least squares needs from the reference: A_i + λ_i I, its inverse, λ_i and tr A_i.
@@ -144,6 +148,86 @@ fn edge_weights(q: &[Vec3], faces: &[[u32; 3]]) -> Vec<(u32, u32, f64)> {
     edges
 }
 
+fn find(parent: &mut [usize], v: usize) -> usize {
+    let mut root = v;
+    while parent[root] != root {
+        root = parent[root];
+    }
+    let mut v = v;
+    while parent[v] != root {
+        (parent[v], v) = (root, parent[v]);
+    }
+    root
+}
+
+/// Joins the connected components of `edges` into one (Borůvka): every round, each component takes its closest
+/// vertex pair to another component (by squared distance, then the smaller, then the larger index), and those
+/// pairs become bridge edges of weight [`WEIGHT_MIN`] · min(1, h̄² / d²), h̄ the mean mesh edge length. Returns the
+/// number of bridges; `edges` stays sorted.
+fn add_bridges(q: &[Vec3], edges: &mut Vec<(u32, u32, f64)>) -> usize {
+    let n = q.len();
+    let mut parent: Vec<usize> = (0..n).collect();
+    for &(i, j, _) in edges.iter() {
+        let (a, b) = (find(&mut parent, i as usize), find(&mut parent, j as usize));
+        parent[a.max(b)] = a.min(b);
+    }
+    let lengths: Vec<f64> = edges
+        .iter()
+        .map(|&(i, j, _)| mat3::norm(mat3::sub(q[i as usize], q[j as usize])))
+        .collect();
+    let mean_length = lengths.iter().sum::<f64>() / lengths.len().max(1) as f64;
+    let mut bridges = Vec::new();
+    loop {
+        let roots: Vec<usize> = (0..n).map(|v| find(&mut parent, v)).collect();
+        if roots.iter().all(|&r| r == roots[0]) {
+            break;
+        }
+        // The closest vertex of another component for every vertex (the first on ties: the smallest index).
+        let nearest: Vec<(f64, usize)> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let mut best = (f64::INFINITY, usize::MAX);
+                for (j, qj) in q.iter().enumerate() {
+                    if roots[j] != roots[i] {
+                        let d = mat3::sub(q[i], *qj);
+                        let d2 = mat3::dot(d, d);
+                        if d2 < best.0 {
+                            best = (d2, j);
+                        }
+                    }
+                }
+                best
+            })
+            .collect();
+        let mut per_root: std::collections::BTreeMap<usize, (f64, usize, usize)> = Default::default();
+        for (i, &(d2, j)) in nearest.iter().enumerate() {
+            let key = (d2, i.min(j), i.max(j));
+            let slot = per_root.entry(roots[i]).or_insert(key);
+            if key.0 < slot.0 || (key.0 == slot.0 && (key.1, key.2) < (slot.1, slot.2)) {
+                *slot = key;
+            }
+        }
+        let mut chosen: Vec<(f64, usize, usize)> = per_root.into_values().collect();
+        chosen.sort_by(|a, b| a.0.total_cmp(&b.0).then((a.1, a.2).cmp(&(b.1, b.2))));
+        for (d2, a, b) in chosen {
+            let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+            if ra != rb {
+                parent[ra.max(rb)] = ra.min(rb);
+                let w = if d2 > 0.0 {
+                    WEIGHT_MIN * (mean_length * mean_length / d2).min(1.0)
+                } else {
+                    WEIGHT_MIN
+                };
+                bridges.push((a as u32, b as u32, w));
+            }
+        }
+    }
+    let count = bridges.len();
+    edges.extend(bridges);
+    edges.sort_unstable_by_key(|&(i, j, _)| (i, j));
+    count
+}
+
 impl AcapTopology {
     /// Builds the topology of a mesh whose reference frame is `reference`; `source` names the clip in errors.
     ///
@@ -173,7 +257,8 @@ impl AcapTopology {
             return Err(err("faces", format!("face {i} = {f:?} indexes past the {n} vertices")));
         }
         let q: Vec<Vec3> = reference.iter().copied().map(to_f64).collect();
-        let edges = edge_weights(&q, faces);
+        let mut edges = edge_weights(&q, faces);
+        let bridges = add_bridges(&q, &mut edges);
 
         let mut degree = vec![0usize; n];
         for &(i, j, _) in &edges {
@@ -232,6 +317,7 @@ impl AcapTopology {
             component_size: Vec::new(),
             ref_centroid: Vec::new(),
             solvers: reconstruct::Solvers::default(),
+            bridges,
         };
         topo.find_components();
         topo.solvers = topo.factorise()?;
@@ -243,9 +329,14 @@ impl AcapTopology {
         self.reference.len()
     }
 
-    /// Number of connected components of the edge graph (an isolated vertex is one).
+    /// Number of connected components of the edge graph after bridging (1 for any mesh with a vertex).
     pub fn components(&self) -> usize {
         self.seeds.len()
+    }
+
+    /// Number of bridge edges added between the mesh's connected components.
+    pub fn bridges(&self) -> usize {
+        self.bridges
     }
 
     /// The one-ring neighbours of `v`, ascending.
