@@ -207,8 +207,7 @@ fn degenerate_triangles_isolated_vertices_and_flat_rings_stay_finite() {
         }
     }
     // The planar grid still rotates rigidly: the normal direction follows the ring's best rotation.
-    for v in 0..16 {
-        let f = feats[1][v];
+    for (v, f) in feats[1].iter().take(16).enumerate() {
         assert!(
             (f[1] - 0.7).abs() < 1e-4 && (f[3] - 1.0).abs() < 1e-4,
             "vertex {v}: {f:?}"
