@@ -3,6 +3,7 @@
 //! Formats: DyMesh `.bin` (restricted unpickler, never executes), OBJ sequences, glTF/GLB.
 //! Preprocessing: welding, frame-0 normalisation (D1)–(D3), vertex filter, windows, FPS, padding.
 
+pub mod acap;
 pub mod batch;
 pub mod bench;
 pub mod clip;

@@ -3,6 +3,7 @@
 
 pub mod any_vae;
 pub mod attention;
+pub mod bdlstm;
 pub mod bench;
 pub mod dymesh_vae;
 pub mod frame_vae;
