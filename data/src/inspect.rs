@@ -9,6 +9,7 @@ use serde::Serialize;
 
 use crate::clip::object_uid;
 use crate::error::{DataError, Result};
+use crate::formats::skeletal::{ReadOptions, SkinStats, TakeInfo};
 use crate::formats::{self, Format};
 use crate::store::{CLIPS_FILE, IndexRow, Split, Status, read_index};
 
@@ -76,6 +77,10 @@ pub struct FileSummary {
     /// Bounding box over all frames.
     pub bbox_min: [f32; 3],
     pub bbox_max: [f32; 3],
+    /// The file's takes (empty for a single-clip format); the figures above are the first take's.
+    pub takes: Vec<TakeInfo>,
+    /// Skin weights of the first take that were renormalised or had more than 4 entries.
+    pub skin: SkinStats,
 }
 
 /// What [`inspect`] found.
@@ -208,7 +213,9 @@ pub fn synthetic_family(id: &str) -> Option<&str> {
 /// Read one clip file (or OBJ-sequence folder) and describe it.
 pub fn summarize_file(path: &Path) -> Result<FileSummary> {
     let format = Format::from_path(path)?;
-    let clip = formats::read_clip(path)?;
+    let takes = formats::list_takes(path)?.unwrap_or_default();
+    let taken = formats::read_take(path, &ReadOptions::default())?;
+    let clip = taken.clip;
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
     for p in &clip.vertices {
@@ -228,6 +235,8 @@ pub fn summarize_file(path: &Path) -> Result<FileSummary> {
         caption: clip.caption,
         bbox_min: lo,
         bbox_max: hi,
+        takes,
+        skin: taken.stats,
     })
 }
 
@@ -288,6 +297,23 @@ impl FileSummary {
         let _ = writeln!(o, "faces     {}", self.faces);
         let _ = writeln!(o, "caption   {:?}", self.caption);
         let _ = writeln!(o, "bbox      {:?} – {:?}", self.bbox_min, self.bbox_max);
+        if self.skin.vertices > 0 {
+            let _ = writeln!(o, "skin      {}", self.skin.line());
+        }
+        if !self.takes.is_empty() {
+            let _ = writeln!(o, "takes     {}", self.takes.len());
+            for (i, t) in self.takes.iter().enumerate() {
+                let file = t
+                    .file
+                    .as_ref()
+                    .map_or_else(String::new, |f| format!("  ({})", f.display()));
+                let _ = writeln!(
+                    o,
+                    "  {i:>3}  {:<28} {:>5} frames  {:>5.1} fps{file}",
+                    t.name, t.frames, t.fps
+                );
+            }
+        }
         o
     }
 }
@@ -308,6 +334,8 @@ mod tests {
             split,
             status,
             reason: reason.into(),
+            licence: String::new(),
+            source_package: String::new(),
             object: object_uid(id).into(),
         }
     }

@@ -4,14 +4,16 @@
 //! One bad file never aborts an import: it becomes a "rejected" row of the index with its reason. Only problems
 //! with the output folder or an existing store abort.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
+use crate::caption;
 use crate::clip::{Clip, object_uid};
 use crate::error::{DataError, Result};
+use crate::formats::skeletal::{ReadOptions, TakeSel};
 use crate::formats::{self, Format};
 use crate::fps::farthest_point_sampling;
 use crate::preprocess::{self, VertexFilter};
@@ -109,10 +111,51 @@ impl fmt::Display for ImportReport {
     }
 }
 
-/// What one source turned into.
+/// What one source turned into: its clips (windows with their object uid) and, for a file with takes, the takes
+/// that failed (`source#take`, reason). A source that produced nothing is `Rejected`.
 enum Outcome {
-    Clips(Vec<(StoredClip, String)>),
+    Clips(Vec<(StoredClip, String)>, Vec<(String, String)>),
     Rejected(String),
+}
+
+/// Where a source comes from: the package and licence recorded per clip in `index.parquet`, and an optional
+/// readable asset name for captions. Read from the nearest [`PROVENANCE_FILE`] in the source's folder or above.
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize)]
+pub struct Provenance {
+    #[serde(default)]
+    pub source_package: String,
+    #[serde(default)]
+    pub licence: String,
+    /// Readable asset name ("female soldier") for the captions of files in this folder.
+    #[serde(default)]
+    pub asset: Option<String>,
+}
+
+/// File name of a provenance sidecar: JSON `{"source_package": …, "licence": …, "asset": …}`.
+pub const PROVENANCE_FILE: &str = "any4d-source.json";
+
+/// The provenance of `path`: the nearest [`PROVENANCE_FILE`] in its folder or above (cached per folder).
+fn provenance_of(path: &Path, cache: &mut HashMap<PathBuf, Result<Provenance>>) -> Result<Provenance> {
+    let mut dir = path.parent();
+    let mut seen = Vec::new();
+    let found = loop {
+        let Some(d) = dir else { break Ok(Provenance::default()) };
+        if let Some(p) = cache.get(d) {
+            break p.clone();
+        }
+        seen.push(d.to_path_buf());
+        let file = d.join(PROVENANCE_FILE);
+        if file.is_file() {
+            break std::fs::read(&file)
+                .map_err(|e| DataError::io(&file, e))
+                .and_then(|b| serde_json::from_slice(&b).map_err(|e| DataError::new(&file, "json", e.to_string())));
+        }
+        dir = d.parent();
+    };
+    for d in seen {
+        cache.insert(d, found.clone());
+    }
+    found
 }
 
 /// One unit of work: a file or folder found under the sources, or one procedural clip.
@@ -121,6 +164,7 @@ enum Job {
         source: String,
         path: PathBuf,
         format: Result<Format>,
+        provenance: Result<Provenance>,
     },
     Synth {
         source: String,
@@ -137,24 +181,26 @@ impl Job {
 
     fn format_name(&self) -> &'static str {
         match self {
-            Job::File { format: Ok(f), .. } => format_name(f),
+            Job::File { format: Ok(f), .. } => f.name(),
             Job::File { format: Err(_), .. } => "",
             Job::Synth { .. } => "synth",
         }
     }
-}
 
-fn format_name(f: &Format) -> &'static str {
-    match f {
-        Format::Bin => "bin",
-        Format::ObjSeq => "obj-seq",
-        Format::Gltf => "gltf",
-        Format::Glb => "glb",
+    fn provenance(&self) -> Provenance {
+        match self {
+            Job::File { provenance: Ok(p), .. } => p.clone(),
+            _ => Provenance::default(),
+        }
     }
 }
 
-/// Import `sources` (files, or folders searched recursively for `.bin`/`.pkl`/`.pickle`/`.gltf`/`.glb` files and folders of
-/// `.obj` frames) into the store folder `out`; see the [`crate::store`] module doc for re-imports.
+/// Import `sources` (files, or folders searched recursively for the files of
+/// [`formats::SOURCE_EXTENSIONS`] and folders of `.obj` frames) into the store folder `out`; see the
+/// [`crate::store`] module doc for re-imports. Every take of a file with takes becomes its own clip: id
+/// `<object>_offset<take index>_0-<T−1>` (windows renumber the range), caption from the asset and take names
+/// ([`crate::caption`]), source `path#take`; its `licence` and `source_package` come from the nearest
+/// [`PROVENANCE_FILE`].
 pub fn import(sources: &[PathBuf], out: &Path, opts: &ImportOptions) -> Result<ImportReport> {
     import_with_progress(sources, out, opts, None)
 }
@@ -221,7 +267,7 @@ pub fn write_synth_windows(
         Job::Synth { source, index } => match synth::generate_one(cfg, *index) {
             Ok(mut clip) => {
                 clip.source = source.clone();
-                Outcome::Clips(preprocess_windows(&clip, window, stride, p))
+                Outcome::Clips(preprocess_windows(&clip, window, stride, p), Vec::new())
             }
             Err(e) => Outcome::Rejected(reason(&e, source)),
         },
@@ -332,10 +378,12 @@ fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
     }
     found.sort_by(|a, b| a.0.cmp(&b.0));
     found.dedup_by(|a, b| a.0 == b.0);
+    let mut cache = HashMap::new();
     Ok(found
         .into_iter()
         .map(|(path, format)| Job::File {
             source: path.display().to_string(),
+            provenance: provenance_of(&path, &mut cache),
             path,
             format,
         })
@@ -363,7 +411,7 @@ fn walk(dir: &Path, out: &Path, found: &mut Vec<(PathBuf, Result<Format>)>) {
     for p in entries {
         if p.is_dir() {
             walk(&p, out, found);
-        } else if matches!(ext(&p).as_deref(), Some("bin" | "pkl" | "pickle" | "gltf" | "glb")) {
+        } else if formats::is_source(&p) {
             let format = Format::from_path(&p);
             found.push((p, format));
         }
@@ -380,30 +428,113 @@ fn reason(e: &DataError, source: &str) -> String {
 }
 
 fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
-    let Job::File { source, path, format } = job else {
+    let Job::File {
+        source,
+        path,
+        format,
+        provenance,
+    } = job
+    else {
         return Outcome::Rejected("not a file".into());
     };
-    if let Err(e) = format {
+    let format = match format {
+        Ok(f) => *f,
+        Err(e) => return Outcome::Rejected(reason(e, source)),
+    };
+    if let Err(e) = provenance {
         return Outcome::Rejected(reason(e, source));
     }
-    let mut clip = match formats::read_clip(path) {
-        Ok(c) => c,
+    if !format.has_takes() {
+        return match formats::read_clip(path).and_then(|c| accept(c, source.clone(), opts)) {
+            Ok(windows) => Outcome::Clips(windows, Vec::new()),
+            Err(e) => Outcome::Rejected(reason(&e, source)),
+        };
+    }
+    let takes = match formats::list_takes(path) {
+        Ok(t) => t.unwrap_or_default(),
         Err(e) => return Outcome::Rejected(reason(&e, source)),
     };
-    clip.source = source.clone();
+    if takes.is_empty() {
+        return Outcome::Rejected("animations: no animation: a static mesh is not a clip".into());
+    }
+    let asset = job.provenance().asset.unwrap_or_else(|| caption::asset_of_path(path));
+    let object = object_name(path);
+    let mut clips = Vec::new();
+    let mut failed = Vec::new();
+    for (k, take) in takes.iter().enumerate() {
+        let take_source = format!("{source}#{}", take.name);
+        let read = formats::read_take(
+            path,
+            &ReadOptions {
+                take: TakeSel::Index(k),
+                ..ReadOptions::default()
+            },
+        );
+        let result = read.and_then(|t| {
+            let mut clip = t.clip;
+            clip.id = format!("{object}_offset{k}_0-{}", clip.frames - 1);
+            clip.caption = caption::caption(&asset, &take.name);
+            accept(clip, take_source.clone(), opts)
+        });
+        match result {
+            Ok(w) => clips.extend(w),
+            Err(e) => failed.push((take_source.clone(), reason(&e, source))),
+        }
+    }
+    if clips.is_empty() {
+        let why: Vec<String> = failed.iter().map(|(s, r)| format!("{s}: {r}")).take(3).collect();
+        return Outcome::Rejected(format!("no take became a clip ({})", why.join("; ")));
+    }
+    Outcome::Clips(clips, failed)
+}
+
+/// The object uid of a file with takes: its last two folders and stem, lower-case, `[a-z0-9]` runs joined by
+/// `-` (`…/actors/drone/mesh.md5mesh` → `actors-drone-mesh`), so that all takes of one asset share a split and
+/// the uid does not depend on where the tree was unpacked.
+fn object_name(path: &Path) -> String {
+    let comps: Vec<String> = path
+        .components()
+        .rev()
+        .take(3)
+        .map(|c| {
+            c.as_os_str()
+                .to_string_lossy()
+                .split('.')
+                .next()
+                .unwrap_or_default()
+                .to_ascii_lowercase()
+        })
+        .collect();
+    let joined = comps.into_iter().rev().collect::<Vec<_>>().join("-");
+    let mut out = String::new();
+    for c in joined.chars() {
+        if c.is_ascii_alphanumeric() {
+            out.push(c);
+        } else if !out.ends_with('-') && !out.is_empty() {
+            out.push('-');
+        }
+    }
+    out.trim_end_matches('-').to_owned()
+}
+
+/// Weld, filter and cut one clip into preprocessed windows.
+fn accept(mut clip: Clip, source: String, opts: &ImportOptions) -> Result<Vec<(StoredClip, String)>> {
+    clip.source = source;
     if let Weld::Eps(eps) = opts.weld {
         clip = preprocess::weld(&clip, eps);
     }
-    if let Err(e) = opts.filter.check(&clip) {
-        return Outcome::Rejected(reason(&e, source));
-    }
+    opts.filter.check(&clip)?;
     if clip.frames < opts.frames {
-        return Outcome::Rejected(format!(
-            "frames: clip {} has {} frames, fewer than the window length {}",
-            clip.id, clip.frames, opts.frames
+        return Err(DataError::new(
+            &clip.source,
+            "frames",
+            format!(
+                "clip {} has {} frames, fewer than the window length {}",
+                clip.id, clip.frames, opts.frames
+            ),
         ));
     }
-    Outcome::Clips(preprocess_windows(&clip, opts.frames, opts.stride, opts.p))
+    Ok(preprocess_windows(&clip, opts.frames, opts.stride, opts.p))
 }
 
 /// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 (SPEC §2.5)
@@ -432,7 +563,7 @@ fn preprocess_windows(clip: &Clip, frames: usize, stride: usize, p: usize) -> Ve
 
 /// The index row of a stored clip; called after [`StoreWriter::append`] accepted it, which checked that the
 /// counts fit in u32.
-fn ok_row(c: &StoredClip, format: &str, object: String) -> IndexRow {
+fn ok_row(c: &StoredClip, format: &str, object: String, provenance: &Provenance) -> IndexRow {
     let to_u32 = |v: usize| Some(v as u32);
     IndexRow {
         id: c.clip.id.clone(),
@@ -446,11 +577,14 @@ fn ok_row(c: &StoredClip, format: &str, object: String) -> IndexRow {
         status: Status::Ok,
         reason: String::new(),
         object,
+        licence: provenance.licence.clone(),
+        source_package: provenance.source_package.clone(),
     }
 }
 
-fn rejected_row(job: &Job, reason: String) -> IndexRow {
-    let source = job.source().to_owned();
+fn rejected_row(job: &Job, source: &str, reason: String) -> IndexRow {
+    let source = source.to_owned();
+    let provenance = job.provenance();
     let id = Path::new(&source)
         .file_name()
         .map_or_else(|| source.clone(), |n| n.to_string_lossy().into_owned());
@@ -466,6 +600,8 @@ fn rejected_row(job: &Job, reason: String) -> IndexRow {
         split: None,
         status: Status::Rejected,
         reason,
+        licence: provenance.licence,
+        source_package: provenance.source_package,
     }
 }
 
@@ -491,7 +627,7 @@ fn run_jobs(
         let (old_ok, old_rejected): (Vec<IndexRow>, Vec<IndexRow>) =
             rows.into_iter().partition(|r| r.status == Status::Ok);
         for (i, row) in old_ok.into_iter().enumerate() {
-            if replaced.contains(row.source.as_str()) {
+            if is_replaced(&replaced, &row.source) {
                 continue;
             }
             let raw = store.raw(i)?;
@@ -510,11 +646,7 @@ fn run_jobs(
             ok_rows.push(row);
             kept += 1;
         }
-        rejected_rows.extend(
-            old_rejected
-                .into_iter()
-                .filter(|r| !replaced.contains(r.source.as_str())),
-        );
+        rejected_rows.extend(old_rejected.into_iter().filter(|r| !is_replaced(&replaced, &r.source)));
     }
     let mut rejected = Vec::new();
     let mut added = 0;
@@ -522,11 +654,19 @@ fn run_jobs(
         let outcomes: Vec<Outcome> = chunk.par_iter().map(&process).collect();
         for (job, outcome) in chunk.iter().zip(outcomes) {
             match outcome {
-                Outcome::Clips(clips) => {
+                Outcome::Clips(clips, failed) => {
+                    let provenance = job.provenance();
                     for (clip, object) in clips {
                         writer.append(&clip)?;
-                        ok_rows.push(ok_row(&clip, job.format_name(), object));
+                        ok_rows.push(ok_row(&clip, job.format_name(), object, &provenance));
                         added += 1;
+                    }
+                    for (source, reason) in failed {
+                        rejected.push(Rejected {
+                            source: source.clone(),
+                            reason: reason.clone(),
+                        });
+                        rejected_rows.push(rejected_row(job, &source, reason));
                     }
                 }
                 Outcome::Rejected(reason) => {
@@ -534,7 +674,7 @@ fn run_jobs(
                         source: job.source().to_owned(),
                         reason: reason.clone(),
                     });
-                    rejected_rows.push(rejected_row(job, reason));
+                    rejected_rows.push(rejected_row(job, job.source(), reason));
                 }
             }
         }
@@ -557,6 +697,11 @@ fn run_jobs(
         val,
         rejected,
     })
+}
+
+/// Whether an index row's source (`path` or `path#take`) belongs to a source of this run.
+fn is_replaced(replaced: &HashSet<&str>, source: &str) -> bool {
+    replaced.contains(source) || source.rsplit_once('#').is_some_and(|(path, _)| replaced.contains(path))
 }
 
 /// The id at the start of an encoded record, if it is well formed.

@@ -50,6 +50,10 @@ pub struct IndexRow {
     pub reason: String,
     /// Object uid used by the split.
     pub object: String,
+    /// Licence of the source ("" when unknown), from the source's provenance sidecar.
+    pub licence: String,
+    /// Registry package the source came from ("" when unknown).
+    pub source_package: String,
 }
 
 fn polars_err(path: &Path, field: &str, e: PolarsError) -> DataError {
@@ -76,6 +80,8 @@ pub fn write_index(dir: &Path, rows: &[IndexRow]) -> Result<()> {
         Column::new("status".into(), strings(|r| r.status.as_str())),
         Column::new("reason".into(), strings(|r| &r.reason)),
         Column::new("object".into(), strings(|r| &r.object)),
+        Column::new("licence".into(), strings(|r| &r.licence)),
+        Column::new("source_package".into(), strings(|r| &r.source_package)),
     ];
     let mut df = DataFrame::new(rows.len(), columns).map_err(|e| polars_err(&path, "columns", e))?;
     let file = File::create(&tmp).map_err(|e| DataError::io(&tmp, e))?;
@@ -124,6 +130,14 @@ pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
         required("object")?,
     );
     let (frames, vertices, faces, split) = (ints("frames")?, ints("vertices")?, ints("faces")?, strs("split")?);
+    // Columns added later: a store written before them reads as "".
+    let optional = |name: &str| -> Result<Vec<String>> {
+        if df.column(name).is_err() {
+            return Ok(vec![String::new(); df.height()]);
+        }
+        Ok(strs(name)?.into_iter().map(Option::unwrap_or_default).collect())
+    };
+    let (licence, source_package) = (optional("licence")?, optional("source_package")?);
     let mut rows = Vec::with_capacity(df.height());
     for i in 0..df.height() {
         let status = match status[i].as_str() {
@@ -156,6 +170,8 @@ pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
             status,
             reason: reason[i].clone(),
             object: object[i].clone(),
+            licence: licence[i].clone(),
+            source_package: source_package[i].clone(),
         });
     }
     Ok(rows)

@@ -8,7 +8,9 @@
 //! - `index.parquet`: one row per accepted clip (status "ok", same order as `clips.bin`) followed by one row
 //!   per rejected source file (status "rejected" with its reason). Columns: `id`, `source`, `format`,
 //!   `frames`, `vertices`, `faces` (u32, null when rejected), `caption`, `split` ("train"/"val", null when
-//!   rejected), `status`, `reason` ("" when ok), `object` (the object uid that groups the split).
+//!   rejected), `status`, `reason` ("" when ok), `object` (the object uid that groups the split), `licence` and
+//!   `source_package` (from the source's provenance sidecar, "" when unknown; a source with takes is
+//!   recorded as `path#take`).
 //!
 //! Both files are written to a temporary name and renamed into place. `clips.bin` is renamed first, the index
 //! second; [`Store::open`] reads only `clips.bin`, which is self-contained.
@@ -52,8 +54,8 @@ use crate::preprocess::Normalization;
 
 pub use format::{Catalog, Entry, StoreWriter, encode, read_catalog};
 pub use import::{
-    ImportOptions, ImportReport, Progress, Rejected, Weld, import, import_with_progress, write_synth,
-    write_synth_windows, write_synth_with,
+    ImportOptions, ImportReport, PROVENANCE_FILE, Progress, Provenance, Rejected, Weld, import, import_with_progress,
+    write_synth, write_synth_windows, write_synth_with,
 };
 pub use index::{IndexRow, Status, read_index, write_index};
 

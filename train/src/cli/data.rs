@@ -32,6 +32,18 @@ pub enum DataCmd {
     Inspect(InspectArgs),
     /// Render a clip (file, or one clip of a store) as a contact sheet PNG.
     Render(RenderArgs),
+    /// Stage the animated assets of unpacked registry packages (one folder per package, from `dpkg -x`) for
+    /// `data import`: one folder per asset with its provenance (package, licence); see `scripts/real_corpus.sh`.
+    StageReal(StageRealArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct StageRealArgs {
+    /// Folder holding one unpacked package per sub-folder.
+    pub extracted: PathBuf,
+    /// Staging folder to write.
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -40,6 +52,9 @@ pub struct ConvertArgs {
     pub input: PathBuf,
     /// Output clip; the extension picks the format.
     pub output: PathBuf,
+    /// Take (animation) to read, by name or index (formats with takes; default: the first).
+    #[arg(long)]
+    pub take: Option<String>,
     /// Normalise by frame 0 (SPEC (D1)–(D3)).
     #[arg(long)]
     pub normalize: bool,
@@ -133,6 +148,9 @@ pub struct RenderArgs {
     /// Output PNG.
     #[arg(long)]
     pub out: PathBuf,
+    /// Take (animation) of a clip file, by name or index (default: the first).
+    #[arg(long)]
+    pub take: Option<String>,
 }
 
 /// Exit code of `import` when some sources were rejected (the store is still written).
@@ -152,6 +170,16 @@ pub fn run(cmd: DataCmd) -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         DataCmd::Render(a) => render(a),
+        DataCmd::StageReal(a) => {
+            let report = any4d_data::real_corpus::stage(&a.extracted, &a.out)?;
+            for (package, n) in &report.assets {
+                println!("{package}: {n} assets staged");
+            }
+            for (member, why) in &report.refused {
+                println!("  refused {member}: {why}");
+            }
+            Ok(ExitCode::SUCCESS)
+        }
     }
 }
 
@@ -168,7 +196,7 @@ fn weld(eps: Option<f32>) -> Weld {
 }
 
 fn convert(a: ConvertArgs) -> anyhow::Result<ExitCode> {
-    let mut clip = formats::read_clip(&a.input)?;
+    let mut clip = read_file(&a.input, a.take.as_deref())?;
     if let Weld::Eps(eps) = weld(a.weld) {
         clip = preprocess::weld(&clip, eps);
     }
@@ -185,6 +213,15 @@ fn convert(a: ConvertArgs) -> anyhow::Result<ExitCode> {
         clip.faces.len()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// A clip file, at take `take` (name or index) when given.
+fn read_file(path: &Path, take: Option<&str>) -> anyhow::Result<Clip> {
+    let opts = formats::skeletal::ReadOptions {
+        take: take.map_or(formats::skeletal::TakeSel::First, formats::skeletal::TakeSel::parse),
+        ..Default::default()
+    };
+    Ok(formats::read_take(path, &opts)?.clip)
 }
 
 fn progress_bar(what: &str) -> ProgressBar {
@@ -266,7 +303,7 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
                 a.path.display()
             );
         }
-        formats::read_clip(&a.path)?
+        read_file(&a.path, a.take.as_deref())?
     };
     render_contact_sheet(&clip, &a.out, &RenderOptions::default())?;
     println!("{} ({}) → {}", clip.id, a.path.display(), a.out.display());
