@@ -647,7 +647,7 @@ mod tests {
         let other = [("a", -1, [0.0; 3]), ("b", 0, [0.0; 3])];
         std::fs::write(
             dir.path().join("other.iqm"),
-            write_test_iqm(&[], &[], &[], &other, "x", &[vec![[0.0; 3]; 2]; 3], false),
+            write_test_iqm(&[], &[], &[], &other, "x", &vec![vec![[0.0; 3]; 2]; 3], false),
         )
         .unwrap();
         assert!(!has_mesh(&dir.path().join("walk_forward.iqm")) && has_mesh(&mesh_path));

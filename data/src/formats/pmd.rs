@@ -261,7 +261,7 @@ mod tests {
         // Bone 1 rises by f; bone 0 stays.
         let keys: Vec<Vec<[f32; 3]>> = (0..4).map(|f| vec![[0.0; 3], [0.0, 1.0 + f as f32, 0.0]]).collect();
         std::fs::write(dir.path().join("walk.psa"), write_test_psa(&keys)).unwrap();
-        std::fs::write(dir.path().join("bird.psa"), write_test_psa(&[vec![[0.0; 3]; 3]; 4])).unwrap();
+        std::fs::write(dir.path().join("bird.psa"), write_test_psa(&vec![vec![[0.0; 3]; 3]; 4])).unwrap();
         let path = dir.path().join("deer.pmd");
         let takes = list_takes(&path).unwrap();
         assert_eq!(takes.len(), 1, "three-bone animation is not a take: {takes:?}");
@@ -279,7 +279,7 @@ mod tests {
         let pos = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
         // A vertex weighted to bone 3 of a 2-bone skeleton.
         std::fs::write(&path, write_test_pmd(&pos, &[[0, 1, 2]], &[0, 3, 1], &[[0.0; 3]; 2])).unwrap();
-        std::fs::write(dir.path().join("a.psa"), write_test_psa(&[vec![[0.0; 3]; 2]; 2])).unwrap();
+        std::fs::write(dir.path().join("a.psa"), write_test_psa(&vec![vec![[0.0; 3]; 2]; 2])).unwrap();
         let e = read(&path, &ReadOptions::default()).unwrap_err();
         assert!(e.reason.contains("joint 3") && e.reason.contains("2 joints"), "{e}");
         // An unskinned vertex has no weight.
