@@ -7,9 +7,10 @@
 //! - `redeclipse-data`: the male and female player `.iqm` meshes with the animation-only `.iqm` files of
 //!   `actors/player`, and every folder holding a `.md5mesh` with its `.md5anim` files;
 //! - `0ad-data`: from `public.zip`, every actor XML under `art/actors/fauna` and `art/actors/units` (with the
-//!   variant files it names): its first skeletal mesh and its animations (`*.dae.cached.pmd/.psa`); units share
-//!   body meshes, so each mesh is staged once, with at most [`MAX_UNIT_ANIMS`] animations, and at most
-//!   [`MAX_UNIT_MESHES`] unit meshes;
+//!   variant files it names): its first skeletal mesh and its animations (`*.dae.cached.pmd/.psa`); actors
+//!   share meshes (horses of many coats, units of many civilisations), so each mesh is staged once, with the
+//!   animations of the first actor naming it; a unit mesh keeps at most [`MAX_UNIT_ANIMS`] animations, and at
+//!   most [`MAX_UNIT_MESHES`] unit meshes are staged;
 //! - `ufoai-data`: from `base/0models.pk3`, every `.md2` model with an `.anm` animation table beside it;
 //! - `assimp-testmodels`: the animated `.iqm` sample. Its MD2 models are never staged.
 //!
@@ -292,6 +293,7 @@ fn stage_0ad(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut Stag
     let mut plan: BTreeMap<String, String> = BTreeMap::new();
     let mut assets: Vec<(String, String)> = Vec::new(); // (folder, asset name)
     let mut unit_meshes: BTreeSet<String> = BTreeSet::new();
+    let mut staged_meshes: BTreeSet<String> = BTreeSet::new();
     let actors: Vec<String> = names
         .iter()
         .filter(|n| (n.starts_with("art/actors/fauna/") || n.starts_with("art/actors/units/")) && n.ends_with(".xml"))
@@ -307,20 +309,24 @@ fn stage_0ad(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut Stag
         if anims.is_empty() || !names.contains(&mesh_member) {
             continue;
         }
-        let mesh_stem = caption::words(mesh.rsplit('/').next().unwrap_or(mesh)).join("_");
+        let base = mesh.rsplit('/').next().unwrap_or(mesh).trim_end_matches(".dae");
+        let mesh_stem = caption::words(base).join("_");
+        // Actors differing only in textures share a mesh: stage each mesh once (the first actor in name order).
+        if !staged_meshes.insert(mesh.clone()) {
+            continue;
+        }
         let (folder, asset, anims) = if unit {
             if unit_meshes.len() >= MAX_UNIT_MESHES || !unit_meshes.insert(mesh.clone()) {
                 continue;
             }
-            let base = mesh.rsplit('/').next().unwrap_or(mesh);
-            let asset = if base.starts_with("f_") || base.contains("female") {
-                "woman"
-            } else {
-                "man"
+            let asset = match base.get(..2) {
+                Some("m_") => "man".to_owned(),
+                Some("f_") => "woman".to_owned(),
+                _ => caption::asset_words(base).join(" "),
             };
             (
                 format!("unit_{mesh_stem}"),
-                asset.to_owned(),
+                asset,
                 &anims[..anims.len().min(MAX_UNIT_ANIMS)],
             )
         } else {
