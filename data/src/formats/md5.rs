@@ -131,11 +131,11 @@ fn header(t: &mut Tokens) -> Result<()> {
     Ok(())
 }
 
+/// A bind-pose joint: only its name and parent are used (the weights' positions are joint-local, so the bind
+/// transforms are not needed to bake a frame).
 struct Joint {
     name: String,
     parent: i32,
-    pos: [f64; 3],
-    rot: [f64; 4],
 }
 
 #[derive(Clone, Copy)]
@@ -171,9 +171,9 @@ fn parse_mesh(path: &Path) -> Result<Mesh> {
         let f = format!("joints[{j}]");
         let name = t.next(&f)?.to_owned();
         let parent: i32 = t.num(&f)?;
-        let pos = t.vec3(&f)?;
-        let rot = quat(t.vec3(&f)?);
-        joints.push(Joint { name, parent, pos, rot });
+        t.vec3(&f)?; // bind position
+        t.vec3(&f)?; // bind rotation
+        joints.push(Joint { name, parent });
     }
     t.expect("}", "joints")?;
     check_parents(path, "joints", &joints.iter().map(|j| j.parent).collect::<Vec<_>>())?;
