@@ -350,7 +350,6 @@ fn stage_0ad(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut Stag
         }
         assets.push((folder, asset));
     }
-    drop(read);
     let by_member: BTreeMap<&str, Vec<&str>> = plan.iter().fold(BTreeMap::new(), |mut m, (d, s)| {
         m.entry(s.as_str()).or_insert_with(Vec::new).push(d.as_str());
         m

@@ -502,7 +502,7 @@ pub fn write_test_iqm(
     let base = HEADER as u32;
     let ofs_text = base;
     body.extend(&text);
-    while body.len() % 4 != 0 {
+    while !body.len().is_multiple_of(4) {
         body.push(0);
     }
     let (nv, nt) = (positions.len() as u32, faces.len() as u32);

@@ -250,12 +250,24 @@ struct Anim {
     frames: Vec<Vec<([f64; 3], [f64; 4])>>,
 }
 
-/// Joint names and parents of an `.md5anim` and its frame count, without reading the frames.
-fn anim_header(path: &Path) -> Result<(Vec<(String, i32)>, usize, f32)> {
+/// What an `.md5anim` says about itself before its frames.
+struct AnimHeader {
+    /// Joint names and parents.
+    joints: Vec<(String, i32)>,
+    frames: usize,
+    fps: f32,
+}
+
+/// The header of an `.md5anim`, without reading the frames.
+fn anim_header(path: &Path) -> Result<AnimHeader> {
     let text = read_text(path)?;
     let mut t = Tokens::new(path, &text);
     let (h, frames, fps, _) = anim_head(&mut t)?;
-    Ok((h.into_iter().map(|(n, p, _, _)| (n, p)).collect(), frames, fps))
+    Ok(AnimHeader {
+        joints: h.into_iter().map(|(n, p, _, _)| (n, p)).collect(),
+        frames,
+        fps,
+    })
 }
 
 type Hierarchy = Vec<(String, i32, u32, usize)>;
@@ -374,11 +386,11 @@ fn takes_of(path: &Path, mesh: &Mesh) -> Vec<TakeInfo> {
     skeletal::companions(path, &["md5anim"], false)
         .into_iter()
         .filter_map(|p| {
-            let (h, frames, fps) = anim_header(&p).ok()?;
-            fits(mesh, &h).then(|| TakeInfo {
+            let h = anim_header(&p).ok()?;
+            fits(mesh, &h.joints).then(|| TakeInfo {
                 name: skeletal::stem(&p),
-                frames,
-                fps,
+                frames: h.frames,
+                fps: h.fps,
                 file: Some(p),
             })
         })
