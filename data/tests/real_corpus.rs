@@ -134,3 +134,130 @@ fn stage_and_import_record_takes_captions_and_licences() {
     let again = store::import(&[dir.path().join("staged")], &out, &opts).unwrap();
     assert_eq!((again.total, again.kept), (5, 0));
 }
+
+/// An `.md5mesh` whose vertex 0 has 5 weights summing to 0.9 (vertices 1–3: one full weight each).
+const FIVE_WEIGHT_MESH: &str = r#"MD5Version 10
+commandline ""
+numJoints 2
+numMeshes 1
+joints {
+	"root" -1 ( 0 0 0 ) ( 0 0 0 )
+	"tip" 0 ( 0 0 1 ) ( 0 0 0 )
+}
+mesh {
+	numverts 4
+	vert 0 ( 0 0 ) 0 5
+	vert 1 ( 0 0 ) 5 1
+	vert 2 ( 0 0 ) 6 1
+	vert 3 ( 0 0 ) 7 1
+	numtris 2
+	tri 0 0 1 2
+	tri 1 0 2 3
+	numweights 8
+	weight 0 0 0.2 ( 0 0 0 )
+	weight 1 0 0.2 ( 0 0 0 )
+	weight 2 1 0.2 ( 0 0 0 )
+	weight 3 1 0.2 ( 0 0 0 )
+	weight 4 1 0.1 ( 0 0 0 )
+	weight 5 0 1 ( 1 0 0 )
+	weight 6 1 1 ( 1 0 0 )
+	weight 7 1 1 ( 0 1 0 )
+}
+"#;
+
+/// An `.md5anim` for [`FIVE_WEIGHT_MESH`]: the root slides along x by 0.1 per frame.
+fn md5_slide(frames: usize) -> String {
+    let mut s = format!(
+        "MD5Version 10\ncommandline \"\"\nnumFrames {frames}\nnumJoints 2\nframeRate 24\nnumAnimatedComponents 1\n\
+         hierarchy {{\n\"root\" -1 1 0\n\"tip\" 0 0 1\n}}\nbounds {{\n"
+    );
+    s += &"( 0 0 0 ) ( 1 1 1 )\n".repeat(frames);
+    s += "}\nbaseframe {\n( 0 0 0 ) ( 0 0 0 )\n( 0 0 1 ) ( 0 0 0 )\n}\n";
+    for f in 0..frames {
+        s += &format!("frame {f} {{\n{}\n}}\n", f as f32 * 0.1);
+    }
+    s
+}
+
+/// The bad inputs a real corpus meets, each through `data import`: the store keeps the good take, counts the
+/// skin weights it had to fix, and rejects every other file with a reason naming what is wrong.
+#[test]
+fn import_counts_skin_fixes_and_rejects_bad_files_with_reasons() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src");
+    // Good: five weights on vertex 0, summing to 0.9 (kept, renormalised, both counted).
+    write(&src.join("fan/fan.md5mesh"), FIVE_WEIGHT_MESH.as_bytes());
+    write(&src.join("fan/spin.md5anim"), md5_slide(20).as_bytes());
+    let (pos, faces) = strip(4);
+    let joints = [("root", -1, [0.0f32; 3])];
+    let moving: Vec<Vec<[f32; 3]>> = (0..20).map(|f| vec![[0.1 * f as f32, 0.0, 0.0]]).collect();
+    // A static mesh: no animation in the file and none beside it.
+    write(
+        &src.join("statue/statue.iqm"),
+        &iqm::write_test_iqm(&pos, &faces, &[0; 8], &joints, "", &[], true),
+    );
+    // A weight naming joint 5 of a one-joint skeleton.
+    write(
+        &src.join("broken/broken.iqm"),
+        &iqm::write_test_iqm(&pos, &faces, &[0, 0, 5, 0, 0, 0, 0, 0], &joints, "wave", &moving, true),
+    );
+    // A take longer than the configured maximum (40 > 30 frames).
+    let long: Vec<Vec<[f32; 3]>> = (0..40).map(|f| vec![[0.1 * f as f32, 0.0, 0.0]]).collect();
+    write(
+        &src.join("long/long.iqm"),
+        &iqm::write_test_iqm(&pos, &faces, &[0; 8], &joints, "dance", &long, true),
+    );
+    // A header claiming 2³¹ frames: refused from the file's length, nothing allocated for them.
+    let mut huge = iqm::write_test_iqm(&pos, &faces, &[0; 8], &joints, "run", &moving, true);
+    huge[16 + 4 * 19..16 + 4 * 20].copy_from_slice(&(1u32 << 31).to_le_bytes());
+    write(&src.join("huge/huge.iqm"), &huge);
+
+    let out = dir.path().join("store");
+    let opts = ImportOptions {
+        filter: VertexFilter { min: 3, max: 4096 },
+        frames: 16,
+        stride: 4,
+        max_frames: 30,
+        ..ImportOptions::default()
+    };
+    let rep = store::import(&[src], &out, &opts).unwrap();
+    // The fan's 20-frame take gives windows at 0 and 4.
+    assert_eq!(rep.added, 2, "{rep}");
+    assert_eq!(
+        (rep.skin.vertices, rep.skin.over_four_weights, rep.skin.renormalised),
+        (4, 1, 1),
+        "{rep}"
+    );
+    assert!(
+        rep.to_string().contains("1 with more than 4 weights, 1 renormalised"),
+        "{rep}"
+    );
+    let why = |name: &str| -> String {
+        let r = rep.rejected.iter().find(|r| r.source.contains(name));
+        r.unwrap_or_else(|| panic!("{name} not rejected: {rep}")).reason.clone()
+    };
+    assert!(why("statue.iqm").contains("static mesh is not a clip"), "{rep}");
+    assert!(why("broken.iqm").contains("joint 5"), "{rep}");
+    assert!(
+        why("long.iqm").contains("40 frames, more than the maximum of 30"),
+        "{rep}"
+    );
+    let huge = why("huge.iqm");
+    assert!(
+        huge.contains("more than the") && huge.contains("-byte file holds"),
+        "{huge}"
+    );
+    assert_eq!(rep.rejected.len(), 4, "{rep}");
+    // The index records them with their reasons.
+    let rows = read_index(&out).unwrap();
+    let rejected = rows.iter().filter(|r| r.status == Status::Rejected).count();
+    assert_eq!(rejected, 4);
+    // A maximum below the window length is refused before anything is read.
+    let e = store::import(
+        &[dir.path().join("src")],
+        &dir.path().join("other"),
+        &ImportOptions { max_frames: 8, ..opts },
+    )
+    .unwrap_err();
+    assert_eq!(e.field, "max_frames", "{e}");
+}

@@ -87,6 +87,13 @@ pub struct SkinStats {
 }
 
 impl SkinStats {
+    /// Add another read's counts to these.
+    pub fn add(&mut self, other: &SkinStats) {
+        self.vertices += other.vertices;
+        self.over_four_weights += other.over_four_weights;
+        self.renormalised += other.renormalised;
+    }
+
     /// A one-line summary, empty when nothing was skinned.
     pub fn line(&self) -> String {
         if self.vertices == 0 {

@@ -13,7 +13,7 @@ use rayon::prelude::*;
 use crate::caption;
 use crate::clip::{Clip, object_uid};
 use crate::error::{DataError, Result};
-use crate::formats::skeletal::{ReadOptions, TakeSel};
+use crate::formats::skeletal::{self, ReadOptions, SkinStats, TakeSel};
 use crate::formats::{self, Format};
 use crate::fps::farthest_point_sampling;
 use crate::preprocess::{self, VertexFilter};
@@ -47,6 +47,9 @@ pub struct ImportOptions {
     /// FPS tokens P (SPEC §2.5: 512). A clip with fewer vertices gets its FPS order repeated cyclically
     /// (see [`farthest_point_sampling`]); the default filter rules that out.
     pub p: usize,
+    /// Longest take read from a file with takes, in frames: a longer one is refused before its frames are
+    /// baked (default [`skeletal::MAX_FRAMES`]).
+    pub max_frames: usize,
 }
 
 impl Default for ImportOptions {
@@ -57,6 +60,7 @@ impl Default for ImportOptions {
             stride: 1,
             weld: Weld::Off,
             p: DEFAULT_P,
+            max_frames: skeletal::MAX_FRAMES,
         }
     }
 }
@@ -88,6 +92,9 @@ pub struct ImportReport {
     pub val: usize,
     /// This run's rejected sources.
     pub rejected: Vec<Rejected>,
+    /// Skin weights of this run's accepted takes that were renormalised or had more than 4 entries (each
+    /// take's vertices counted once, however many windows it gave).
+    pub skin: SkinStats,
 }
 
 impl fmt::Display for ImportReport {
@@ -104,6 +111,9 @@ impl fmt::Display for ImportReport {
             self.val,
             self.rejected.len()
         )?;
+        if self.skin.vertices > 0 {
+            writeln!(f, "  skin weights: {}", self.skin.line())?;
+        }
         for r in &self.rejected {
             writeln!(f, "  rejected {}: {}", r.source, r.reason)?;
         }
@@ -111,10 +121,11 @@ impl fmt::Display for ImportReport {
     }
 }
 
-/// What one source turned into: its clips (windows with their object uid) and, for a file with takes, the takes
-/// that failed (`source#take`, reason). A source that produced nothing is `Rejected`.
+/// What one source turned into: its clips (windows with their object uid), for a file with takes the takes
+/// that failed (`source#take`, reason), and the skin-weight counts of the takes that were accepted. A source
+/// that produced nothing is `Rejected`.
 enum Outcome {
-    Clips(Vec<(StoredClip, String)>, Vec<(String, String)>),
+    Clips(Vec<(StoredClip, String)>, Vec<(String, String)>, SkinStats),
     Rejected(String),
 }
 
@@ -267,7 +278,11 @@ pub fn write_synth_windows(
         Job::Synth { source, index } => match synth::generate_one(cfg, *index) {
             Ok(mut clip) => {
                 clip.source = source.clone();
-                Outcome::Clips(preprocess_windows(&clip, window, stride, p), Vec::new())
+                Outcome::Clips(
+                    preprocess_windows(&clip, window, stride, p),
+                    Vec::new(),
+                    SkinStats::default(),
+                )
             }
             Err(e) => Outcome::Rejected(reason(&e, source)),
         },
@@ -288,6 +303,15 @@ fn check_options(opts: &ImportOptions) -> Result<()> {
     }
     if opts.p == 0 {
         return err("p", "needs at least 1 FPS token".into());
+    }
+    if opts.max_frames < opts.frames {
+        return err(
+            "max_frames",
+            format!(
+                "{} is shorter than the window length {}: no take could become a clip",
+                opts.max_frames, opts.frames
+            ),
+        );
     }
     if opts.filter.min > opts.filter.max {
         return err(
@@ -446,7 +470,7 @@ fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
     }
     if !format.has_takes() {
         return match formats::read_clip(path).and_then(|c| accept(c, source.clone(), opts)) {
-            Ok(windows) => Outcome::Clips(windows, Vec::new()),
+            Ok(windows) => Outcome::Clips(windows, Vec::new(), SkinStats::default()),
             Err(e) => Outcome::Rejected(reason(&e, source)),
         };
     }
@@ -461,23 +485,27 @@ fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
     let object = object_name(path);
     let mut clips = Vec::new();
     let mut failed = Vec::new();
+    let mut skin = SkinStats::default();
     for (k, take) in takes.iter().enumerate() {
         let take_source = format!("{source}#{}", take.name);
         let read = formats::read_take(
             path,
             &ReadOptions {
                 take: TakeSel::Index(k),
-                ..ReadOptions::default()
+                max_frames: opts.max_frames,
             },
         );
         let result = read.and_then(|t| {
             let mut clip = t.clip;
             clip.id = format!("{object}_offset{k}_0-{}", clip.frames - 1);
             clip.caption = caption::caption(&asset, &take.name);
-            accept(clip, take_source.clone(), opts)
+            Ok((accept(clip, take_source.clone(), opts)?, t.stats))
         });
         match result {
-            Ok(w) => clips.extend(w),
+            Ok((w, stats)) => {
+                clips.extend(w);
+                skin.add(&stats);
+            }
             Err(e) => failed.push((take_source.clone(), reason(&e, source))),
         }
     }
@@ -485,7 +513,7 @@ fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
         let why: Vec<String> = failed.iter().map(|(s, r)| format!("{s}: {r}")).take(3).collect();
         return Outcome::Rejected(format!("no take became a clip ({})", why.join("; ")));
     }
-    Outcome::Clips(clips, failed)
+    Outcome::Clips(clips, failed, skin)
 }
 
 /// The object uid of a file with takes: its last two folders and stem, lower-case, `[a-z0-9]` runs joined by
@@ -649,12 +677,14 @@ fn run_jobs(
         rejected_rows.extend(old_rejected.into_iter().filter(|r| !is_replaced(&replaced, &r.source)));
     }
     let mut rejected = Vec::new();
+    let mut skin = SkinStats::default();
     let mut added = 0;
     for (c, chunk) in jobs.chunks(CHUNK).enumerate() {
         let outcomes: Vec<Outcome> = chunk.par_iter().map(&process).collect();
         for (job, outcome) in chunk.iter().zip(outcomes) {
             match outcome {
-                Outcome::Clips(clips, failed) => {
+                Outcome::Clips(clips, failed, stats) => {
+                    skin.add(&stats);
                     let provenance = job.provenance();
                     for (clip, object) in clips {
                         writer.append(&clip)?;
@@ -696,6 +726,7 @@ fn run_jobs(
         train: total - val,
         val,
         rejected,
+        skin,
     })
 }
 
