@@ -55,6 +55,11 @@ pub struct Summary {
     pub frames: BTreeMap<u32, usize>,
     /// Source format → number of index rows.
     pub formats: BTreeMap<String, usize>,
+    /// Registry package → stored clips / distinct objects (clips with a recorded `source_package` only).
+    pub packages: BTreeMap<String, usize>,
+    pub package_objects: BTreeMap<String, usize>,
+    /// Licence → stored clips (clips with a recorded licence only).
+    pub licences: BTreeMap<String, usize>,
     /// `<shape>-<motion>` → stored clips, for ids of the form `synth-<shape>-<motion>-<seed>-<index>…`.
     pub synthetic_families: BTreeMap<String, usize>,
     /// Field of the reject reason (the text before its first ':') → rejected files.
@@ -151,11 +156,15 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
         vertices_above: 0,
         frames: BTreeMap::new(),
         formats: BTreeMap::new(),
+        packages: BTreeMap::new(),
+        package_objects: BTreeMap::new(),
+        licences: BTreeMap::new(),
         synthetic_families: BTreeMap::new(),
         reject_reasons: BTreeMap::new(),
         rejected_files: Vec::new(),
     };
     let mut objects = std::collections::HashSet::new();
+    let mut package_objects = std::collections::HashSet::new();
     for r in rows {
         *s.formats.entry(r.format.clone()).or_default() += 1;
         match r.status {
@@ -178,6 +187,15 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
                     None => {}
                 }
                 objects.insert(r.object.as_str());
+                if !r.source_package.is_empty() {
+                    *s.packages.entry(r.source_package.clone()).or_default() += 1;
+                    if package_objects.insert((r.source_package.as_str(), r.object.as_str())) {
+                        *s.package_objects.entry(r.source_package.clone()).or_default() += 1;
+                    }
+                }
+                if !r.licence.is_empty() {
+                    *s.licences.entry(r.licence.clone()).or_default() += 1;
+                }
                 s.empty_captions += usize::from(r.caption.is_empty());
                 if let Some(t) = r.frames {
                     *s.frames.entry(t).or_default() += 1;
@@ -267,6 +285,9 @@ impl Summary {
         let _ = writeln!(o, "empty captions     {}", self.empty_captions);
         map_line(&mut o, "frames", &self.frames);
         map_line(&mut o, "formats", &self.formats);
+        map_line(&mut o, "packages (clips)", &self.packages);
+        map_line(&mut o, "packages (objects)", &self.package_objects);
+        map_line(&mut o, "licences", &self.licences);
         let _ = writeln!(
             o,
             "vertices           below {}: {}, above {}: {}",
@@ -366,9 +387,28 @@ mod tests {
             ),
             row("big", 5000, Some(Split::Train), Status::Ok, ""),
             row("bad", 0, None, Status::Rejected, "vertices: has 100 vertices"),
+            IndexRow {
+                source_package: "0ad-data".into(),
+                licence: "CC-BY-SA-3.0".into(),
+                ..row("deer_offset0_0-15", 1000, Some(Split::Train), Status::Ok, "")
+            },
+            IndexRow {
+                source_package: "0ad-data".into(),
+                licence: "CC-BY-SA-3.0".into(),
+                ..row("deer_offset0_8-23", 1000, Some(Split::Train), Status::Ok, "")
+            },
+            IndexRow {
+                source_package: "0ad-data".into(),
+                ..row("bad-deer", 0, None, Status::Rejected, "frames: too short")
+            },
         ];
         let s = summarize_rows(Path::new("d"), &rows);
-        assert_eq!((s.clips, s.ok, s.rejected, s.train, s.val), (5, 4, 1, 3, 1));
+        assert_eq!((s.clips, s.ok, s.rejected, s.train, s.val), (8, 6, 2, 5, 1));
+        // Packages count stored clips and their objects (both deer windows are one object); rejects are not counted.
+        assert_eq!(s.packages.get("0ad-data"), Some(&2));
+        assert_eq!(s.package_objects.get("0ad-data"), Some(&1));
+        assert_eq!(s.licences.get("CC-BY-SA-3.0"), Some(&2));
+        assert_eq!(s.licences.len(), 1);
         assert_eq!(s.empty_captions, 1);
         assert_eq!(s.vertex_histogram.len(), 8);
         assert_eq!(
