@@ -20,6 +20,8 @@ use any4d_data::rng::{Rng, rng};
 use any4d_data::store::{self, DEFAULT_P, ImportOptions, Store, Weld};
 use any4d_data::synth::SynthConfig;
 
+use super::bench_formats::JOINTS;
+
 #[derive(Subcommand, Debug)]
 pub enum DataCmd {
     /// Convert a clip between formats (chosen by extension); geometry is unchanged unless a flag asks.
@@ -89,6 +91,9 @@ pub struct ImportArgs {
     /// FPS tokens P per clip.
     #[arg(long, default_value_t = DEFAULT_P)]
     pub p: usize,
+    /// Longest take (animation) read from a file with takes, in frames; a longer one is rejected unread.
+    #[arg(long, default_value_t = any4d_data::formats::skeletal::MAX_FRAMES)]
+    pub max_frames: usize,
 }
 
 #[derive(Args, Debug)]
@@ -245,6 +250,7 @@ fn import(a: ImportArgs) -> anyhow::Result<ExitCode> {
         stride: a.stride,
         weld: weld(a.weld),
         p: a.p,
+        max_frames: a.max_frames,
     };
     let bar = progress_bar("import");
     let tick = |done: usize, total: usize| {
@@ -477,6 +483,18 @@ fn bench_in(a: &BenchArgs, dir: &Path) -> anyhow::Result<ExitCode> {
                 reference.fps_checksum
             );
         }
+    }
+    // (c) every reader on the same clips, written in its format.
+    if a.vertices > usize::from(u16::MAX) {
+        println!("per format: skipped (MD2 and PMD index vertices with 16 bits)");
+        return Ok(ExitCode::SUCCESS);
+    }
+    let clips = (0..a.clips)
+        .map(|i| bench_clip(i, a.frames, a.vertices))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    println!("per format (read one take + normalise + FPS, 1 thread; skeletal formats bake {JOINTS} joints):");
+    for (format, rate) in super::bench_formats::per_format(&clips, &dir.join("formats"), a.p)? {
+        println!("  {format:<8} {rate:>9.2} clips/s");
     }
     Ok(ExitCode::SUCCESS)
 }
