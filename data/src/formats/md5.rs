@@ -121,10 +121,14 @@ fn read_text(path: &Path) -> Result<String> {
     String::from_utf8(bytes).map_err(|e| DataError::new(path, "file", format!("not UTF-8 text: {e}")))
 }
 
+/// `MD5Version 10` (optional: Red Eclipse ships meshes without the line, and its engine reads them) and the
+/// `commandline` string.
 fn header(t: &mut Tokens) -> Result<()> {
-    let version: u32 = t.keyed("MD5Version")?;
-    if version != 10 {
-        return Err(t.err("MD5Version", format!("version {version}, only 10 is supported")));
+    if t.toks.get(t.at) != Some(&"commandline") {
+        let version: u32 = t.keyed("MD5Version")?;
+        if version != 10 {
+            return Err(t.err("MD5Version", format!("version {version}, only 10 is supported")));
+        }
     }
     t.expect("commandline", "commandline")?;
     t.next("commandline")?;
@@ -512,6 +516,12 @@ mesh {
         let takes = list_takes(&mesh).unwrap();
         assert_eq!(takes.len(), 1, "{takes:?}");
         assert_eq!((takes[0].name.as_str(), takes[0].frames), ("slide", 3));
+        // Without its version line the mesh reads the same; another version is refused.
+        std::fs::write(&mesh, MESH.replacen("MD5Version 10\n", "", 1)).unwrap();
+        assert_eq!(list_takes(&mesh).unwrap(), takes);
+        std::fs::write(&mesh, MESH.replacen("MD5Version 10", "MD5Version 11", 1)).unwrap();
+        assert_eq!(list_takes(&mesh).unwrap_err().field, "MD5Version");
+        std::fs::write(&mesh, MESH).unwrap();
         let (clip, stats, _) = read(&mesh, &ReadOptions::default()).unwrap();
         assert_eq!((clip.frames, clip.n_vertices), (3, 3));
         // Vertex 2's biases sum to 0.5: renormalised and counted; it sits at tip + (0,0,0.5) = (0,0,1.5).

@@ -451,6 +451,16 @@ fn reason(e: &DataError, source: &str) -> String {
     }
 }
 
+/// The reason text of a rejected take: `field: reason`, followed by the file in parentheses when it is neither
+/// the source nor the take (an animation file beside the mesh), so that the field always comes first.
+fn take_reason(e: &DataError, source: &str, take_source: &str) -> String {
+    if e.path == source || e.path == take_source {
+        format!("{}: {}", e.field, e.reason)
+    } else {
+        format!("{}: {} (in {})", e.field, e.reason, e.path)
+    }
+}
+
 fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
     let Job::File {
         source,
@@ -506,12 +516,26 @@ fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
                 clips.extend(w);
                 skin.add(&stats);
             }
-            Err(e) => failed.push((take_source.clone(), reason(&e, source))),
+            Err(e) => failed.push((take_source.clone(), take_reason(&e, source, &take_source))),
         }
     }
     if clips.is_empty() {
-        let why: Vec<String> = failed.iter().map(|(s, r)| format!("{s}: {r}")).take(3).collect();
-        return Outcome::Rejected(format!("no take became a clip ({})", why.join("; ")));
+        let why: Vec<String> = failed
+            .iter()
+            .take(3)
+            .map(|(s, r)| format!("{}: {r}", s.rsplit_once('#').map_or(s.as_str(), |(_, take)| take)))
+            .collect();
+        let more = failed.len().saturating_sub(3);
+        let more = if more > 0 {
+            format!("; {more} more")
+        } else {
+            String::new()
+        };
+        return Outcome::Rejected(format!(
+            "takes: none of {} became a clip ({}{more})",
+            failed.len(),
+            why.join("; ")
+        ));
     }
     Outcome::Clips(clips, failed, skin)
 }
