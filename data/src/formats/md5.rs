@@ -121,17 +121,19 @@ fn read_text(path: &Path) -> Result<String> {
     String::from_utf8(bytes).map_err(|e| DataError::new(path, "file", format!("not UTF-8 text: {e}")))
 }
 
-/// `MD5Version 10` (optional: Red Eclipse ships meshes without the line, and its engine reads them) and the
-/// `commandline` string.
+/// `MD5Version 10` and the `commandline` string, each optional: Red Eclipse ships meshes without one or both
+/// lines, and its engine reads them. A version other than 10 is refused.
 fn header(t: &mut Tokens) -> Result<()> {
-    if t.toks.get(t.at) != Some(&"commandline") {
+    if t.toks.get(t.at) == Some(&"MD5Version") {
         let version: u32 = t.keyed("MD5Version")?;
         if version != 10 {
             return Err(t.err("MD5Version", format!("version {version}, only 10 is supported")));
         }
     }
-    t.expect("commandline", "commandline")?;
-    t.next("commandline")?;
+    if t.toks.get(t.at) == Some(&"commandline") {
+        t.next("commandline")?;
+        t.next("commandline")?;
+    }
     Ok(())
 }
 
@@ -516,8 +518,10 @@ mesh {
         let takes = list_takes(&mesh).unwrap();
         assert_eq!(takes.len(), 1, "{takes:?}");
         assert_eq!((takes[0].name.as_str(), takes[0].frames), ("slide", 3));
-        // Without its version line the mesh reads the same; another version is refused.
+        // Without its version and command lines the mesh reads the same; another version is refused.
         std::fs::write(&mesh, MESH.replacen("MD5Version 10\n", "", 1)).unwrap();
+        assert_eq!(list_takes(&mesh).unwrap(), takes);
+        std::fs::write(&mesh, MESH.replacen("MD5Version 10\ncommandline \"\"\n", "", 1)).unwrap();
         assert_eq!(list_takes(&mesh).unwrap(), takes);
         std::fs::write(&mesh, MESH.replacen("MD5Version 10", "MD5Version 11", 1)).unwrap();
         assert_eq!(list_takes(&mesh).unwrap_err().field, "MD5Version");
