@@ -2,8 +2,10 @@
 //!
 //! Rule: both names are split into lower-case words (at `_`, `-`, `.`, spaces, digits and camelCase bounds;
 //! trailing digits dropped: `walk01` → `walk`). Asset words in [`GENERIC`] (`mesh`, `body`, `tris`, …) are
-//! dropped, `male`/`female` move to the front. The first take word found in [`MOTIONS`] gives the verb phrase,
-//! followed by the take's direction words (`forward`, `left`, …): `a male player walking forward`,
+//! dropped, `male`/`female` move to the front. The first take word found in [`MOTIONS`] gives the verb phrase
+//! (a word glued from a motion and more, `runbackward`, counts as that motion when the motion word has at least
+//! 3 letters, and a direction word that ends it counts as a direction), followed by the take's direction words
+//! (`forward`, `left`, …): `a male player walking forward`,
 //! `a deer galloping`. Without a known motion word the caption is the asset alone (`a drone`); without an asset
 //! word it is `something <motion>`; with neither it is empty (unconditional).
 
@@ -92,7 +94,7 @@ pub const MOTIONS: &[(&str, &str)] = &[
     ("chop", "chopping"),
     ("mine", "mining"),
     ("farm", "farming"),
-    ("fish", "fishing"),
+    ("fishing", "fishing"),
     ("carry", "carrying"),
     ("throw", "throwing"),
     ("open", "opening"),
@@ -173,14 +175,23 @@ pub fn asset_of_path(path: &Path) -> String {
 /// The caption for `asset` (already readable, may be empty) doing take `take` (see the module doc).
 pub fn caption(asset: &str, take: &str) -> String {
     let tw = words(take);
-    let motion = tw
-        .iter()
-        .find_map(|w| MOTIONS.iter().find(|(k, _)| k == w).map(|(_, v)| *v));
-    let dirs: Vec<&str> = tw
-        .iter()
-        .filter(|w| DIRECTIONS.contains(&w.as_str()))
-        .map(String::as_str)
-        .collect();
+    let exact = |w: &str| MOTIONS.iter().find(|(k, _)| *k == w).map(|(_, v)| *v);
+    // `runbackward` → `run` + `backward`: the longest motion word of ≥ 3 letters the word starts with.
+    let glued = |w: &str| {
+        MOTIONS
+            .iter()
+            .filter(|(k, _)| k.len() >= 3 && w.len() > k.len() && w.starts_with(k))
+            .max_by_key(|(k, _)| k.len())
+            .map(|(k, v)| (*v, DIRECTIONS.iter().find(|d| w[k.len()..].ends_with(**d)).copied()))
+    };
+    let motion = tw.iter().find_map(|w| exact(w).map(|m| (m, None)).or_else(|| glued(w)));
+    let mut dirs: Vec<&str> = motion.and_then(|(_, d)| d).into_iter().collect();
+    dirs.extend(
+        tw.iter()
+            .filter(|w| DIRECTIONS.contains(&w.as_str()))
+            .map(String::as_str),
+    );
+    let motion = motion.map(|(m, _)| m);
     let subject = if asset.is_empty() {
         String::new()
     } else {
@@ -221,6 +232,11 @@ mod tests {
         assert_eq!(caption("elephant", "idle"), "an elephant standing idle");
         assert_eq!(caption("drone", "frag_power"), "a drone");
         assert_eq!(caption("", "runcycle0"), "something running");
+        assert_eq!(caption("male player", "runbackward0"), "a male player running backward");
+        assert_eq!(caption("male player", "runstepleft0"), "a male player running left");
+        // A glued word needs a motion of at least 3 letters at its start.
+        assert_eq!(caption("fish", "fish_move"), "a fish moving");
+        assert_eq!(caption("cat", "upset"), "a cat");
         assert_eq!(caption("", "Take 001"), "");
         assert_eq!(words("hudPistol-reload2"), ["hud", "pistol", "reload"]);
     }
