@@ -12,7 +12,9 @@
 //!   animations of the first actor naming it; a unit mesh keeps at most [`MAX_UNIT_ANIMS`] animations, and at
 //!   most [`MAX_UNIT_MESHES`] unit meshes are staged;
 //! - `ufoai-data`: from `base/0models.pk3`, every `.md2` model with an `.anm` animation table beside it;
-//! - `assimp-testmodels`: the animated `.iqm` sample. Its MD2 models are never staged.
+//! - `assimp-testmodels`: the animated `.iqm` sample. Its MD2 models are never staged;
+//! - both of the last two (folder [`MOCAP_FOLDER`]): the `.bvh` motion capture of `assimp-testmodels` beside
+//!   copies of the Red Eclipse player meshes, retargeted at import ([`crate::formats::bvh`]).
 //!
 //! Packages held out for evaluation (OpenArena, MegaGlest, Nexuiz, Xonotic) are refused by name.
 
@@ -73,7 +75,51 @@ pub fn stage(extracted: &Path, out: &Path) -> Result<StageReport> {
         };
         report.assets.insert(package, n);
     }
+    let (re, assimp) = (extracted.join("redeclipse-data"), extracted.join("assimp-testmodels"));
+    if re.is_dir() && assimp.is_dir() {
+        let n = stage_mocap(&re, &assimp, &out.join(MOCAP_FOLDER))?;
+        report.assets.insert(MOCAP_FOLDER.to_owned(), n);
+    }
     Ok(report)
+}
+
+/// Staging folder (and `source_package`) of the motion capture retargeted onto the Red Eclipse players.
+pub const MOCAP_FOLDER: &str = "redeclipse-data+assimp-testmodels";
+
+/// The CMU and Biovision BVH files of `assimp-testmodels` beside copies of the Red Eclipse player meshes, in
+/// folders whose last two names match the players' own staging (`player_male/male/`), so that their clips share
+/// the players' object uid and split. The licence records both sources.
+fn stage_mocap(re: &Path, assimp: &Path, dest: &Path) -> Result<usize> {
+    let bvh_dir = assimp.join("usr/share/assimp/models/BVH");
+    let motions = files_with(&bvh_dir, "bvh");
+    let player = re.join("usr/share/games/redeclipse/data/actors/player");
+    if motions.is_empty() {
+        return Ok(0);
+    }
+    let (c_re, c_assimp) = (
+        Dep5::read(&re.join("usr/share/doc/redeclipse-data/copyright")),
+        Dep5::read(&assimp.join("usr/share/doc/assimp-testmodels/copyright")),
+    );
+    let mut n = 0;
+    for who in ["male", "female"] {
+        let mesh = player.join(who).join(format!("RE_Player_{who}.iqm"));
+        if !mesh.is_file() {
+            continue;
+        }
+        let to = dest.join(format!("player_{who}")).join(who);
+        copy(&mesh, &to.join(mesh.file_name().expect("file")))?;
+        for m in &motions {
+            copy(m, &to.join(m.file_name().expect("file")))?;
+        }
+        let licence = format!(
+            "{} (mesh) AND {} (motion)",
+            c_re.licence(&rel(re, &mesh)),
+            c_assimp.licence(&rel(assimp, &motions[0]))
+        );
+        write_provenance(&to, MOCAP_FOLDER, &licence, &format!("{who} player"))?;
+        n += 1;
+    }
+    Ok(n)
 }
 
 /// A Debian machine-readable `copyright` file: `Files:` patterns and their `License:`; the last matching

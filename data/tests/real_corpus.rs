@@ -6,7 +6,7 @@ use std::path::Path;
 
 use any4d_data::formats::{iqm, md2};
 use any4d_data::preprocess::VertexFilter;
-use any4d_data::real_corpus::stage;
+use any4d_data::real_corpus::{MOCAP_FOLDER, stage};
 use any4d_data::store::{self, ImportOptions, Status, read_index};
 
 fn write(path: &Path, bytes: &[u8]) {
@@ -263,4 +263,46 @@ fn import_counts_skin_fixes_and_rejects_bad_files_with_reasons() {
     )
     .unwrap_err();
     assert_eq!(e.field, "max_frames", "{e}");
+}
+
+/// The motion capture of `assimp-testmodels` is staged beside copies of the Red Eclipse players with both
+/// licences; a BVH whose joints do not map onto the rig is a rejected take naming the joints of both.
+#[test]
+fn mocap_is_staged_beside_the_players_with_both_licences() {
+    let dir = tempfile::tempdir().unwrap();
+    let extracted = dir.path().join("extracted");
+    fake_packages(&extracted);
+    let assimp = extracted.join("assimp-testmodels");
+    write(
+        &assimp.join("usr/share/doc/assimp-testmodels/copyright"),
+        b"Format: dep5\n\nFiles: *\nLicense: BSD-3-clause\n",
+    );
+    let bvh = "HIERARCHY\nROOT Pelvis\n{\nOFFSET 0 0 0\nCHANNELS 3 Xposition Yposition Zposition\n\
+               End Site\n{\nOFFSET 0 1 0\n}\n}\nMOTION\nFrames: 2\nFrame Time: 0.0333\n0 0 0\n0 1 0\n";
+    write(&assimp.join("usr/share/assimp/models/BVH/01_01.bvh"), bvh.as_bytes());
+    let staged = dir.path().join("staged");
+    let report = stage(&extracted, &staged).unwrap();
+    assert_eq!(report.assets.get(MOCAP_FOLDER), Some(&1), "{report:?}");
+    let to = staged.join(MOCAP_FOLDER).join("player_male/male");
+    assert!(to.join("RE_Player_male.iqm").is_file() && to.join("01_01.bvh").is_file());
+    let provenance: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(to.join(store::PROVENANCE_FILE)).unwrap()).unwrap();
+    assert_eq!(provenance["licence"], "CC-BY-SA-3.0 (mesh) AND BSD-3-clause (motion)");
+    assert_eq!(provenance["source_package"], MOCAP_FOLDER);
+
+    let opts = ImportOptions {
+        filter: VertexFilter { min: 3, max: 4096 },
+        frames: 16,
+        stride: 2,
+        ..ImportOptions::default()
+    };
+    let rep = store::import(&[staged.join(MOCAP_FOLDER)], &dir.path().join("store"), &opts).unwrap();
+    assert_eq!(rep.added, 0, "{rep}");
+    let reason = &rep.rejected[0].reason;
+    assert!(
+        reason.contains("01_01: joints: 1 body parts map")
+            && reason.contains("BVH joints [Pelvis]")
+            && reason.contains("rig joints [hips, head]"),
+        "{reason}"
+    );
 }

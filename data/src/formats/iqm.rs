@@ -3,7 +3,8 @@
 //! A file holds meshes, joints, poses and animations, or only some of them: Red Eclipse ships one mesh file per
 //! character and one animation-only file per move. The takes of a file with a mesh are its own animations, or,
 //! when it has none, the animations of the animation-only `.iqm` files beside it and in its parent folder whose
-//! pose count equals the mesh's joint count and whose joint names (when they have any) equal the mesh's. Every
+//! pose count equals the mesh's joint count and whose joint names (when they have any) equal the mesh's; then
+//! the `.bvh` files in its folder, retargeted onto its skeleton by joint name ([`super::bvh`]). Every
 //! mesh of the file is read (faces offset into one vertex list); frames are the file's own frames (no
 //! resampling); coordinates go from IQM's Z-up to Y-up ([`super::skeletal::z_up_to_y_up`]).
 //!
@@ -14,6 +15,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::bvh;
 use super::bytes::Bytes;
 use super::skeletal::{
     self, Influences, Mat, ReadOptions, SkinStats, TakeInfo, check_parents, clean_influences, globals, inverse, mul,
@@ -320,10 +322,10 @@ fn load(path: &Path) -> Result<Iqm> {
     parse(path, &data)
 }
 
-/// Where a take's frames come from.
-struct Source {
-    file: Option<PathBuf>,
-    anim: usize,
+/// Where a take's frames come from: an animation of this or another `.iqm`, or a BVH retargeted onto the mesh.
+enum Source {
+    Iqm { file: Option<PathBuf>, anim: usize },
+    Bvh(PathBuf),
 }
 
 /// Whether the animation file `anim` fits the skeleton of `mesh`.
@@ -353,7 +355,7 @@ fn take_list(path: &Path, iqm: &Iqm) -> Vec<(TakeInfo, Source)> {
                         fps: a.fps,
                         file: file.clone(),
                     },
-                    Source {
+                    Source::Iqm {
                         file: file.clone(),
                         anim: i,
                     },
@@ -361,11 +363,16 @@ fn take_list(path: &Path, iqm: &Iqm) -> Vec<(TakeInfo, Source)> {
             })
             .collect()
     };
-    if !iqm.anims.is_empty() || iqm.mesh.is_none() {
+    if iqm.mesh.is_none() {
         return own(iqm, None);
     }
-    let mut out = Vec::new();
-    for p in skeletal::companions(path, &["iqm"], true) {
+    let mut out = own(iqm, None);
+    let companions = if iqm.anims.is_empty() {
+        skeletal::companions(path, &["iqm"], true)
+    } else {
+        Vec::new()
+    };
+    for p in companions {
         if let Ok(other) = load(&p)
             && other.mesh.is_none()
             && compatible(iqm, &other)
@@ -377,6 +384,19 @@ fn take_list(path: &Path, iqm: &Iqm) -> Vec<(TakeInfo, Source)> {
                 takes[0].0.name = skeletal::stem(&p);
             }
             out.extend(takes);
+        }
+    }
+    // Motion capture beside the mesh, retargeted by joint name (listed even when nothing maps: reading it then
+    // says which joints failed to match).
+    for p in skeletal::companions(path, &["bvh"], false) {
+        if let Ok(b) = bvh::parse(&p, usize::MAX, false) {
+            let info = TakeInfo {
+                name: skeletal::stem(&p),
+                frames: b.frames,
+                fps: b.fps,
+                file: Some(p.clone()),
+            };
+            out.push((info, Source::Bvh(p)));
         }
     }
     out
@@ -401,16 +421,20 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     let k = skeletal::pick(path, &infos, &opts.take)?;
     let (info, src) = &takes[k];
     skeletal::check_frames(path, &info.name, info.frames, opts.max_frames)?;
+    let (file, anim) = match src {
+        Source::Iqm { file, anim } => (file, *anim),
+        Source::Bvh(p) => return read_bvh(path, &iqm, mesh, p, info, opts),
+    };
     let other;
-    let anim_file: &Iqm = match &src.file {
+    let anim_file: &Iqm = match file {
         None => &iqm,
         Some(p) => {
             other = load(p)?;
             &other
         }
     };
-    let anim_path = src.file.as_deref().unwrap_or(path);
-    let anim = &anim_file.anims[src.anim];
+    let anim_path = file.as_deref().unwrap_or(path);
+    let anim = &anim_file.anims[anim];
     let n = mesh.positions.len();
     let mut infl = mesh.influences.clone().ok_or_else(|| {
         err(
@@ -465,6 +489,57 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
         skeletal::stem(path),
         vertices,
         anim.count,
+        n,
+        mesh.faces.clone(),
+        "",
+        path.display().to_string(),
+    )?;
+    Ok((clip, stats, info.clone()))
+}
+
+/// Bake the BVH take `bvh_path` onto the mesh of `iqm` ([`bvh::retarget`]).
+fn read_bvh(
+    path: &Path,
+    iqm: &Iqm,
+    mesh: &Mesh,
+    bvh_path: &Path,
+    info: &TakeInfo,
+    opts: &ReadOptions,
+) -> Result<(Clip, SkinStats, TakeInfo)> {
+    let motion = bvh::parse(bvh_path, opts.max_frames, true)?;
+    let mut infl = mesh.influences.clone().ok_or_else(|| {
+        DataError::new(
+            path,
+            "vertexarrays",
+            "the mesh has no BLENDINDEXES/BLENDWEIGHTS: nothing to animate",
+        )
+    })?;
+    let stats = clean_influences(path, "BLENDINDEXES", &mut infl, iqm.joints.len())?;
+    let parents = check_parents(path, "joints", &iqm.joints.iter().map(|j| j.parent).collect::<Vec<_>>())?;
+    let bind = globals(&parents, &iqm.joints.iter().map(|j| j.local).collect::<Vec<_>>());
+    let names: Vec<String> = iqm.joints.iter().map(|j| j.name.clone()).collect();
+    let rest: Vec<[f64; 3]> = bind.iter().map(|m| [m[0][3], m[1][3], m[2][3]]).collect();
+    let rig = bvh::Rig {
+        names: &names,
+        parents: &parents,
+        rest: &rest,
+        // Y-up BVH into IQM's Z-up axes (the inverse of `z_up_to_y_up`).
+        axes: |p| [p[0], -p[2], p[1]],
+    };
+    let skins = bvh::retarget(bvh_path, &motion, &rig)?;
+    let n = mesh.positions.len();
+    let mut vertices = Vec::with_capacity(skins.len() * n);
+    for skin in &skins {
+        let start = vertices.len();
+        skin_frame(&mesh.positions, &infl, skin, &mut vertices);
+        for p in &mut vertices[start..] {
+            *p = z_up_to_y_up(p.map(f64::from)).map(|x| x as f32);
+        }
+    }
+    let clip = Clip::new(
+        skeletal::stem(path),
+        vertices,
+        skins.len(),
         n,
         mesh.faces.clone(),
         "",

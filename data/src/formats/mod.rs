@@ -5,9 +5,11 @@
 //!
 //! Animated game formats hold several takes (animations) per file: [`list_takes`] names them, [`read_take`]
 //! bakes one ([`skeletal::TakeSel`]), and [`read_clip`] reads the first. Animation-only companions
-//! (`.md5anim`, `.psa`, `.anm`, animation-only `.iqm`) are found beside their mesh and are not clips themselves.
+//! (`.md5anim`, `.psa`, `.anm`, animation-only `.iqm`, `.bvh` for a rigged `.iqm`) are found beside their mesh and
+//! are not clips themselves.
 
 pub mod anime;
+pub mod bvh;
 pub mod bytes;
 pub mod dymesh_bin;
 pub mod gltf;
@@ -110,10 +112,10 @@ impl Format {
             "md3" => Ok(Format::Md3),
             "pmd" => Ok(Format::Pmd),
             "anime" => Ok(Format::Anime),
-            "md5anim" | "psa" => Err(DataError::new(
+            "md5anim" | "psa" | "bvh" => Err(DataError::new(
                 path,
                 "format",
-                "an animation without a mesh: give the mesh file (.md5mesh / .pmd) beside it",
+                "an animation without a mesh: give the mesh file (.md5mesh / .pmd / rigged .iqm) beside it",
             )),
             "obj" => Err(DataError::new(
                 path,
