@@ -190,6 +190,15 @@ fn bench_data_reports_throughput() {
         stdout.contains("ours (1 thread)") && stdout.contains("clips/s"),
         "{stdout}"
     );
+    // Every reader is timed on the same clips written in its format.
+    for format in ["bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd"] {
+        assert!(
+            stdout
+                .lines()
+                .any(|l| l.trim_start().starts_with(format) && l.ends_with("clips/s")),
+            "{format}: {stdout}"
+        );
+    }
     if stdout.contains("numpy reference") {
         assert!(
             stdout.contains("FPS indices agree") && stdout.contains(": yes"),

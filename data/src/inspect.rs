@@ -9,6 +9,7 @@ use serde::Serialize;
 
 use crate::clip::object_uid;
 use crate::error::{DataError, Result};
+use crate::formats::skeletal::{ReadOptions, SkinStats, TakeInfo};
 use crate::formats::{self, Format};
 use crate::store::{CLIPS_FILE, IndexRow, Split, Status, Store, check_index, read_index};
 
@@ -57,6 +58,11 @@ pub struct Summary {
     pub frames: BTreeMap<u32, usize>,
     /// Source format → number of index rows.
     pub formats: BTreeMap<String, usize>,
+    /// Registry package → stored clips / distinct objects (clips with a recorded `source_package` only).
+    pub packages: BTreeMap<String, usize>,
+    pub package_objects: BTreeMap<String, usize>,
+    /// Licence → stored clips (clips with a recorded licence only).
+    pub licences: BTreeMap<String, usize>,
     /// `<shape>-<motion>` → stored clips, for ids of the form `synth-<shape>-<motion>-<seed>-<index>…`.
     pub synthetic_families: BTreeMap<String, usize>,
     /// Field of the reject reason (the text before its first ':') → rejected files.
@@ -79,6 +85,10 @@ pub struct FileSummary {
     /// Bounding box over all frames.
     pub bbox_min: [f32; 3],
     pub bbox_max: [f32; 3],
+    /// The file's takes (empty for a single-clip format); the figures above are the first take's.
+    pub takes: Vec<TakeInfo>,
+    /// Skin weights of the first take that were renormalised or had more than 4 entries.
+    pub skin: SkinStats,
 }
 
 /// What [`inspect`] found.
@@ -154,11 +164,15 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
         vertices_above: 0,
         frames: BTreeMap::new(),
         formats: BTreeMap::new(),
+        packages: BTreeMap::new(),
+        package_objects: BTreeMap::new(),
+        licences: BTreeMap::new(),
         synthetic_families: BTreeMap::new(),
         reject_reasons: BTreeMap::new(),
         rejected_files: Vec::new(),
     };
     let mut objects = std::collections::HashSet::new();
+    let mut package_objects = std::collections::HashSet::new();
     for r in rows {
         *s.formats.entry(r.format.clone()).or_default() += 1;
         match r.status {
@@ -181,6 +195,15 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
                     None => {}
                 }
                 objects.insert(r.object.as_str());
+                if !r.source_package.is_empty() {
+                    *s.packages.entry(r.source_package.clone()).or_default() += 1;
+                    if package_objects.insert((r.source_package.as_str(), r.object.as_str())) {
+                        *s.package_objects.entry(r.source_package.clone()).or_default() += 1;
+                    }
+                }
+                if !r.licence.is_empty() {
+                    *s.licences.entry(r.licence.clone()).or_default() += 1;
+                }
                 s.empty_captions += usize::from(r.caption.is_empty());
                 s.checksums += usize::from(r.checksum.is_some());
                 if let Some(t) = r.frames {
@@ -217,7 +240,9 @@ pub fn synthetic_family(id: &str) -> Option<&str> {
 /// Read one clip file (or OBJ-sequence folder) and describe it.
 pub fn summarize_file(path: &Path) -> Result<FileSummary> {
     let format = Format::from_path(path)?;
-    let clip = formats::read_clip(path)?;
+    let takes = formats::list_takes(path)?.unwrap_or_default();
+    let taken = formats::read_take(path, &ReadOptions::default())?;
+    let clip = taken.clip;
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
     for p in &clip.vertices {
@@ -237,6 +262,8 @@ pub fn summarize_file(path: &Path) -> Result<FileSummary> {
         caption: clip.caption,
         bbox_min: lo,
         bbox_max: hi,
+        takes,
+        skin: taken.stats,
     })
 }
 
@@ -278,6 +305,9 @@ impl Summary {
         );
         map_line(&mut o, "frames", &self.frames);
         map_line(&mut o, "formats", &self.formats);
+        map_line(&mut o, "packages (clips)", &self.packages);
+        map_line(&mut o, "packages (objects)", &self.package_objects);
+        map_line(&mut o, "licences", &self.licences);
         let _ = writeln!(
             o,
             "vertices           below {}: {}, above {}: {}",
@@ -308,6 +338,23 @@ impl FileSummary {
         let _ = writeln!(o, "faces     {}", self.faces);
         let _ = writeln!(o, "caption   {:?}", self.caption);
         let _ = writeln!(o, "bbox      {:?} – {:?}", self.bbox_min, self.bbox_max);
+        if self.skin.vertices > 0 {
+            let _ = writeln!(o, "skin      {}", self.skin.line());
+        }
+        if !self.takes.is_empty() {
+            let _ = writeln!(o, "takes     {}", self.takes.len());
+            for (i, t) in self.takes.iter().enumerate() {
+                let file = t
+                    .file
+                    .as_ref()
+                    .map_or_else(String::new, |f| format!("  ({})", f.display()));
+                let _ = writeln!(
+                    o,
+                    "  {i:>3}  {:<28} {:>5} frames  {:>5.1} fps{file}",
+                    t.name, t.frames, t.fps
+                );
+            }
+        }
         o
     }
 }
@@ -328,6 +375,8 @@ mod tests {
             split,
             status,
             reason: reason.into(),
+            licence: String::new(),
+            source_package: String::new(),
             object: object_uid(id).into(),
             checksum: (status == Status::Ok).then_some(7),
         }
@@ -359,10 +408,29 @@ mod tests {
             ),
             row("big", 5000, Some(Split::Train), Status::Ok, ""),
             row("bad", 0, None, Status::Rejected, "vertices: has 100 vertices"),
+            IndexRow {
+                source_package: "0ad-data".into(),
+                licence: "CC-BY-SA-3.0".into(),
+                ..row("deer_offset0_0-15", 1000, Some(Split::Train), Status::Ok, "")
+            },
+            IndexRow {
+                source_package: "0ad-data".into(),
+                licence: "CC-BY-SA-3.0".into(),
+                ..row("deer_offset0_8-23", 1000, Some(Split::Train), Status::Ok, "")
+            },
+            IndexRow {
+                source_package: "0ad-data".into(),
+                ..row("bad-deer", 0, None, Status::Rejected, "frames: too short")
+            },
         ];
         let s = summarize_rows(Path::new("d"), &rows);
-        assert_eq!((s.clips, s.ok, s.rejected, s.train, s.val), (5, 4, 1, 3, 1));
-        assert_eq!((s.empty_captions, s.checksums), (1, 4));
+        assert_eq!((s.clips, s.ok, s.rejected, s.train, s.val), (8, 6, 2, 5, 1));
+        // Packages count stored clips and their objects (both deer windows are one object); rejects are not counted.
+        assert_eq!(s.packages.get("0ad-data"), Some(&2));
+        assert_eq!(s.package_objects.get("0ad-data"), Some(&1));
+        assert_eq!(s.licences.get("CC-BY-SA-3.0"), Some(&2));
+        assert_eq!(s.licences.len(), 1);
+        assert_eq!((s.empty_captions, s.checksums), (1, 6));
         assert_eq!(s.vertex_histogram.len(), 8);
         assert_eq!(
             s.vertex_histogram[0],

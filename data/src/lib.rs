@@ -1,11 +1,14 @@
 //! Clips in and out, preprocessing, the dataset store and burn batches (docs/method.md §2).
 //!
-//! Formats: DyMesh `.bin` (restricted unpickler, never executes), OBJ sequences, glTF/GLB.
+//! Formats: DyMesh `.bin` (restricted unpickler, never executes), OBJ sequences, glTF/GLB, and the animated game
+//! and capture formats IQM, MD5, MD2, MD3, 0 A.D. PMD/PSA and DeformingThings4D `.anime` (takes, skinning bake).
 //! Preprocessing: welding, frame-0 normalisation (D1)–(D3), vertex filter, windows, FPS, padding.
 
 pub mod acap;
+pub mod archive;
 pub mod batch;
 pub mod bench;
+pub mod caption;
 pub mod clip;
 pub mod error;
 pub mod formats;
@@ -14,6 +17,7 @@ pub mod inspect;
 pub mod keyframes;
 pub mod limits;
 pub mod preprocess;
+pub mod real_corpus;
 pub mod render;
 pub mod rng;
 pub mod store;

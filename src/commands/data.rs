@@ -2,14 +2,16 @@
 //! dataset store, inspection, contact sheets; the throughput benchmark of import + normalise (D1)–(D3) + FPS).
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use any4d_data::bench::DataBench;
+use any4d_data::Clip;
+use any4d_data::bench::readers::{JOINTS, per_format};
+use any4d_data::bench::{DataBench, DataTiming, bench_clip};
 use any4d_data::formats;
 use any4d_data::inspect;
 use any4d_data::preprocess::{self, VertexFilter};
@@ -33,6 +35,18 @@ pub enum DataCmd {
     Verify(VerifyArgs),
     /// Render a clip (file, or one clip of a store) as a contact sheet PNG.
     Render(RenderArgs),
+    /// Stage the animated assets of unpacked registry packages (one folder per package, from `dpkg -x`) for
+    /// `data import`: one folder per asset with its provenance (package, licence); see `scripts/real_corpus.sh`.
+    StageReal(StageRealArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct StageRealArgs {
+    /// Folder holding one unpacked package per sub-folder.
+    pub extracted: PathBuf,
+    /// Staging folder to write.
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -41,6 +55,9 @@ pub struct ConvertArgs {
     pub input: PathBuf,
     /// Output clip; the extension picks the format.
     pub output: PathBuf,
+    /// Take (animation) to read, by name or index (formats with takes; default: the first).
+    #[arg(long)]
+    pub take: Option<String>,
     /// Normalise by frame 0 (docs/method.md (D1)–(D3)).
     #[arg(long)]
     pub normalize: bool,
@@ -75,6 +92,9 @@ pub struct ImportArgs {
     /// FPS tokens P per clip.
     #[arg(long, default_value_t = DEFAULT_P)]
     pub p: usize,
+    /// Longest take (animation) read from a file with takes, in frames; a longer one is rejected unread.
+    #[arg(long, default_value_t = any4d_data::formats::skeletal::MAX_FRAMES)]
+    pub max_frames: usize,
 }
 
 #[derive(Args, Debug)]
@@ -140,6 +160,9 @@ pub struct RenderArgs {
     /// Output PNG.
     #[arg(long)]
     pub out: PathBuf,
+    /// Take (animation) of a clip file, by name or index (default: the first).
+    #[arg(long)]
+    pub take: Option<String>,
 }
 
 /// Exit code of `import` when some sources were rejected (the store is still written).
@@ -168,6 +191,16 @@ pub fn exec(cmd: DataCmd) -> anyhow::Result<ExitCode> {
             })
         }
         DataCmd::Render(a) => render(a),
+        DataCmd::StageReal(a) => {
+            let report = any4d_data::real_corpus::stage(&a.extracted, &a.out)?;
+            for (package, n) in &report.assets {
+                println!("{package}: {n} assets staged");
+            }
+            for (member, why) in &report.refused {
+                println!("  refused {member}: {why}");
+            }
+            Ok(ExitCode::SUCCESS)
+        }
     }
 }
 
@@ -184,7 +217,7 @@ fn weld(eps: Option<f32>) -> Weld {
 }
 
 fn convert(a: ConvertArgs) -> anyhow::Result<ExitCode> {
-    let mut clip = weld(a.weld).apply(formats::read_clip(&a.input)?)?;
+    let mut clip = weld(a.weld).apply(read_file(&a.input, a.take.as_deref())?)?;
     if a.normalize {
         clip = preprocess::normalize(&clip).0;
     }
@@ -198,6 +231,15 @@ fn convert(a: ConvertArgs) -> anyhow::Result<ExitCode> {
         clip.faces.len()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// A clip file, at take `take` (name or index) when given.
+fn read_file(path: &Path, take: Option<&str>) -> anyhow::Result<Clip> {
+    let opts = formats::skeletal::ReadOptions {
+        take: take.map_or(formats::skeletal::TakeSel::First, formats::skeletal::TakeSel::parse),
+        ..Default::default()
+    };
+    Ok(formats::read_take(path, &opts)?.clip)
 }
 
 fn progress_bar(what: &str) -> ProgressBar {
@@ -221,6 +263,7 @@ fn import(a: ImportArgs) -> anyhow::Result<ExitCode> {
         stride: a.stride,
         weld: weld(a.weld),
         p: a.p,
+        max_frames: a.max_frames,
         ..ImportOptions::default()
     };
     opts.validate()?;
@@ -282,7 +325,7 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
                 a.path.display()
             );
         }
-        formats::read_clip(&a.path)?
+        read_file(&a.path, a.take.as_deref())?
     };
     render_contact_sheet(&clip, &a.out, &RenderOptions::default())?;
     println!("{} ({}) → {}", clip.id, a.path.display(), a.out.display());
@@ -346,20 +389,35 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<ExitCode> {
         args: vec![dir.path().display().to_string(), "--p".into(), a.p.to_string()],
         threads: 1,
     };
-    let theirs: Reference = match reference.json()? {
-        Ok(r) => r,
-        Err(Skipped(why)) => {
-            println!("reference skipped: {why}; reporting ours only");
-            return Ok(ExitCode::SUCCESS);
-        }
-    };
+    match reference.json()? {
+        Ok(theirs) => compare(&theirs, &ours, a.clips)?,
+        Err(Skipped(why)) => println!("reference skipped: {why}; reporting ours only"),
+    }
+    // Every reader on the same clips, written in its format.
+    if a.vertices > usize::from(u16::MAX) {
+        println!("per format: skipped (MD2 and PMD index vertices with 16 bits)");
+        return Ok(ExitCode::SUCCESS);
+    }
+    let clips = (0..a.clips)
+        .map(|i| bench_clip(i, a.frames, a.vertices))
+        .collect::<any4d_data::Result<Vec<_>>>()?;
+    println!("per format (read one take + normalise + FPS, 1 thread; skeletal formats bake {JOINTS} joints):");
+    for (format, rate) in per_format(&clips, &dir.path().join("formats"), a.p)? {
+        println!("  {format:<8} {rate:>9.2} clips/s");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Print the numpy reference's rate beside ours; an FPS checksum that differs is an error.
+fn compare(theirs: &Reference, ours: &DataTiming, clips: usize) -> anyhow::Result<()> {
+    let rate = clips as f64 / ours.seconds;
     let their_rate = theirs.clips as f64 / theirs.seconds;
     println!(
         "numpy reference (1 core): {their_rate:>7.2} clips/s ({:.3} s)",
         theirs.seconds
     );
     println!("ratio ours / reference: {:.2}×", rate / their_rate);
-    let agree = theirs.fps_checksum == ours.fps_checksum && theirs.clips == a.clips;
+    let agree = theirs.fps_checksum == ours.fps_checksum && theirs.clips == clips;
     println!(
         "FPS indices agree (checksum {}): {}",
         ours.fps_checksum,
@@ -372,5 +430,5 @@ pub fn bench(a: BenchArgs) -> anyhow::Result<ExitCode> {
             ours.fps_checksum
         );
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }

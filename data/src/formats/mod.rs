@@ -1,12 +1,26 @@
 //! Clip file formats (docs/method.md §2.1), one module each, and dispatch by extension.
 //!
 //! Readers return the file's coordinates, vertex order and faces unchanged (glTF: the world-space positions a
-//! viewer shows); normalisation is preprocessing's job.
+//! viewer shows; the Z-up game formats turned Y-up, see [`skeletal`]); normalisation is preprocessing's job.
+//!
+//! Animated game formats hold several takes (animations) per file: [`list_takes`] names them, [`read_take`]
+//! bakes one ([`skeletal::TakeSel`]), and [`read_clip`] reads the first. Animation-only companions
+//! (`.md5anim`, `.psa`, `.anm`, animation-only `.iqm`, `.bvh` for a rigged `.iqm`) are found beside their mesh and
+//! are not clips themselves.
 
+pub mod anime;
+pub mod bvh;
+pub mod bytes;
 pub mod dymesh_bin;
 pub mod gltf;
+pub mod iqm;
+pub mod md2;
+pub mod md3;
+pub mod md5;
 pub mod obj;
 pub mod pickle;
+pub mod pmd;
+pub mod skeletal;
 
 use std::io::Read;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -14,6 +28,7 @@ use std::path::Path;
 
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
+use skeletal::{ReadOptions, SkinStats, TakeInfo};
 
 /// Largest clip file (`.bin`, `.gltf`, `.glb`, one `.obj` frame) read into memory: 4 GiB, far above any clip the
 /// method uses (a 4096-vertex, 300-frame clip is 15 MB), so only a wrong path (a disk image, `/dev/zero`) hits it.
@@ -84,6 +99,57 @@ pub enum Format {
     Gltf,
     /// Binary glTF.
     Glb,
+    /// Inter-Quake Model `.iqm`.
+    Iqm,
+    /// Doom 3 `.md5mesh` (with the `.md5anim` files beside it).
+    Md5,
+    /// Quake II `.md2`.
+    Md2,
+    /// Quake III `.md3`.
+    Md3,
+    /// 0 A.D. `.pmd` (with the `.psa` files beside it).
+    Pmd,
+    /// DeformingThings4D `.anime`.
+    Anime,
+}
+
+impl Format {
+    /// Short lower-case name, as in the store index's `format` column.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Bin => "bin",
+            Format::ObjSeq => "obj-seq",
+            Format::Gltf => "gltf",
+            Format::Glb => "glb",
+            Format::Iqm => "iqm",
+            Format::Md5 => "md5",
+            Format::Md2 => "md2",
+            Format::Md3 => "md3",
+            Format::Pmd => "pmd",
+            Format::Anime => "anime",
+        }
+    }
+
+    /// Whether files of this format hold takes ([`list_takes`]) rather than exactly one clip.
+    pub fn has_takes(self) -> bool {
+        !matches!(self, Format::Bin | Format::ObjSeq | Format::Gltf | Format::Glb)
+    }
+}
+
+/// Extensions (lower case) of the files an import picks up as clip sources.
+pub const SOURCE_EXTENSIONS: &[&str] = &[
+    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime",
+];
+
+/// Whether `path` is a clip source for an import: a file with one of [`SOURCE_EXTENSIONS`], except an
+/// animation-only `.iqm` (a companion of a mesh file).
+pub fn is_source(path: &Path) -> bool {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("iqm") => iqm::has_mesh(path),
+        Some(e) => SOURCE_EXTENSIONS.contains(&e),
+        None => false,
+    }
 }
 
 impl Format {
@@ -100,6 +166,17 @@ impl Format {
             "bin" | "pkl" | "pickle" => Ok(Format::Bin),
             "gltf" => Ok(Format::Gltf),
             "glb" => Ok(Format::Glb),
+            "iqm" => Ok(Format::Iqm),
+            "md5mesh" => Ok(Format::Md5),
+            "md2" => Ok(Format::Md2),
+            "md3" => Ok(Format::Md3),
+            "pmd" => Ok(Format::Pmd),
+            "anime" => Ok(Format::Anime),
+            "md5anim" | "psa" | "bvh" => Err(DataError::new(
+                path,
+                "format",
+                "an animation without a mesh: give the mesh file (.md5mesh / .pmd / rigged .iqm) beside it",
+            )),
             "obj" => Err(DataError::new(
                 path,
                 "format",
@@ -108,20 +185,86 @@ impl Format {
             other => Err(DataError::new(
                 path,
                 "format",
-                format!("unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb or a folder of .obj)"),
+                format!(
+                    "unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb, .iqm, .md5mesh, .md2, .md3, \
+                     .pmd, .anime or a folder of .obj)"
+                ),
             )),
         }
     }
 }
 
-/// Read a clip in the format of its path (glTF with [`gltf::GltfReadOptions::default`]), under [`guard`].
+/// Read a clip in the format of its path (glTF with [`gltf::GltfReadOptions::default`]; the first take of a
+/// format with takes), under [`guard`].
 pub fn read_clip(path: &Path) -> Result<Clip> {
+    Ok(read_take(path, &ReadOptions::default())?.clip)
+}
+
+/// A clip read from one take of a file.
+#[derive(Debug, Clone)]
+pub struct Taken {
+    pub clip: Clip,
+    /// Skin weights that were renormalised or had more than 4 entries.
+    pub stats: SkinStats,
+    /// The take read; `None` for a single-clip format.
+    pub take: Option<TakeInfo>,
+}
+
+/// Read take `opts.take` of `path` (single-clip formats accept only the first take), under [`guard`].
+pub fn read_take(path: &Path, opts: &ReadOptions) -> Result<Taken> {
     let format = Format::from_path(path)?;
-    guard(path, || match format {
-        Format::Bin => dymesh_bin::read_bin(path),
-        Format::ObjSeq => obj::read_obj_seq(path),
-        Format::Gltf | Format::Glb => gltf::read_gltf(path, &gltf::GltfReadOptions::default()),
+    guard(path, || read_take_unguarded(path, format, opts))
+}
+
+fn read_take_unguarded(path: &Path, format: Format, opts: &ReadOptions) -> Result<Taken> {
+    let single = |clip: Clip| -> Result<Taken> {
+        if opts.take != skeletal::TakeSel::First && opts.take != skeletal::TakeSel::Index(0) {
+            return Err(DataError::new(
+                path,
+                "take",
+                "this format holds one clip; there are no takes to pick",
+            ));
+        }
+        Ok(Taken {
+            clip,
+            stats: SkinStats::default(),
+            take: None,
+        })
+    };
+    let (clip, stats, take) = match format {
+        Format::Bin => return single(dymesh_bin::read_bin(path)?),
+        Format::ObjSeq => return single(obj::read_obj_seq(path)?),
+        Format::Gltf | Format::Glb => return single(gltf::read_gltf(path, &gltf::GltfReadOptions::default())?),
+        Format::Iqm => iqm::read(path, opts)?,
+        Format::Md5 => md5::read(path, opts)?,
+        Format::Md2 => md2::read(path, opts)?,
+        Format::Md3 => md3::read(path, opts)?,
+        Format::Pmd => pmd::read(path, opts)?,
+        Format::Anime => anime::read(path, opts)?,
+    };
+    Ok(Taken {
+        clip,
+        stats,
+        take: Some(take),
     })
+}
+
+/// The takes of `path`; `None` for a single-clip format. Runs under [`guard`].
+pub fn list_takes(path: &Path) -> Result<Option<Vec<TakeInfo>>> {
+    let format = Format::from_path(path)?;
+    guard(path, || list_takes_unguarded(path, format))
+}
+
+fn list_takes_unguarded(path: &Path, format: Format) -> Result<Option<Vec<TakeInfo>>> {
+    Ok(Some(match format {
+        Format::Bin | Format::ObjSeq | Format::Gltf | Format::Glb => return Ok(None),
+        Format::Iqm => iqm::list_takes(path)?,
+        Format::Md5 => md5::list_takes(path)?,
+        Format::Md2 => md2::list_takes(path)?,
+        Format::Md3 => md3::list_takes(path)?,
+        Format::Pmd => pmd::list_takes(path)?,
+        Format::Anime => anime::list_takes(path)?,
+    }))
 }
 
 /// Write a clip in the format of its path (glTF at [`gltf::DEFAULT_FPS`]). The clip is validated first, so no
@@ -132,7 +275,20 @@ pub fn write_clip(path: &Path, clip: &Clip) -> Result<()> {
         Format::Bin => dymesh_bin::write_bin(path, clip),
         Format::ObjSeq => obj::write_obj_seq(path, clip),
         Format::Gltf | Format::Glb => gltf::write_gltf(path, clip, gltf::DEFAULT_FPS),
+        Format::Anime => write_atomic_bytes(path, &anime::write_anime(clip)),
+        other => Err(DataError::new(
+            path,
+            "format",
+            format!(
+                "writing {} is not supported (write .bin, .gltf, .glb, .anime or an OBJ folder)",
+                other.name()
+            ),
+        )),
     }
+}
+
+fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
+    dymesh_bin::write_atomic(path, bytes)
 }
 
 #[cfg(test)]
@@ -150,6 +306,17 @@ mod tests {
             Format::ObjSeq
         );
         assert_eq!(Format::from_path(Path::new("x.fbx")).unwrap_err().field, "format");
+        assert_eq!(Format::from_path(Path::new("a/b.MD5MESH")).unwrap(), Format::Md5);
+        assert_eq!(
+            Format::from_path(Path::new("deer.dae.cached.pmd")).unwrap(),
+            Format::Pmd
+        );
+        assert!(
+            Format::from_path(Path::new("walk.md5anim"))
+                .unwrap_err()
+                .reason
+                .contains("mesh")
+        );
         assert!(
             Format::from_path(Path::new("x.obj"))
                 .unwrap_err()

@@ -7,7 +7,7 @@
 //! are imported. Only problems with the output folder or an existing store abort, and then no temporary file is
 //! left behind.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -15,21 +15,23 @@ use std::time::Duration;
 
 use rayon::prelude::*;
 
-use crate::clip::{Clip, object_uid};
+use crate::clip::object_uid;
 use crate::error::{DataError, Result};
+use crate::formats::skeletal::SkinStats;
 use crate::formats::{self, Format};
-use crate::fps::farthest_point_sampling;
 use crate::limits::MAX_FRAMES;
-use crate::preprocess;
 use crate::synth::{self, SynthConfig};
 
+use super::clips::{preprocess_windows, process_file, reason};
 use super::jobs::{Job, Outcome, Process, run_one};
 use super::options::check_p;
 pub use super::options::{FILE_TIME_LIMIT, ImportOptions, Weld};
+use super::provenance::provenance_of;
+pub use super::provenance::{PROVENANCE_FILE, Provenance};
 
 use super::{
-    CLIPS_FILE, DEFAULT_P, IndexRow, SPLIT_SEED, Split, Status, Store, StoreWriter, StoredClip, check_index,
-    read_index, write_index,
+    CLIPS_FILE, DEFAULT_P, IndexRow, Split, Status, Store, StoreWriter, StoredClip, check_index, read_index,
+    write_index,
 };
 
 /// Progress callback: `(sources done, sources total)`, called after each parallel chunk.
@@ -59,6 +61,9 @@ pub struct ImportReport {
     pub val: usize,
     /// This run's rejected sources.
     pub rejected: Vec<Rejected>,
+    /// Skin weights of this run's accepted takes that were renormalised or had more than 4 entries (each
+    /// take's vertices counted once, however many windows it gave).
+    pub skin: SkinStats,
 }
 
 impl fmt::Display for ImportReport {
@@ -75,6 +80,9 @@ impl fmt::Display for ImportReport {
             self.val,
             self.rejected.len()
         )?;
+        if self.skin.vertices > 0 {
+            writeln!(f, "  skin weights: {}", self.skin.line())?;
+        }
         for r in &self.rejected {
             writeln!(f, "  rejected {}: {}", r.source, r.reason)?;
         }
@@ -82,8 +90,12 @@ impl fmt::Display for ImportReport {
     }
 }
 
-/// Import `sources` (files, or folders searched recursively for `.bin`/`.pkl`/`.pickle`/`.gltf`/`.glb` files and folders of
-/// `.obj` frames) into the store folder `out`; see the [`crate::store`] module doc for re-imports.
+/// Import `sources` (files, or folders searched recursively for the files of
+/// [`formats::SOURCE_EXTENSIONS`] and folders of `.obj` frames) into the store folder `out`; see the
+/// [`crate::store`] module doc for re-imports. Every take of a file with takes becomes its own clip: id
+/// `<object>_offset<take index>_0-<T−1>` (windows renumber the range), caption from the asset and take names
+/// ([`crate::caption`]), source `path#take`; its `licence` and `source_package` come from the nearest
+/// [`PROVENANCE_FILE`].
 pub fn import(sources: &[PathBuf], out: &Path, opts: &ImportOptions) -> Result<ImportReport> {
     import_with_progress(sources, out, opts, None)
 }
@@ -165,7 +177,10 @@ pub fn write_synth_windows(
         Job::Synth { source, index } => match synth::generate_one(&cfg, *index) {
             Ok(mut clip) => {
                 clip.source = source.clone();
-                preprocess_windows(&clip, window, stride, p).unwrap_or_else(Outcome::Rejected)
+                match preprocess_windows(&clip, window, stride, p) {
+                    Ok(windows) => Outcome::Clips(windows, Vec::new(), SkinStats::default()),
+                    Err(e) => Outcome::Rejected(reason(&e, source)),
+                }
             }
             Err(e) => Outcome::Rejected(reason(&e, source)),
         },
@@ -239,10 +254,12 @@ fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
     }
     found.sort_by(|a, b| a.0.cmp(&b.0));
     found.dedup_by(|a, b| a.0 == b.0);
+    let mut cache = HashMap::new();
     Ok(found
         .into_iter()
         .map(|(path, format)| Job::File {
             source: path.display().to_string(),
+            provenance: provenance_of(&path, &mut cache),
             path,
             format,
         })
@@ -270,89 +287,16 @@ fn walk(dir: &Path, out: &Path, found: &mut Vec<(PathBuf, Result<Format>)>) {
     for p in entries {
         if p.is_dir() {
             walk(&p, out, found);
-        } else if matches!(ext(&p).as_deref(), Some("bin" | "pkl" | "pickle" | "gltf" | "glb")) {
+        } else if formats::is_source(&p) {
             let format = Format::from_path(&p);
             found.push((p, format));
         }
     }
 }
 
-/// The reason text of a rejection: `field: reason`, prefixed by the file when it is not the source itself.
-fn reason(e: &DataError, source: &str) -> String {
-    if e.path == source {
-        format!("{}: {}", e.field, e.reason)
-    } else {
-        e.to_string()
-    }
-}
-
-fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
-    let Job::File { source, path, format } = job else {
-        return Outcome::Rejected("not a file".into());
-    };
-    if let Err(e) = format {
-        return Outcome::Rejected(reason(e, source));
-    }
-    let mut clip = match formats::read_clip(path) {
-        Ok(c) => c,
-        Err(e) => return Outcome::Rejected(reason(&e, source)),
-    };
-    clip.source = source.clone();
-    clip = match opts.weld.apply(clip) {
-        Ok(c) => c,
-        Err(e) => return Outcome::Rejected(reason(&e, source)),
-    };
-    if let Err(e) = opts.filter.check(&clip) {
-        return Outcome::Rejected(reason(&e, source));
-    }
-    if clip.frames < opts.frames {
-        return Outcome::Rejected(format!(
-            "frames: clip {} has {} frames, fewer than the window length {}",
-            clip.id, clip.frames, opts.frames
-        ));
-    }
-    preprocess_windows(&clip, opts.frames, opts.stride, opts.p).unwrap_or_else(Outcome::Rejected)
-}
-
-/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 and assign
-/// the split of the clip's object (module doc of [`crate::store`]). Returns each window with its object uid, or
-/// the reject reason when a window does not normalise to finite numbers (finite coordinates near ±3.4e38
-/// overflow f32).
-fn preprocess_windows(clip: &Clip, frames: usize, stride: usize, p: usize) -> std::result::Result<Outcome, String> {
-    // The uid of the whole clip, so every window of one animation shares its split.
-    let object = object_uid(&clip.id).to_owned();
-    let split = Split::of_object(&object, SPLIT_SEED);
-    let mut out = Vec::new();
-    for (k, w) in preprocess::windows(clip, frames, stride).iter().enumerate() {
-        let (clip, normalization) = preprocess::normalize(w);
-        let finite = normalization.center.iter().all(|c| c.is_finite())
-            && normalization.scale.is_finite()
-            && normalization.scale > 0.0
-            && clip.vertices.iter().flatten().all(|x| x.is_finite());
-        if !finite {
-            return Err(format!(
-                "vertices: normalising window {k} by its frame 0 (centre {:?}, scale {}) gives non-finite \
-                 coordinates: values this large overflow f32; rescale the file",
-                normalization.center, normalization.scale
-            ));
-        }
-        let fps = farthest_point_sampling(clip.frame(0), p);
-        out.push((
-            StoredClip {
-                clip,
-                fps,
-                normalization,
-                split,
-            },
-            object.clone(),
-        ));
-    }
-    Ok(Outcome::Clips(out))
-}
-
 /// The index row of a stored clip; called after [`StoreWriter::append`] accepted it, which checked that the
 /// counts fit in u32.
-fn ok_row(c: &StoredClip, format: &str, object: String, checksum: u64) -> IndexRow {
+fn ok_row(c: &StoredClip, format: &str, object: String, checksum: u64, provenance: &Provenance) -> IndexRow {
     let to_u32 = |v: usize| Some(v as u32);
     IndexRow {
         id: c.clip.id.clone(),
@@ -367,11 +311,14 @@ fn ok_row(c: &StoredClip, format: &str, object: String, checksum: u64) -> IndexR
         reason: String::new(),
         object,
         checksum: Some(checksum),
+        licence: provenance.licence.clone(),
+        source_package: provenance.source_package.clone(),
     }
 }
 
-fn rejected_row(job: &Job, reason: String) -> IndexRow {
-    let source = job.source().to_owned();
+fn rejected_row(job: &Job, source: &str, reason: String) -> IndexRow {
+    let source = source.to_owned();
+    let provenance = job.provenance();
     let id = Path::new(&source)
         .file_name()
         .map_or_else(|| source.clone(), |n| n.to_string_lossy().into_owned());
@@ -388,6 +335,8 @@ fn rejected_row(job: &Job, reason: String) -> IndexRow {
         status: Status::Rejected,
         reason,
         checksum: None,
+        licence: provenance.licence,
+        source_package: provenance.source_package,
     }
 }
 
@@ -421,7 +370,7 @@ fn run_jobs(
         let (old_ok, old_rejected): (Vec<IndexRow>, Vec<IndexRow>) =
             rows.into_iter().partition(|r| r.status == Status::Ok);
         for (i, mut row) in old_ok.into_iter().enumerate() {
-            if replaced.contains(row.source.as_str()) {
+            if is_replaced(&replaced, &row.source) {
                 continue;
             }
             let raw = store.raw(i)?;
@@ -449,13 +398,10 @@ fn run_jobs(
             ok_rows.push(row);
             kept += 1;
         }
-        rejected_rows.extend(
-            old_rejected
-                .into_iter()
-                .filter(|r| !replaced.contains(r.source.as_str())),
-        );
+        rejected_rows.extend(old_rejected.into_iter().filter(|r| !is_replaced(&replaced, &r.source)));
     }
     let mut rejected = Vec::new();
+    let mut skin = SkinStats::default();
     let mut added = 0;
     for (c, chunk) in jobs.chunks(CHUNK).enumerate() {
         let outcomes: Vec<Outcome> = chunk
@@ -464,11 +410,20 @@ fn run_jobs(
             .collect();
         for (job, outcome) in chunk.iter().zip(outcomes) {
             match outcome {
-                Outcome::Clips(clips) => {
+                Outcome::Clips(clips, failed, stats) => {
+                    skin.add(&stats);
+                    let provenance = job.provenance();
                     for (clip, object) in clips {
                         let sum = writer.append(&clip)?;
-                        ok_rows.push(ok_row(&clip, job.format_name(), object, sum));
+                        ok_rows.push(ok_row(&clip, job.format_name(), object, sum, &provenance));
                         added += 1;
+                    }
+                    for (source, reason) in failed {
+                        rejected.push(Rejected {
+                            source: source.clone(),
+                            reason: reason.clone(),
+                        });
+                        rejected_rows.push(rejected_row(job, &source, reason));
                     }
                 }
                 Outcome::Rejected(reason) => {
@@ -476,7 +431,7 @@ fn run_jobs(
                         source: job.source().to_owned(),
                         reason: reason.clone(),
                     });
-                    rejected_rows.push(rejected_row(job, reason));
+                    rejected_rows.push(rejected_row(job, job.source(), reason));
                 }
             }
         }
@@ -498,7 +453,13 @@ fn run_jobs(
         train: total - val,
         val,
         rejected,
+        skin,
     })
+}
+
+/// Whether an index row's source (`path` or `path#take`) belongs to a source of this run.
+fn is_replaced(replaced: &HashSet<&str>, source: &str) -> bool {
+    replaced.contains(source) || source.rsplit_once('#').is_some_and(|(path, _)| replaced.contains(path))
 }
 
 /// The id at the start of an encoded record, if it is well formed.

@@ -53,6 +53,10 @@ pub struct IndexRow {
     /// xxh3-64 of the clip's record in `clips.bin` ([`super::checksum`]); `None` for a rejected file and for every
     /// row of a store written before checksums existed (re-import to add them).
     pub checksum: Option<u64>,
+    /// Licence of the source ("" when unknown), from the source's provenance sidecar.
+    pub licence: String,
+    /// Registry package the source came from ("" when unknown).
+    pub source_package: String,
 }
 
 /// Name of the checksum column (absent in stores made before it existed).
@@ -86,6 +90,8 @@ pub fn write_index(dir: &Path, rows: &[IndexRow]) -> Result<()> {
             CHECKSUM_COLUMN.into(),
             rows.iter().map(|r| r.checksum).collect::<Vec<_>>(),
         ),
+        Column::new("licence".into(), strings(|r| &r.licence)),
+        Column::new("source_package".into(), strings(|r| &r.source_package)),
     ];
     let mut df = DataFrame::new(rows.len(), columns).map_err(|e| polars_err(&path, "columns", e))?;
     let written = (|| {
@@ -150,6 +156,14 @@ pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
             .iter()
             .collect(),
     };
+    // Columns added later: a store written before them reads as "".
+    let optional = |name: &str| -> Result<Vec<String>> {
+        if df.column(name).is_err() {
+            return Ok(vec![String::new(); df.height()]);
+        }
+        Ok(strs(name)?.into_iter().map(Option::unwrap_or_default).collect())
+    };
+    let (licence, source_package) = (optional("licence")?, optional("source_package")?);
     let mut rows = Vec::with_capacity(df.height());
     for i in 0..df.height() {
         let status = match status[i].as_str() {
@@ -183,6 +197,8 @@ pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
             reason: reason[i].clone(),
             object: object[i].clone(),
             checksum: checksums[i],
+            licence: licence[i].clone(),
+            source_package: source_package[i].clone(),
         });
     }
     Ok(rows)

@@ -6,12 +6,16 @@ use std::sync::{Arc, mpsc};
 use std::time::Duration;
 
 use super::StoredClip;
+use super::provenance::Provenance;
 use crate::error::Result;
+use crate::formats::skeletal::SkinStats;
 use crate::formats::{self, Format};
 
-/// What one source turned into.
+/// What one source turned into: its clips (windows with their object uid), for a file with takes the takes
+/// that failed (`source#take`, reason), and the skin-weight counts of the takes that were accepted. A source
+/// that produced nothing is `Rejected`.
 pub(super) enum Outcome {
-    Clips(Vec<(StoredClip, String)>),
+    Clips(Vec<(StoredClip, String)>, Vec<(String, String)>, SkinStats),
     Rejected(String),
 }
 
@@ -22,6 +26,7 @@ pub(super) enum Job {
         source: String,
         path: PathBuf,
         format: Result<Format>,
+        provenance: Result<Provenance>,
     },
     Synth {
         source: String,
@@ -38,19 +43,17 @@ impl Job {
 
     pub(super) fn format_name(&self) -> &'static str {
         match self {
-            Job::File { format: Ok(f), .. } => format_name(f),
+            Job::File { format: Ok(f), .. } => f.name(),
             Job::File { format: Err(_), .. } => "",
             Job::Synth { .. } => "synth",
         }
     }
-}
 
-fn format_name(f: &Format) -> &'static str {
-    match f {
-        Format::Bin => "bin",
-        Format::ObjSeq => "obj-seq",
-        Format::Gltf => "gltf",
-        Format::Glb => "glb",
+    pub(super) fn provenance(&self) -> Provenance {
+        match self {
+            Job::File { provenance: Ok(p), .. } => p.clone(),
+            _ => Provenance::default(),
+        }
     }
 }
 
@@ -93,13 +96,14 @@ mod tests {
             source: format!("/src/{name}"),
             path: PathBuf::from(format!("/src/{name}")),
             format: Ok(Format::Bin),
+            provenance: Ok(Provenance::default()),
         }
     }
 
     fn reason(outcome: Outcome) -> String {
         match outcome {
             Outcome::Rejected(r) => r,
-            Outcome::Clips(c) => panic!("{} clips, expected a rejection", c.len()),
+            Outcome::Clips(c, ..) => panic!("{} clips, expected a rejection", c.len()),
         }
     }
 
@@ -111,7 +115,7 @@ mod tests {
                 std::thread::sleep(Duration::from_secs(30));
                 Outcome::Rejected("finished".into())
             }
-            _ => Outcome::Clips(Vec::new()),
+            _ => Outcome::Clips(Vec::new(), Vec::new(), SkinStats::default()),
         });
         // Generous limits where the work is instant (a panic's backtrace can take a while on a busy machine).
         let generous = Duration::from_secs(120);
@@ -121,7 +125,7 @@ mod tests {
         assert!(r.starts_with("time limit:"), "{r}");
         assert!(matches!(
             run_one(&job("fine.bin"), &process, generous),
-            Outcome::Clips(_)
+            Outcome::Clips(..)
         ));
     }
 

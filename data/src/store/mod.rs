@@ -10,7 +10,8 @@
 //!   `frames`, `vertices`, `faces` (u32, null when rejected), `caption`, `split` ("train"/"val", null when
 //!   rejected), `status`, `reason` ("" when ok), `object` (the object uid that groups the split), `checksum`
 //!   (u64 xxh3-64 of the clip's record in `clips.bin`, null when rejected; stores written before this column
-//!   existed still read, with no checksums: re-import to add them).
+//!   existed still read, with no checksums: re-import to add them), `licence` and `source_package` (from the
+//!   source's provenance sidecar, "" when unknown; a source with takes is recorded as `path#take`).
 //!
 //! `data inspect` checks `clips.bin` against the index by clip count and record sizes ([`check_index`]);
 //! [`verify_store`] (`data verify`) reads every clip and checks its checksum, its decoding and its index row.
@@ -44,11 +45,13 @@
 //! the same T and P as the existing store (else an error says so); a non-empty folder without `clips.bin` is
 //! refused rather than written into.
 
+mod clips;
 mod format;
 mod import;
 mod index;
 mod jobs;
 mod options;
+mod provenance;
 mod verify;
 
 use std::fs::File;
@@ -60,8 +63,8 @@ use crate::preprocess::Normalization;
 
 pub use format::{Catalog, Entry, StoreWriter, checksum, decode_clip_bytes, encode, read_catalog, read_catalog_bytes};
 pub use import::{
-    FILE_TIME_LIMIT, ImportOptions, ImportReport, Progress, Rejected, Weld, import, import_with_progress, write_synth,
-    write_synth_windows, write_synth_with,
+    FILE_TIME_LIMIT, ImportOptions, ImportReport, PROVENANCE_FILE, Progress, Provenance, Rejected, Weld, import,
+    import_with_progress, write_synth, write_synth_windows, write_synth_with,
 };
 pub use index::{CHECKSUM_COLUMN, IndexRow, Status, read_index, write_index};
 pub use verify::{Problem, VerifyReport, check_index, record_len, verify_store};

@@ -1,10 +1,11 @@
 //! How an import turns files into store clips: [`ImportOptions`] (window, stride, FPS tokens, vertex filter,
-//! welding, per-file time limit) and their range checks.
+//! welding, per-file time limit, longest take) and their range checks.
 
 use std::time::Duration;
 
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
+use crate::formats::skeletal;
 use crate::limits::{MAX_FRAMES, MAX_P};
 use crate::preprocess::{self, VertexFilter};
 
@@ -67,6 +68,9 @@ pub struct ImportOptions {
     /// Rust cannot stop a thread, so a reader past its limit keeps running in the background until it ends or the
     /// process exits.
     pub time_limit: Duration,
+    /// Longest take read from a file with takes, in frames: a longer one is refused before its frames are
+    /// baked (default [`skeletal::MAX_FRAMES`]; at most [`MAX_FRAMES`]).
+    pub max_frames: usize,
 }
 
 impl Default for ImportOptions {
@@ -78,13 +82,14 @@ impl Default for ImportOptions {
             weld: Weld::Off,
             p: DEFAULT_P,
             time_limit: FILE_TIME_LIMIT,
+            max_frames: skeletal::MAX_FRAMES,
         }
     }
 }
 
 impl ImportOptions {
-    /// Range checks: 2 ≤ frames ≤ [`MAX_FRAMES`], 1 ≤ stride ≤ [`MAX_FRAMES`], 1 ≤ p ≤ [`MAX_P`], filter
-    /// min ≤ max, a finite weld epsilon ≥ 0, a time limit above zero.
+    /// Range checks: 2 ≤ frames ≤ [`MAX_FRAMES`], 1 ≤ stride ≤ [`MAX_FRAMES`], 1 ≤ p ≤ [`MAX_P`],
+    /// frames ≤ max_frames ≤ [`MAX_FRAMES`], filter min ≤ max, a finite weld epsilon ≥ 0, a time limit above zero.
     pub fn validate(&self) -> Result<()> {
         let err = |field: &str, reason: String| Err(DataError::new("import options", field, reason));
         if !(2..=MAX_FRAMES).contains(&self.frames) {
@@ -97,6 +102,15 @@ impl ImportOptions {
             return err("stride", format!("must be in 1..={MAX_FRAMES}, got {}", self.stride));
         }
         check_p(self.p, "import options")?;
+        if !(self.frames..=MAX_FRAMES).contains(&self.max_frames) {
+            return err(
+                "max_frames",
+                format!(
+                    "{} must be in {}..={MAX_FRAMES}: a take shorter than the window length {} cannot become a clip",
+                    self.max_frames, self.frames, self.frames
+                ),
+            );
+        }
         if self.filter.min > self.filter.max {
             return err(
                 "vertex filter",

@@ -1,6 +1,9 @@
 //! What `any4d bench data` measures: reading `.bin` clips, normalising them (docs/method.md (D1)–(D3)) and
 //! farthest-point sampling frame 0 (§2.5) on one thread, on deterministic clips that the numpy reference
 //! (`scripts/bench_data_reference.py`) reads too; the FPS checksum lets the two implementations be compared.
+//! [`readers`] times every reader on the same clips written in its format.
+
+pub mod readers;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -1,0 +1,456 @@
+//! What the animated-mesh readers share: takes (which animation of a file), the frame limit, joint transforms,
+//! linear blend skinning and the weight clean-up they count.
+//!
+//! Skinning is docs/method.md's linear blend skinning, the same as the glTF reader's:
+//! `v_f = Σ_i w_i · G_f(j_i) · G_bind(j_i)⁻¹ · v_bind`, with `G` a joint's object-space transform. Weights are
+//! kept however many a vertex has (the formats here never need truncation); a vertex whose weights do not sum to
+//! 1 (|Σw − 1| > [`WEIGHT_SUM_TOLERANCE`]) is renormalised, and both cases are counted in [`SkinStats`].
+//!
+//! Z-up formats (IQM, MD5, MD2, MD3) are turned to the Y-up frame of glTF and of the contact sheets with
+//! [`z_up_to_y_up`]: `(x, y, z) → (x, z, −y)`, a rotation, so shapes and motion are unchanged.
+
+use std::path::{Path, PathBuf};
+
+use crate::error::{DataError, Result};
+
+/// The longest animation a reader bakes, in frames: a take that claims more is refused before anything is
+/// allocated for it (override with [`ReadOptions::max_frames`]).
+pub const MAX_FRAMES: usize = 4096;
+
+/// Most joints a skeleton may have.
+pub const MAX_JOINTS: usize = 4096;
+
+/// A vertex whose weights sum further than this from 1 is renormalised (and counted).
+pub const WEIGHT_SUM_TOLERANCE: f64 = 1e-3;
+
+/// Which take (animation) of a file to read.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum TakeSel {
+    /// The first take the file lists.
+    #[default]
+    First,
+    /// The take at this position in the list (zero-based).
+    Index(usize),
+    /// The take with this name.
+    Name(String),
+}
+
+impl TakeSel {
+    /// `--take` text: all digits is an index, anything else a name.
+    pub fn parse(s: &str) -> Self {
+        match s.parse::<usize>() {
+            Ok(i) => Self::Index(i),
+            Err(_) => Self::Name(s.to_owned()),
+        }
+    }
+}
+
+/// How to read an animated file.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReadOptions {
+    pub take: TakeSel,
+    /// Refuse takes longer than this many frames.
+    pub max_frames: usize,
+}
+
+impl Default for ReadOptions {
+    fn default() -> Self {
+        Self {
+            take: TakeSel::First,
+            max_frames: MAX_FRAMES,
+        }
+    }
+}
+
+/// One take of a file as listed by `data inspect`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct TakeInfo {
+    /// Name (the animation's name, or the animation file's stem when that is all there is).
+    pub name: String,
+    /// Frames the take has in the file.
+    pub frames: usize,
+    /// The file's frame rate for this take (0 when the file does not say).
+    pub fps: f32,
+    /// The file holding the animation when it is not the mesh file itself.
+    pub file: Option<PathBuf>,
+}
+
+/// Skin weights that needed attention, counted over all vertices of a read.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct SkinStats {
+    /// Skinned vertices.
+    pub vertices: usize,
+    /// Vertices with more than 4 weights (kept: the skinning here takes any number).
+    pub over_four_weights: usize,
+    /// Vertices whose weights did not sum to 1 and were renormalised.
+    pub renormalised: usize,
+}
+
+impl SkinStats {
+    /// Add another read's counts to these.
+    pub fn add(&mut self, other: &SkinStats) {
+        self.vertices += other.vertices;
+        self.over_four_weights += other.over_four_weights;
+        self.renormalised += other.renormalised;
+    }
+
+    /// A one-line summary, empty when nothing was skinned.
+    pub fn line(&self) -> String {
+        if self.vertices == 0 {
+            return String::new();
+        }
+        format!(
+            "{} skinned vertices, {} with more than 4 weights, {} renormalised",
+            self.vertices, self.over_four_weights, self.renormalised
+        )
+    }
+}
+
+/// Index of the take `sel` names in `takes`; the error lists what exists.
+pub fn pick(path: &Path, takes: &[TakeInfo], sel: &TakeSel) -> Result<usize> {
+    let names = || {
+        let list: Vec<String> = takes
+            .iter()
+            .enumerate()
+            .map(|(i, t)| format!("{i}: {}", t.name))
+            .collect();
+        if list.is_empty() {
+            "the file has no animation".to_owned()
+        } else {
+            format!("takes are {}", list.join(", "))
+        }
+    };
+    if takes.is_empty() {
+        return Err(DataError::new(
+            path,
+            "animations",
+            "no animation: a static mesh is not a clip",
+        ));
+    }
+    match sel {
+        TakeSel::First => Ok(0),
+        TakeSel::Index(i) if *i < takes.len() => Ok(*i),
+        TakeSel::Index(i) => Err(DataError::new(path, "take", format!("no take {i}; {}", names()))),
+        TakeSel::Name(n) => takes
+            .iter()
+            .position(|t| &t.name == n)
+            .ok_or_else(|| DataError::new(path, "take", format!("no take named {n:?}; {}", names()))),
+    }
+}
+
+/// Refuse a take of `frames` frames over `max` (before anything is allocated for it).
+pub fn check_frames(path: &Path, take: &str, frames: usize, max: usize) -> Result<()> {
+    if frames > max {
+        return Err(DataError::new(
+            path,
+            "frames",
+            format!("take {take:?} has {frames} frames, more than the maximum of {max}"),
+        ));
+    }
+    if frames < 2 {
+        return Err(DataError::new(
+            path,
+            "frames",
+            format!("take {take:?} has {frames} frame(s): a clip needs at least 2"),
+        ));
+    }
+    Ok(())
+}
+
+/// `(x, y, z)` of a Z-up file in Y-up coordinates.
+pub fn z_up_to_y_up(p: [f64; 3]) -> [f64; 3] {
+    [p[0], p[2], -p[1]]
+}
+
+/// Row-major affine 4×4 matrix: `m[r][c]`, points are columns.
+pub type Mat = [[f64; 4]; 4];
+
+pub const IDENTITY: Mat = [
+    [1.0, 0.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0, 0.0],
+    [0.0, 0.0, 1.0, 0.0],
+    [0.0, 0.0, 0.0, 1.0],
+];
+
+pub fn mul(a: &Mat, b: &Mat) -> Mat {
+    std::array::from_fn(|r| std::array::from_fn(|c| (0..4).map(|k| a[r][k] * b[k][c]).sum()))
+}
+
+pub fn apply(m: &Mat, p: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3])
+}
+
+/// Unit quaternion `(x, y, z, w)`; a zero quaternion becomes the identity.
+pub fn normalize_quat(q: [f64; 4]) -> [f64; 4] {
+    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if n < 1e-12 {
+        [0.0, 0.0, 0.0, 1.0]
+    } else {
+        q.map(|x| x / n)
+    }
+}
+
+/// Hamilton product `a · b` of `(x, y, z, w)` quaternions.
+pub fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    let [ax, ay, az, aw] = a;
+    let [bx, by, bz, bw] = b;
+    [
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    ]
+}
+
+/// Rotate `v` by the unit quaternion `q`.
+pub fn quat_rotate(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
+    let r = quat_mul(quat_mul(q, [v[0], v[1], v[2], 0.0]), [-q[0], -q[1], -q[2], q[3]]);
+    [r[0], r[1], r[2]]
+}
+
+/// `T · R · S` from translation, unit quaternion and scale.
+pub fn trs(t: [f64; 3], q: [f64; 4], s: [f64; 3]) -> Mat {
+    let [x, y, z, w] = normalize_quat(q);
+    let r = [
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - z * w),
+            2.0 * (x * z + y * w),
+        ],
+        [
+            2.0 * (x * y + z * w),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - x * w),
+        ],
+        [
+            2.0 * (x * z - y * w),
+            2.0 * (y * z + x * w),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
+    ];
+    let mut m = IDENTITY;
+    for (row, out) in r.iter().zip(m.iter_mut()) {
+        for c in 0..3 {
+            out[c] = row[c] * s[c];
+        }
+    }
+    for k in 0..3 {
+        m[k][3] = t[k];
+    }
+    m
+}
+
+/// Inverse of an affine matrix (general 3×3 part); `None` when it is singular.
+pub fn inverse(m: &Mat) -> Option<Mat> {
+    let a = |r: usize, c: usize| m[r][c];
+    let cof = |r0: usize, r1: usize, c0: usize, c1: usize| a(r0, c0) * a(r1, c1) - a(r0, c1) * a(r1, c0);
+    let det = a(0, 0) * cof(1, 2, 1, 2) - a(0, 1) * cof(1, 2, 0, 2) + a(0, 2) * cof(1, 2, 0, 1);
+    if det.abs() < 1e-300 || !det.is_finite() {
+        return None;
+    }
+    let inv3 = [
+        [cof(1, 2, 1, 2), -cof(0, 2, 1, 2), cof(0, 1, 1, 2)],
+        [-cof(1, 2, 0, 2), cof(0, 2, 0, 2), -cof(0, 1, 0, 2)],
+        [cof(1, 2, 0, 1), -cof(0, 2, 0, 1), cof(0, 1, 0, 1)],
+    ]
+    .map(|row| row.map(|x| x / det));
+    let mut out = IDENTITY;
+    for r in 0..3 {
+        out[r][..3].copy_from_slice(&inv3[r]);
+        out[r][3] = -(0..3).map(|k| inv3[r][k] * m[k][3]).sum::<f64>();
+    }
+    Some(out)
+}
+
+/// Object-space transforms from local ones: `G_j = G_parent(j) · L_j`. Parents must come before children
+/// (checked by [`check_parents`]).
+pub fn globals(parents: &[Option<usize>], locals: &[Mat]) -> Vec<Mat> {
+    let mut g: Vec<Mat> = Vec::with_capacity(locals.len());
+    for (j, l) in locals.iter().enumerate() {
+        let m = match parents[j] {
+            Some(p) => mul(&g[p], l),
+            None => *l,
+        };
+        g.push(m);
+    }
+    g
+}
+
+/// Parent indices from a file: `-1` (or any negative) is a root; a parent must precede its child, which also
+/// rules out cycles.
+pub fn check_parents(path: &Path, field: &str, raw: &[i32]) -> Result<Vec<Option<usize>>> {
+    raw.iter()
+        .enumerate()
+        .map(|(j, &p)| match usize::try_from(p) {
+            Err(_) => Ok(None),
+            Ok(p) if p < j => Ok(Some(p)),
+            Ok(p) => Err(DataError::new(
+                path,
+                field,
+                format!("joint {j} names parent {p}, which does not precede it"),
+            )),
+        })
+        .collect()
+}
+
+/// Per-vertex `(joint, weight)` lists.
+pub type Influences = Vec<Vec<(usize, f64)>>;
+
+/// Check joint indices against `joints`, drop zero weights, renormalise sums ≠ 1 and count what needed it. A
+/// vertex without any positive weight, or a weight naming a missing joint, is an error naming the vertex.
+pub fn clean_influences(path: &Path, field: &str, infl: &mut Influences, joints: usize) -> Result<SkinStats> {
+    let mut stats = SkinStats {
+        vertices: infl.len(),
+        ..SkinStats::default()
+    };
+    for (v, list) in infl.iter_mut().enumerate() {
+        if let Some(&(j, _)) = list.iter().find(|(j, _)| *j >= joints) {
+            return Err(DataError::new(
+                path,
+                field,
+                format!("vertex {v} is weighted to joint {j}, but the skeleton has {joints} joints"),
+            ));
+        }
+        if let Some(&(j, w)) = list.iter().find(|(_, w)| !w.is_finite() || *w < 0.0) {
+            return Err(DataError::new(
+                path,
+                field,
+                format!("vertex {v} has weight {w} for joint {j}"),
+            ));
+        }
+        list.retain(|(_, w)| *w > 0.0);
+        if list.len() > 4 {
+            stats.over_four_weights += 1;
+        }
+        let sum: f64 = list.iter().map(|(_, w)| w).sum();
+        if sum <= 0.0 {
+            return Err(DataError::new(path, field, format!("vertex {v} has no joint weight")));
+        }
+        if (sum - 1.0).abs() > WEIGHT_SUM_TOLERANCE {
+            stats.renormalised += 1;
+        }
+        list.iter_mut().for_each(|(_, w)| *w /= sum);
+    }
+    Ok(stats)
+}
+
+/// One frame of linear blend skinning: append `Σ_i w_i · skin_i · p` for each bind position `p`.
+pub fn skin_frame(bind: &[[f64; 3]], infl: &Influences, skin: &[Mat], out: &mut Vec<[f32; 3]>) {
+    for (p, list) in bind.iter().zip(infl) {
+        let mut acc = [0.0; 3];
+        for &(j, w) in list {
+            let q = apply(&skin[j], *p);
+            (0..3).for_each(|c| acc[c] += w * q[c]);
+        }
+        out.push(acc.map(|x| x as f32));
+    }
+}
+
+/// Animation files that may belong to `mesh`: files with one of `exts` (lower-case, no dot) in the mesh's folder
+/// and, when `parent` is set, its parent folder; sorted by path.
+pub fn companions(mesh: &Path, exts: &[&str], parent: bool) -> Vec<PathBuf> {
+    let mut dirs = Vec::new();
+    if let Some(d) = mesh.parent() {
+        dirs.push(if d.as_os_str().is_empty() { Path::new(".") } else { d });
+        if parent && let Some(pd) = d.parent().filter(|p| !p.as_os_str().is_empty()) {
+            dirs.push(pd);
+        }
+    }
+    let mut found = Vec::new();
+    for d in dirs {
+        let Ok(rd) = std::fs::read_dir(d) else { continue };
+        for e in rd.flatten() {
+            let p = e.path();
+            let ext = p.extension().and_then(|x| x.to_str()).map(str::to_ascii_lowercase);
+            if p.is_file() && p != mesh && ext.is_some_and(|x| exts.contains(&x.as_str())) {
+                found.push(p);
+            }
+        }
+    }
+    found.sort();
+    found
+}
+
+/// The stem of `path` as a take or asset name.
+pub fn stem(path: &Path) -> String {
+    let name = path
+        .file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    // `deer_walk_01.dae.cached.psa` → `deer_walk_01`
+    name.split('.').next().unwrap_or_default().to_owned()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: [f64; 3], b: [f64; 3]) -> bool {
+        a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9)
+    }
+
+    #[test]
+    fn trs_inverse_and_quaternions_agree() {
+        let s = 0.5f64.sqrt();
+        let q = [0.0, 0.0, s, s]; // 90° about z
+        let m = trs([1.0, 2.0, 3.0], q, [2.0, 2.0, 2.0]);
+        assert!(close(apply(&m, [1.0, 0.0, 0.0]), [1.0, 4.0, 3.0]));
+        assert!(close(quat_rotate(q, [1.0, 0.0, 0.0]), [0.0, 1.0, 0.0]));
+        let inv = inverse(&m).unwrap();
+        assert!(close(apply(&inv, apply(&m, [0.3, -0.7, 5.0])), [0.3, -0.7, 5.0]));
+        let qq = quat_mul(q, q); // 180° about z
+        assert!(close(quat_rotate(qq, [1.0, 0.0, 0.0]), [-1.0, 0.0, 0.0]));
+        assert!(inverse(&[[0.0; 4]; 4]).is_none());
+    }
+
+    #[test]
+    fn globals_chain_parents() {
+        let parents = check_parents(Path::new("f"), "joints", &[-1, 0, 1]).unwrap();
+        let l = trs([1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], [1.0; 3]);
+        let g = globals(&parents, &[l, l, l]);
+        assert!(close(apply(&g[2], [0.0; 3]), [3.0, 0.0, 0.0]));
+        let e = check_parents(Path::new("f"), "joints", &[-1, 2, 0]).unwrap_err();
+        assert!(e.reason.contains("does not precede"), "{e}");
+    }
+
+    #[test]
+    fn influences_are_counted_renormalised_and_checked() {
+        let mut infl: Influences = vec![
+            vec![(0, 0.5), (1, 0.5)],
+            vec![(0, 0.2), (1, 0.2), (2, 0.2), (3, 0.2), (4, 0.1)], // 5 weights summing to 0.9
+            vec![(1, 2.0)],
+        ];
+        let stats = clean_influences(Path::new("f"), "weights", &mut infl, 5).unwrap();
+        assert_eq!((stats.vertices, stats.over_four_weights, stats.renormalised), (3, 1, 2));
+        assert!((infl[1].iter().map(|x| x.1).sum::<f64>() - 1.0).abs() < 1e-12);
+        assert_eq!(infl[2], vec![(1, 1.0)]);
+        let mut missing: Influences = vec![vec![(7, 1.0)]];
+        let e = clean_influences(Path::new("f"), "weights", &mut missing, 5).unwrap_err();
+        assert!(e.reason.contains("joint 7") && e.reason.contains("5 joints"), "{e}");
+        let mut none: Influences = vec![vec![(0, 0.0)]];
+        assert!(clean_influences(Path::new("f"), "weights", &mut none, 1).is_err());
+    }
+
+    #[test]
+    fn picks_takes_by_index_and_name() {
+        let t = |n: &str| TakeInfo {
+            name: n.into(),
+            frames: 10,
+            fps: 30.0,
+            file: None,
+        };
+        let takes = [t("idle"), t("walk")];
+        let p = Path::new("a.iqm");
+        assert_eq!(pick(p, &takes, &TakeSel::parse("walk")).unwrap(), 1);
+        assert_eq!(pick(p, &takes, &TakeSel::parse("1")).unwrap(), 1);
+        let e = pick(p, &takes, &TakeSel::parse("run")).unwrap_err();
+        assert!(e.reason.contains("0: idle, 1: walk"), "{e}");
+        let e = pick(p, &[], &TakeSel::First).unwrap_err();
+        assert!(e.reason.contains("static mesh is not a clip"), "{e}");
+        assert!(
+            check_frames(p, "walk", 5000, MAX_FRAMES)
+                .unwrap_err()
+                .reason
+                .contains("maximum")
+        );
+    }
+}

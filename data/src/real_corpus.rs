@@ -1,0 +1,493 @@
+//! The staging step of the real corpus: from Debian packages unpacked with `dpkg -x` (one folder per package)
+//! to one folder per animated asset, holding the mesh, its animation files and an [`PROVENANCE_FILE`] naming the
+//! package, the licence (from the package's machine-readable `copyright`) and a readable asset name. `data
+//! import` then turns every take into clips (`scripts/real_corpus.sh` runs both).
+//!
+//! Per package (anything else under the input folder is ignored):
+//! - `redeclipse-data`: the male and female player `.iqm` meshes with the animation-only `.iqm` files of
+//!   `actors/player`, and every folder holding a `.md5mesh` with its `.md5anim` files;
+//! - `0ad-data`: from `public.zip`, every actor XML under `art/actors/fauna` and `art/actors/units` (with the
+//!   variant files it names): its first skeletal mesh and its animations (`*.dae.cached.pmd/.psa`); actors
+//!   share meshes (horses of many coats, units of many civilisations), so each mesh is staged once, with the
+//!   animations of the first actor naming it; a unit mesh keeps at most [`MAX_UNIT_ANIMS`] animations, and at
+//!   most [`MAX_UNIT_MESHES`] unit meshes are staged;
+//! - `ufoai-data`: from `base/0models.pk3`, every `.md2` model with an `.anm` animation table beside it;
+//! - `assimp-testmodels`: the animated `.iqm` sample. Its MD2 models are never staged;
+//! - both of the last two (folder [`MOCAP_FOLDER`]): the `.bvh` motion capture of `assimp-testmodels` beside
+//!   copies of the Red Eclipse player meshes, retargeted at import ([`crate::formats::bvh`]).
+//!
+//! Packages held out for evaluation (OpenArena, MegaGlest, Nexuiz, Xonotic) are refused by name.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use crate::archive;
+use crate::caption;
+use crate::error::{DataError, Result};
+use crate::store::PROVENANCE_FILE;
+
+/// Unit (human) body meshes staged from 0 A.D. at most.
+pub const MAX_UNIT_MESHES: usize = 40;
+/// Animations staged per 0 A.D. unit mesh at most.
+pub const MAX_UNIT_ANIMS: usize = 12;
+
+/// Package name prefixes never staged (the held-out evaluation is drawn from them).
+pub const HELD_OUT: &[&str] = &["openarena", "megaglest", "nexuiz", "xonotic"];
+
+/// What staging did per package.
+#[derive(Debug, Default, Clone, PartialEq)]
+pub struct StageReport {
+    /// Package → asset folders staged.
+    pub assets: BTreeMap<String, usize>,
+    /// Archive members refused (path escapes, sizes).
+    pub refused: Vec<(String, String)>,
+}
+
+/// Stage every known package under `extracted` (`extracted/<package>/usr/...`) into `out`.
+pub fn stage(extracted: &Path, out: &Path) -> Result<StageReport> {
+    let mut report = StageReport::default();
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(extracted)
+        .map_err(|e| DataError::io(extracted, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
+    entries.sort();
+    for dir in entries {
+        let package = dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        if HELD_OUT.iter().any(|h| package.starts_with(h)) {
+            return Err(DataError::new(
+                &dir,
+                "package",
+                format!("{package} is held out for evaluation and must not enter a training store"),
+            ));
+        }
+        let copyright = Dep5::read(&dir.join(format!("usr/share/doc/{package}/copyright")));
+        let dest = out.join(&package);
+        let n = match package.as_str() {
+            "redeclipse-data" => stage_redeclipse(&dir, &dest, &package, &copyright)?,
+            "0ad-data" => stage_0ad(&dir, &dest, &package, &copyright, &mut report)?,
+            "ufoai-data" => stage_ufoai(&dir, &dest, &package, &copyright, &mut report)?,
+            "assimp-testmodels" => stage_assimp(&dir, &dest, &package, &copyright)?,
+            _ => continue,
+        };
+        report.assets.insert(package, n);
+    }
+    let (re, assimp) = (extracted.join("redeclipse-data"), extracted.join("assimp-testmodels"));
+    if re.is_dir() && assimp.is_dir() {
+        let n = stage_mocap(&re, &assimp, &out.join(MOCAP_FOLDER))?;
+        report.assets.insert(MOCAP_FOLDER.to_owned(), n);
+    }
+    Ok(report)
+}
+
+/// Staging folder (and `source_package`) of the motion capture retargeted onto the Red Eclipse players.
+pub const MOCAP_FOLDER: &str = "redeclipse-data+assimp-testmodels";
+
+/// The CMU and Biovision BVH files of `assimp-testmodels` beside copies of the Red Eclipse player meshes, in
+/// folders whose last two names match the players' own staging (`player_male/male/`), so that their clips share
+/// the players' object uid and split. The licence records both sources.
+fn stage_mocap(re: &Path, assimp: &Path, dest: &Path) -> Result<usize> {
+    let bvh_dir = assimp.join("usr/share/assimp/models/BVH");
+    let motions = files_with(&bvh_dir, "bvh");
+    let player = re.join("usr/share/games/redeclipse/data/actors/player");
+    if motions.is_empty() {
+        return Ok(0);
+    }
+    let (c_re, c_assimp) = (
+        Dep5::read(&re.join("usr/share/doc/redeclipse-data/copyright")),
+        Dep5::read(&assimp.join("usr/share/doc/assimp-testmodels/copyright")),
+    );
+    let mut n = 0;
+    for who in ["male", "female"] {
+        let mesh = player.join(who).join(format!("RE_Player_{who}.iqm"));
+        if !mesh.is_file() {
+            continue;
+        }
+        let to = dest.join(format!("player_{who}")).join(who);
+        copy(&mesh, &to.join(mesh.file_name().expect("file")))?;
+        for m in &motions {
+            copy(m, &to.join(m.file_name().expect("file")))?;
+        }
+        let licence = format!(
+            "{} (mesh) AND {} (motion)",
+            c_re.licence(&rel(re, &mesh)),
+            c_assimp.licence(&rel(assimp, &motions[0]))
+        );
+        write_provenance(&to, MOCAP_FOLDER, &licence, &format!("{who} player"))?;
+        n += 1;
+    }
+    Ok(n)
+}
+
+/// A Debian machine-readable `copyright` file: `Files:` patterns and their `License:`; the last matching
+/// stanza wins.
+pub struct Dep5 {
+    stanzas: Vec<(Vec<String>, String)>,
+}
+
+impl Dep5 {
+    /// Read `path`; a missing or unreadable file gives no stanzas (licences then read "unknown").
+    pub fn read(path: &Path) -> Self {
+        Self::parse(&std::fs::read_to_string(path).unwrap_or_default())
+    }
+
+    pub fn parse(text: &str) -> Self {
+        let mut stanzas = Vec::new();
+        for block in text.split("\n\n") {
+            let mut files = Vec::new();
+            let mut licence = None;
+            let mut in_files = false;
+            for line in block.lines() {
+                if let Some(rest) = line.strip_prefix("Files:") {
+                    in_files = true;
+                    files.extend(rest.split_whitespace().map(str::to_owned));
+                } else if line.starts_with([' ', '\t']) && in_files {
+                    files.extend(line.split_whitespace().map(str::to_owned));
+                } else {
+                    in_files = false;
+                    if let Some(rest) = line.strip_prefix("License:")
+                        && licence.is_none()
+                    {
+                        licence = Some(rest.trim().to_owned());
+                    }
+                }
+            }
+            if let (false, Some(l)) = (files.is_empty(), licence) {
+                stanzas.push((files, l));
+            }
+        }
+        Self { stanzas }
+    }
+
+    /// The licence of `path` (an installed or archive path; a pattern may match any tail of it that starts at a
+    /// folder boundary), or "unknown".
+    pub fn licence(&self, path: &str) -> String {
+        let tails: Vec<&str> = std::iter::once(path)
+            .chain(path.match_indices('/').map(|(i, _)| &path[i + 1..]))
+            .collect();
+        self.stanzas
+            .iter()
+            .rev()
+            .find(|(pats, _)| pats.iter().any(|p| tails.iter().any(|t| glob(p, t))))
+            .map_or_else(|| "unknown".to_owned(), |(_, l)| l.clone())
+    }
+}
+
+/// `*` matches any run of characters (also `/`), `?` one character.
+fn glob(pat: &str, s: &str) -> bool {
+    let (p, t): (Vec<char>, Vec<char>) = (pat.chars().collect(), s.chars().collect());
+    let (mut pi, mut ti, mut star, mut mark) = (0, 0, None, 0);
+    while ti < t.len() {
+        if pi < p.len() && (p[pi] == '?' || p[pi] == t[ti]) {
+            pi += 1;
+            ti += 1;
+        } else if pi < p.len() && p[pi] == '*' {
+            star = Some(pi);
+            mark = ti;
+            pi += 1;
+        } else if let Some(sp) = star {
+            pi = sp + 1;
+            mark += 1;
+            ti = mark;
+        } else {
+            return false;
+        }
+    }
+    p[pi..].iter().all(|&c| c == '*')
+}
+
+fn write_provenance(dir: &Path, package: &str, licence: &str, asset: &str) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))?;
+    let json = serde_json::json!({"source_package": package, "licence": licence, "asset": asset});
+    let path = dir.join(PROVENANCE_FILE);
+    std::fs::write(&path, json.to_string()).map_err(|e| DataError::io(&path, e))
+}
+
+fn copy(from: &Path, to: &Path) -> Result<()> {
+    if let Some(d) = to.parent() {
+        std::fs::create_dir_all(d).map_err(|e| DataError::io(d, e))?;
+    }
+    std::fs::copy(from, to).map_err(|e| DataError::io(from, e))?;
+    Ok(())
+}
+
+fn files_with(dir: &Path, ext: &str) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| rd.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
+    v.retain(|p| p.is_file() && p.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext)));
+    v.sort();
+    v
+}
+
+fn walk_dirs(dir: &Path, out: &mut Vec<PathBuf>) {
+    out.push(dir.to_path_buf());
+    let mut subs: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.is_dir())
+                .collect()
+        })
+        .unwrap_or_default();
+    subs.sort();
+    for s in subs {
+        walk_dirs(&s, out);
+    }
+}
+
+fn rel(root: &Path, p: &Path) -> String {
+    p.strip_prefix(root).unwrap_or(p).to_string_lossy().into_owned()
+}
+
+fn stage_redeclipse(dir: &Path, dest: &Path, package: &str, c: &Dep5) -> Result<usize> {
+    let data = dir.join("usr/share/games/redeclipse/data");
+    let mut n = 0;
+    let player = data.join("actors/player");
+    for who in ["male", "female"] {
+        let mesh = player.join(who).join(format!("RE_Player_{who}.iqm"));
+        if !mesh.is_file() {
+            continue;
+        }
+        let to = dest.join(format!("player_{who}"));
+        copy(&mesh, &to.join(who).join(mesh.file_name().expect("file")))?;
+        for anim in files_with(&player, "iqm") {
+            copy(&anim, &to.join(anim.file_name().expect("file")))?;
+        }
+        write_provenance(&to, package, &c.licence(&rel(dir, &mesh)), &format!("{who} player"))?;
+        n += 1;
+    }
+    let mut dirs = Vec::new();
+    walk_dirs(&data, &mut dirs);
+    for d in dirs {
+        let anims = files_with(&d, "md5anim");
+        let meshes = files_with(&d, "md5mesh");
+        if anims.is_empty() || meshes.is_empty() {
+            continue;
+        }
+        let name = rel(&data, &d).replace('/', "_");
+        let to = dest.join(&name);
+        for f in meshes.iter().chain(&anims) {
+            copy(f, &to.join(f.file_name().expect("file")))?;
+        }
+        let asset = caption::asset_of_path(&meshes[0]);
+        write_provenance(&to, package, &c.licence(&rel(dir, &meshes[0])), &asset)?;
+        n += 1;
+    }
+    Ok(n)
+}
+
+/// Mesh and animation files named by an 0 A.D. actor (following `variant file=` references).
+fn actor_refs(
+    zip_names: &BTreeSet<String>,
+    read: &mut dyn FnMut(&str) -> Option<String>,
+    actor: &str,
+) -> (Vec<String>, Vec<String>) {
+    let (mut meshes, mut anims) = (Vec::new(), Vec::new());
+    let mut queue = vec![actor.to_owned()];
+    let mut seen = BTreeSet::new();
+    while let Some(file) = queue.pop() {
+        if !seen.insert(file.clone()) || seen.len() > 32 {
+            continue;
+        }
+        let Some(text) = read(&file) else { continue };
+        let Ok(doc) = roxmltree::Document::parse(&text) else {
+            continue;
+        };
+        for node in doc.descendants() {
+            match node.tag_name().name() {
+                "mesh" => meshes.extend(node.text().map(|t| t.trim().to_owned())),
+                "animation" => anims.extend(node.attribute("file").map(str::to_owned)),
+                "variant" => {
+                    if let Some(f) = node.attribute("file") {
+                        let v = format!("art/variants/{f}");
+                        if zip_names.contains(&v) {
+                            queue.push(v);
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    anims.sort();
+    anims.dedup();
+    (meshes, anims)
+}
+
+fn stage_0ad(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut StageReport) -> Result<usize> {
+    let zip_path = dir.join("usr/share/games/0ad/mods/public/public.zip");
+    if !zip_path.is_file() {
+        return Ok(0);
+    }
+    let file = std::fs::File::open(&zip_path).map_err(|e| DataError::io(&zip_path, e))?;
+    let mut zip = zip::ZipArchive::new(file).map_err(|e| DataError::new(&zip_path, "zip", e.to_string()))?;
+    let names: BTreeSet<String> = zip.file_names().map(str::to_owned).collect();
+    let mut read = |name: &str| -> Option<String> {
+        use std::io::Read;
+        let mut m = zip.by_name(name).ok()?;
+        if m.size() > 1 << 20 {
+            return None;
+        }
+        let mut s = String::new();
+        m.read_to_string(&mut s).ok()?;
+        Some(s)
+    };
+    // destination relative path → archive member
+    let mut plan: BTreeMap<String, String> = BTreeMap::new();
+    let mut assets: Vec<(String, String)> = Vec::new(); // (folder, asset name)
+    let mut unit_meshes: BTreeSet<String> = BTreeSet::new();
+    let mut staged_meshes: BTreeSet<String> = BTreeSet::new();
+    let actors: Vec<String> = names
+        .iter()
+        .filter(|n| (n.starts_with("art/actors/fauna/") || n.starts_with("art/actors/units/")) && n.ends_with(".xml"))
+        .cloned()
+        .collect();
+    for actor in actors {
+        let unit = actor.starts_with("art/actors/units/");
+        let (meshes, anims) = actor_refs(&names, &mut read, &actor);
+        let Some(mesh) = meshes.iter().find(|m| m.starts_with("skeletal/")) else {
+            continue;
+        };
+        let mesh_member = format!("art/meshes/{mesh}.cached.pmd");
+        if anims.is_empty() || !names.contains(&mesh_member) {
+            continue;
+        }
+        let base = mesh.rsplit('/').next().unwrap_or(mesh).trim_end_matches(".dae");
+        let mesh_stem = caption::words(base).join("_");
+        // Actors differing only in textures share a mesh: stage each mesh once (the first actor in name order).
+        if !staged_meshes.insert(mesh.clone()) {
+            continue;
+        }
+        let (folder, asset, anims) = if unit {
+            if unit_meshes.len() >= MAX_UNIT_MESHES || !unit_meshes.insert(mesh.clone()) {
+                continue;
+            }
+            let asset = match base.get(..2) {
+                Some("m_") => "man".to_owned(),
+                Some("f_") => "woman".to_owned(),
+                _ => caption::asset_words(base).join(" "),
+            };
+            (
+                format!("unit_{mesh_stem}"),
+                asset,
+                &anims[..anims.len().min(MAX_UNIT_ANIMS)],
+            )
+        } else {
+            let stem = actor
+                .rsplit('/')
+                .next()
+                .unwrap_or(&actor)
+                .trim_end_matches(".xml")
+                .to_owned();
+            let asset = caption::asset_words(&stem).join(" ");
+            (stem, asset, &anims[..])
+        };
+        let folder = folder.replace(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == '-'), "_");
+        plan.insert(format!("{folder}/{folder}.pmd"), mesh_member.clone());
+        for a in anims {
+            let member = format!("art/animation/{a}.cached.psa");
+            if names.contains(&member) {
+                let stem = a.rsplit('/').next().unwrap_or(a).trim_end_matches(".dae");
+                plan.insert(format!("{folder}/{stem}.psa"), member);
+            }
+        }
+        assets.push((folder, asset));
+    }
+    let by_member: BTreeMap<&str, Vec<&str>> = plan.iter().fold(BTreeMap::new(), |mut m, (d, s)| {
+        m.entry(s.as_str()).or_insert_with(Vec::new).push(d.as_str());
+        m
+    });
+    // One pass over the archive, then copies for members used by several actors.
+    let first = archive::extract(&zip_path, dest, |name| by_member.get(name).map(|d| d[0].to_owned()))?;
+    report.refused.extend(first.refused);
+    for dests in by_member.values() {
+        for extra in &dests[1..] {
+            copy(&dest.join(dests[0]), &dest.join(extra))?;
+        }
+    }
+    for (folder, asset) in &assets {
+        let mesh = plan.get(&format!("{folder}/{folder}.pmd")).cloned().unwrap_or_default();
+        write_provenance(&dest.join(folder), package, &c.licence(&mesh), asset)?;
+    }
+    Ok(assets.len())
+}
+
+fn stage_ufoai(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut StageReport) -> Result<usize> {
+    let pk3 = dir.join("usr/share/games/ufoai/base/0models.pk3");
+    if !pk3.is_file() {
+        return Ok(0);
+    }
+    let file = std::fs::File::open(&pk3).map_err(|e| DataError::io(&pk3, e))?;
+    let zip = zip::ZipArchive::new(file).map_err(|e| DataError::new(&pk3, "zip", e.to_string()))?;
+    let names: BTreeSet<String> = zip.file_names().map(str::to_owned).collect();
+    let wanted: BTreeSet<String> = names
+        .iter()
+        .filter(|n| n.ends_with(".anm"))
+        .flat_map(|anm| {
+            let md2 = format!("{}.md2", anm.trim_end_matches(".anm"));
+            names.contains(&md2).then(|| [anm.clone(), md2]).into_iter().flatten()
+        })
+        .collect();
+    let got = archive::extract(&pk3, dest, |name| wanted.contains(name).then(|| name.to_owned()))?;
+    report.refused.extend(got.refused);
+    let mut n = 0;
+    for md2 in wanted.iter().filter(|w| w.ends_with(".md2")) {
+        // One folder per model: models/<kind>/<name>/<file>.md2 → asset "<name> <kind without plural s>".
+        let parts: Vec<&str> = md2.split('/').collect();
+        let (kind, name) = (parts.get(1).copied().unwrap_or(""), parts.get(2).copied().unwrap_or(""));
+        let kind = kind.trim_end_matches('s');
+        let asset = match kind {
+            "animal" | "object" | "" => caption::asset_words(name).join(" "),
+            k => format!("{} {k}", caption::asset_words(name).join(" ")),
+        };
+        let folder = Path::new(md2).parent().unwrap_or(Path::new(""));
+        let licence = c.licence(&format!("base/{md2}"));
+        let to = dest.join(folder);
+        let path = to.join(PROVENANCE_FILE);
+        if !path.exists() {
+            write_provenance(&to, package, &licence, asset.trim())?;
+        }
+        n += 1;
+    }
+    Ok(n)
+}
+
+fn stage_assimp(dir: &Path, dest: &Path, package: &str, c: &Dep5) -> Result<usize> {
+    let mesh = dir.join("usr/share/assimp/models/IQM/mrfixit.iqm");
+    if !mesh.is_file() {
+        return Ok(0);
+    }
+    let to = dest.join("mrfixit");
+    copy(&mesh, &to.join("mrfixit.iqm"))?;
+    write_provenance(&to, package, &c.licence(&rel(dir, &mesh)), "robot")?;
+    Ok(1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dep5_last_matching_stanza_wins() {
+        let c = Dep5::parse(
+            "Format: x\n\nFiles: *\nCopyright: a\nLicense: GPL-2+\n\nFiles: base/models/aliens/a.md2\n base/models/x/*\n\
+             Copyright: b\nLicense: CC-BY-SA-3.0\n more text\n",
+        );
+        assert_eq!(c.licence("models/y/z.md2"), "GPL-2+");
+        assert_eq!(c.licence("base/models/aliens/a.md2"), "CC-BY-SA-3.0");
+        assert_eq!(c.licence("usr/share/games/ufoai/base/models/x/q/b.md2"), "CC-BY-SA-3.0");
+        assert_eq!(Dep5::parse("").licence("a"), "unknown");
+        assert!(glob("a*c?e", "abbbcde") && !glob("a*c", "abd"));
+    }
+
+    #[test]
+    fn held_out_packages_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("in/openarena-data")).unwrap();
+        let e = stage(&dir.path().join("in"), &dir.path().join("out")).unwrap_err();
+        assert!(e.reason.contains("held out"), "{e}");
+    }
+}

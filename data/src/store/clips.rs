@@ -1,0 +1,206 @@
+//! How one import source becomes store clips: read it (every take of a file with takes), weld, filter, cut into
+//! windows, normalise (D1)–(D3) and sample FPS tokens (docs/method.md §2.5); what goes wrong becomes the reason
+//! of a rejection.
+
+use std::path::Path;
+
+use crate::caption;
+use crate::clip::{Clip, object_uid};
+use crate::error::{DataError, Result};
+use crate::formats;
+use crate::formats::skeletal::{ReadOptions, SkinStats, TakeSel};
+use crate::fps::farthest_point_sampling;
+use crate::preprocess;
+
+use super::jobs::{Job, Outcome};
+use super::{ImportOptions, SPLIT_SEED, Split, StoredClip};
+
+/// The reason text of a rejection: `field: reason`, prefixed by the file when it is not the source itself.
+pub(super) fn reason(e: &DataError, source: &str) -> String {
+    if e.path == source {
+        format!("{}: {}", e.field, e.reason)
+    } else {
+        e.to_string()
+    }
+}
+
+/// The reason text of a rejected take: `field: reason`, followed by the file in parentheses when it is neither
+/// the source nor the take (an animation file beside the mesh), so that the field always comes first.
+fn take_reason(e: &DataError, source: &str, take_source: &str) -> String {
+    if e.path == source || e.path == take_source {
+        format!("{}: {}", e.field, e.reason)
+    } else {
+        format!("{}: {} (in {})", e.field, e.reason, e.path)
+    }
+}
+
+pub(super) fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
+    let Job::File {
+        source,
+        path,
+        format,
+        provenance,
+    } = job
+    else {
+        return Outcome::Rejected("not a file".into());
+    };
+    let format = match format {
+        Ok(f) => *f,
+        Err(e) => return Outcome::Rejected(reason(e, source)),
+    };
+    if let Err(e) = provenance {
+        return Outcome::Rejected(reason(e, source));
+    }
+    if !format.has_takes() {
+        return match formats::read_clip(path).and_then(|c| accept(c, source.clone(), opts)) {
+            Ok(windows) => Outcome::Clips(windows, Vec::new(), SkinStats::default()),
+            Err(e) => Outcome::Rejected(reason(&e, source)),
+        };
+    }
+    let takes = match formats::list_takes(path) {
+        Ok(t) => t.unwrap_or_default(),
+        Err(e) => return Outcome::Rejected(reason(&e, source)),
+    };
+    if takes.is_empty() {
+        return Outcome::Rejected("animations: no animation: a static mesh is not a clip".into());
+    }
+    let asset = job.provenance().asset.unwrap_or_else(|| caption::asset_of_path(path));
+    let object = object_name(path);
+    let mut clips = Vec::new();
+    let mut failed = Vec::new();
+    let mut skin = SkinStats::default();
+    for (k, take) in takes.iter().enumerate() {
+        let take_source = format!("{source}#{}", take.name);
+        let read = formats::read_take(
+            path,
+            &ReadOptions {
+                take: TakeSel::Index(k),
+                max_frames: opts.max_frames,
+            },
+        );
+        let result = read.and_then(|t| {
+            let mut clip = t.clip;
+            clip.id = format!("{object}_offset{k}_0-{}", clip.frames - 1);
+            clip.caption = caption::caption(&asset, &take.name);
+            Ok((accept(clip, take_source.clone(), opts)?, t.stats))
+        });
+        match result {
+            Ok((w, stats)) => {
+                clips.extend(w);
+                skin.add(&stats);
+            }
+            Err(e) => failed.push((take_source.clone(), take_reason(&e, source, &take_source))),
+        }
+    }
+    if clips.is_empty() {
+        let why: Vec<String> = failed
+            .iter()
+            .take(3)
+            .map(|(s, r)| format!("{}: {r}", s.rsplit_once('#').map_or(s.as_str(), |(_, take)| take)))
+            .collect();
+        let more = failed.len().saturating_sub(3);
+        let more = if more > 0 {
+            format!("; {more} more")
+        } else {
+            String::new()
+        };
+        return Outcome::Rejected(format!(
+            "takes: none of {} became a clip ({}{more})",
+            failed.len(),
+            why.join("; ")
+        ));
+    }
+    Outcome::Clips(clips, failed, skin)
+}
+
+/// The object uid of a file with takes: its last two folders and stem, lower-case, `[a-z0-9]` runs joined by
+/// `-` (`…/actors/drone/mesh.md5mesh` → `actors-drone-mesh`), so that all takes of one asset share a split and
+/// the uid does not depend on where the tree was unpacked.
+fn object_name(path: &Path) -> String {
+    let comps: Vec<String> = path
+        .components()
+        .rev()
+        .take(3)
+        .map(|c| {
+            c.as_os_str()
+                .to_string_lossy()
+                .split('.')
+                .next()
+                .unwrap_or_default()
+                .to_ascii_lowercase()
+        })
+        .collect();
+    let joined = comps.into_iter().rev().collect::<Vec<_>>().join("-");
+    let mut out = String::new();
+    for c in joined.chars() {
+        if c.is_ascii_alphanumeric() {
+            out.push(c);
+        } else if !out.ends_with('-') && !out.is_empty() {
+            out.push('-');
+        }
+    }
+    out.trim_end_matches('-').to_owned()
+}
+
+/// Weld, filter and cut one clip into preprocessed windows.
+fn accept(mut clip: Clip, source: String, opts: &ImportOptions) -> Result<Vec<(StoredClip, String)>> {
+    clip.source = source;
+    let clip = opts.weld.apply(clip)?;
+    opts.filter.check(&clip)?;
+    if clip.frames < opts.frames {
+        return Err(DataError::new(
+            &clip.source,
+            "frames",
+            format!(
+                "clip {} has {} frames, fewer than the window length {}",
+                clip.id, clip.frames, opts.frames
+            ),
+        ));
+    }
+    preprocess_windows(&clip, opts.frames, opts.stride, opts.p)
+}
+
+/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 and assign
+/// the split of the clip's object (module doc of [`crate::store`]). Returns each window with its object uid, or
+/// an error (field `vertices`) when a window does not normalise to finite numbers (finite coordinates near ±3.4e38
+/// overflow f32).
+pub(super) fn preprocess_windows(
+    clip: &Clip,
+    frames: usize,
+    stride: usize,
+    p: usize,
+) -> Result<Vec<(StoredClip, String)>> {
+    // The uid of the whole clip, so every window of one animation shares its split.
+    let object = object_uid(&clip.id).to_owned();
+    let split = Split::of_object(&object, SPLIT_SEED);
+    let mut out = Vec::new();
+    for (k, w) in preprocess::windows(clip, frames, stride).iter().enumerate() {
+        let (clip, normalization) = preprocess::normalize(w);
+        let finite = normalization.center.iter().all(|c| c.is_finite())
+            && normalization.scale.is_finite()
+            && normalization.scale > 0.0
+            && clip.vertices.iter().flatten().all(|x| x.is_finite());
+        if !finite {
+            return Err(DataError::new(
+                &clip.source,
+                "vertices",
+                format!(
+                    "normalising window {k} by its frame 0 (centre {:?}, scale {}) gives non-finite \
+                     coordinates: values this large overflow f32; rescale the file",
+                    normalization.center, normalization.scale
+                ),
+            ));
+        }
+        let fps = farthest_point_sampling(clip.frame(0), p);
+        out.push((
+            StoredClip {
+                clip,
+                fps,
+                normalization,
+                split,
+            },
+            object.clone(),
+        ));
+    }
+    Ok(out)
+}
