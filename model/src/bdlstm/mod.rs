@@ -14,7 +14,7 @@ use burn::nn::{Lstm, LstmConfig, LstmState};
 use burn::prelude::*;
 use burn::tensor::Distribution;
 
-pub use crate::frame_vae::Posterior;
+pub use crate::mesh_vae::Posterior;
 pub use codec::{FrameCodec, LOGVAR_MAX, LOGVAR_MIN, LatentCodec, LatentCodecConfig};
 pub use loss::{BdLstmLoss, BdLstmLossConfig, NORM_EPS, bdlstm_loss, frame_norms, kl_sum, l2_penalty};
 pub use merge::{MergeConfig, MergedSegment, SegmentError, SegmentTry, bbox_diagonal, frame_distance, merge_segment};
