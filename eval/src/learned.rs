@@ -18,7 +18,7 @@ use any4d_model::latent_stats::LatentStats;
 use any4d_model::mesh_vae::{EdgeList, MeshVae, VaeEncoding};
 use any4d_model::mmdit::{KeyframeConditioning, Mmdit, MmditConfig, replace_keyframes};
 use any4d_model::rectified_flow::{Conditioning, SampleOptions, sample_mmdit};
-use any4d_model::text::TextEncoder;
+use any4d_model::text::{TextEncoder, caption_keep};
 use burn::prelude::*;
 use burn::tensor::TensorData;
 
@@ -576,6 +576,7 @@ impl RfSampler {
             .states;
         let [_, l, d] = text.dims();
         let text = text.expand([b, l, d]);
+        let keep = Tensor::<1>::from_data(TensorData::new(caption_keep(&[caption.to_string()]), [1]), &device).expand([b]);
         let eps = Tensor::cat(
             requests
                 .iter()
@@ -583,7 +584,7 @@ impl RfSampler {
                 .collect(),
             0,
         );
-        let x1 = sample_mmdit(&m.rf, &cond, text, eps, self.guidance, &self.options); // (R6)
+        let x1 = sample_mmdit(&m.rf, &cond, text, keep, eps, self.guidance, &self.options); // (R6)
         let mut latents = m.stats.destandardize_motion(x1); // [B, P, T, C]
         if matches!(
             self.options.conditioning,

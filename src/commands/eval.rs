@@ -9,6 +9,7 @@ use any4d_data::keyframes::Placement;
 use any4d_eval::bench::{MetricsBench, timed, write_f32_clips};
 use any4d_eval::methods::MethodKind;
 use any4d_eval::metrics::{ClipMetrics, Coordinates, Motion, Scoring, average, evaluate_clip_with};
+use any4d_eval::protocol::EvalSplit;
 use any4d_eval::rollout::OverlapSource;
 use any4d_eval::tables::long_horizon::LongHorizon;
 use any4d_eval::tables::reconstruction::Reconstruction;
@@ -211,6 +212,11 @@ pub struct RunArgs {
     /// Noise seeds; several give mean ± 95 % CI (docs/method.md §8 X8).
     #[arg(long, value_delimiter = ',', default_value = "42")]
     pub seeds: Vec<u64>,
+    /// Which clips of the store the items come from: val (the paper's protocol), train, or all (a held-out store
+    /// imported from real files, scored whole).
+    #[arg(long, default_value = "val", value_parser = EvalSplit::parse)]
+    pub split: EvalSplit,
+
     /// Keyframe placement of table 1: random, every_<r> or bernoulli_<p> (docs/method.md §8 X4).
     #[arg(long, default_value = "random", value_parser = Placement::parse)]
     pub placement: Placement,
@@ -337,6 +343,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     };
     opts.export_items = args.export;
     opts.progress = !args.no_progress;
+    opts.split = args.split;
     let uses_rf = kinds.iter().any(|k| k.needs_model());
     opts.header = TableHeader {
         text_encoder: if uses_rf { "scratch".into() } else { "none".into() },
