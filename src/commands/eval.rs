@@ -17,7 +17,7 @@ use any4d_eval::tables::short_horizon::ShortHorizon;
 use any4d_eval::tables::summary::TableHeader;
 use any4d_eval::tables::timing::{PAPER_REPS, Timing};
 use any4d_eval::tables::{Items, PAPER_CLIPS, Protocol, TableOptions, render_results, run_protocol};
-use any4d_model::rectified_flow::Solver;
+use any4d_model::rectified_flow::{ReplaceNoise, Solver};
 use any4d_train::backend::{self, Backend, Precision};
 use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods, build_reconstructors};
 use anyhow::Context;
@@ -167,6 +167,15 @@ pub enum SolverArg {
     Midpoint,
 }
 
+/// `--replace-noise` (docs/method.md §8 X9).
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReplaceNoiseArg {
+    /// ε_key = the trajectory's initial noise (the paper).
+    Fixed,
+    /// New noise at every evaluation, seeded from the items' noise seeds.
+    Fresh,
+}
+
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OverlapArg {
     /// Ground-truth overlap frame (keyframe methods).
@@ -238,6 +247,9 @@ pub struct RunArgs {
     /// Classifier-free guidance weight (docs/method.md §9 item 9: 1.0).
     #[arg(long, default_value_t = 1.0)]
     pub guidance: f64,
+    /// Noise that re-noises the Baseline's keyframes (docs/method.md §8 X9).
+    #[arg(long, value_enum, default_value_t = ReplaceNoiseArg::Fixed)]
+    pub replace_noise: ReplaceNoiseArg,
     /// Table 4: vertex counts timed [default: 512,1024,2048,4096].
     #[arg(long, value_delimiter = ',')]
     pub timing_vertices: Option<Vec<usize>>,
@@ -336,6 +348,10 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 SolverArg::Midpoint => Solver::Midpoint,
             },
             guidance: args.guidance,
+            replace_noise: match args.replace_noise {
+                ReplaceNoiseArg::Fixed => ReplaceNoise::Fixed,
+                ReplaceNoiseArg::Fresh => ReplaceNoise::Fresh,
+            },
         };
         let built = build_methods(&kinds, &runs, sampling, &device)?;
         opts.methods = built.methods;
