@@ -11,14 +11,14 @@ use std::sync::Arc;
 use any4d_data::batch::PadTo;
 use any4d_data::fps::farthest_point_sampling;
 use any4d_data::preprocess::{edges_from_faces, pad_vertices};
-use any4d_data::rng::{Rng, rng};
+use any4d_data::rng::{GOLDEN_GAMMA, Rng, rng, splitmix64};
 use any4d_data::{Clip, DataError};
 use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mesh_vae::{EdgeList, MeshVae, VaeEncoding};
 use any4d_model::mmdit::{KeyframeConditioning, Mmdit, MmditConfig, replace_keyframes};
-use any4d_model::rectified_flow::{Conditioning, SampleOptions, sample_mmdit};
-use any4d_model::text::TextEncoder;
+use any4d_model::rectified_flow::{Conditioning, ReplaceNoise, SampleOptions, sample_mmdit};
+use any4d_model::text::{TextEncoder, caption_keep};
 use burn::prelude::*;
 use burn::tensor::TensorData;
 
@@ -442,7 +442,7 @@ pub struct RfSampler {
 impl RfSampler {
     /// `options.conditioning` must match the network's input layout (mask channels or not); `guidance` is the CFG
     /// weight w (1.0 in the paper: one conditional branch). ε comes from the seed ([`sampler_noise`]); only
-    /// `ReplaceNoise::Fresh` also draws from the device RNG, so it is reproducible only if the device is seeded.
+    /// `ReplaceNoise::Fresh` also draws from the device RNG, which each batch seeds from its requests' seeds.
     pub fn new(models: Arc<LearnedModels>, options: SampleOptions, guidance: f64) -> Result<Self> {
         let bad = |field: &str, reason: String| Err(DataError::new("rf sampler", field, reason));
         let net = models.rf_config.conditioning;
@@ -576,6 +576,7 @@ impl RfSampler {
             .states;
         let [_, l, d] = text.dims();
         let text = text.expand([b, l, d]);
+        let keep = Tensor::<1>::from_data(TensorData::new(caption_keep(&[caption.to_string()]), [1]), &device).expand([b]);
         let eps = Tensor::cat(
             requests
                 .iter()
@@ -583,7 +584,15 @@ impl RfSampler {
                 .collect(),
             0,
         );
-        let x1 = sample_mmdit(&m.rf, &cond, text, eps, self.guidance, &self.options); // (R6)
+        if self.options.replace_noise == ReplaceNoise::Fresh {
+            // Fresh replacement noise comes from the device stream: seed it from the requests, so the same
+            // requests in the same batches give the same samples.
+            let mix = requests
+                .iter()
+                .fold(0x5EED_F2E5_u64, |h, r| splitmix64(h ^ r.seed.wrapping_mul(GOLDEN_GAMMA)));
+            device.seed(mix);
+        }
+        let x1 = sample_mmdit(&m.rf, &cond, text, keep, eps, self.guidance, &self.options); // (R6)
         let mut latents = m.stats.destandardize_motion(x1); // [B, P, T, C]
         if matches!(
             self.options.conditioning,

@@ -288,15 +288,57 @@ fn split_start(id: &str) -> Option<(&str, usize)> {
     }
 }
 
-/// Clips for the protocol: the validation split of a store.
+/// Which clips of a store an evaluation draws its items from (`eval run --split`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum EvalSplit {
+    /// The validation split (the paper's protocol).
+    #[default]
+    Val,
+    /// The training split (to measure over-fitting).
+    Train,
+    /// Every clip with status ok, whatever its split (a held-out store imported from real files is scored whole).
+    All,
+}
+
+impl EvalSplit {
+    /// The name written into manifests and table headers (`validation`, `train`, `all`).
+    pub fn name(self) -> &'static str {
+        match self {
+            EvalSplit::Val => "validation",
+            EvalSplit::Train => "train",
+            EvalSplit::All => "all",
+        }
+    }
+
+    /// Whether a clip of `split` (None: the index row has no split) is an evaluation candidate.
+    pub fn includes(self, split: Option<Split>) -> bool {
+        match self {
+            EvalSplit::Val => split == Some(Split::Val),
+            EvalSplit::Train => split == Some(Split::Train),
+            EvalSplit::All => true,
+        }
+    }
+
+    /// Parses `val` | `validation` | `train` | `all` (the CLI's value parser).
+    pub fn parse(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "val" | "validation" => Ok(EvalSplit::Val),
+            "train" => Ok(EvalSplit::Train),
+            "all" => Ok(EvalSplit::All),
+            other => Err(format!("unknown split {other:?}: expected val, train or all")),
+        }
+    }
+}
+
+/// Clips for the protocol: one split of a store (the validation split unless told otherwise).
 pub struct StoreSource {
     store: Store,
     val: Vec<ClipRef>,
 }
 
 impl StoreSource {
-    /// Open a store and list its validation clips from `index.parquet` (rows with status ok, in store order).
-    pub fn open(dir: &Path) -> Result<Self> {
+    /// Open a store and list the clips of `split` from `index.parquet` (rows with status ok, in store order).
+    pub fn open(dir: &Path, split: EvalSplit) -> Result<Self> {
         let store = Store::open(dir)?;
         let ok: Vec<_> = read_index(dir)?
             .into_iter()
@@ -312,13 +354,13 @@ impl StoreSource {
         let val = ok
             .into_iter()
             .enumerate()
-            .filter(|(_, r)| r.split == Some(Split::Val))
+            .filter(|(_, r)| split.includes(r.split))
             .map(|(index, r)| ClipRef { index, id: r.id })
             .collect();
         Ok(Self { store, val })
     }
 
-    /// Evaluation candidates: single validation clips when the store's clips are long enough for `frames`,
+    /// Evaluation candidates: single clips of the split when the store's clips are long enough for `frames`,
     /// otherwise pairs of clips sharing their boundary frame (docs/method.md §2.7).
     pub fn candidates(&self, frames: usize) -> Vec<Candidate> {
         if self.store.frames() >= frames {

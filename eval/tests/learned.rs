@@ -331,7 +331,8 @@ fn sample_latents_match_a_hand_wired_sample_mmdit() {
         mask: Tensor::from_data(TensorData::new(vec![1.0f32, 0.0, 0.0, 1.0], [1, T]), &device),
     };
     let text = ByteText.encode(&["flag".to_string()], &device).unwrap().states;
-    let x1 = sample_mmdit(&rf, &cond, text, sampler_noise(3, [1, P, T, C], &device), 1.0, &opts);
+    let keep = Tensor::ones([1], &device);
+    let x1 = sample_mmdit(&rf, &cond, text, keep, sampler_noise(3, [1, P, T, C], &device), 1.0, &opts);
     let expect = floats(st.destandardize_motion(x1).swap_dims(1, 2));
     let err = max_diff(&floats(got.latents), &expect);
     assert!(err < 1e-4, "latents differ from the hand-wired sampler by {err}");
@@ -377,6 +378,59 @@ fn impute_until_samples_and_differs_from_input_mask() {
         max_diff(slot(&floats(guided.latents), 1), slot(&zb, 1)) > 1e-5,
         "guidance reaches the sampler"
     );
+}
+
+/// `ReplaceNoise::Fresh` (docs/method.md §8 X9) is reproducible from the request seeds, and differs from fixed noise
+/// and between seeds.
+#[test]
+fn fresh_replacement_noise_is_seed_reproducible() {
+    use any4d_model::rectified_flow::ReplaceNoise;
+    let device = Device::flex();
+    let m = models(
+        frame_codec(&device, PadTo::BatchMax),
+        KeyframeConditioning::ReplaceNoised,
+        &device,
+    );
+    let fresh = SampleOptions {
+        replace_noise: ReplaceNoise::Fresh,
+        ..options(KeyframeConditioning::ReplaceNoised)
+    };
+    let sampler = RfSampler::new(m.clone(), fresh, 1.0).unwrap();
+    let fixed = RfSampler::new(m, options(KeyframeConditioning::ReplaceNoised), 1.0).unwrap();
+    let gt = wave_clip();
+    let keys = [0, 3];
+    let visible = hide_non_keyframes(&gt, &keys);
+    let a = sampler.sample(&visible, &keys, "flag", 5).unwrap();
+    let b = sampler.sample(&visible, &keys, "flag", 5).unwrap();
+    assert_eq!(a, b, "same seed, same fresh noise");
+    let other = sampler.sample(&visible, &keys, "flag", 6).unwrap();
+    assert!(rows_diff(&a, &other) > 1e-6, "another seed, other noise");
+    let f = fixed.sample(&visible, &keys, "flag", 5).unwrap();
+    assert!(rows_diff(&a, &f) > 1e-6, "fresh noise is not the fixed ε");
+}
+
+/// An empty caption is the same network input as the unconditional branch of classifier-free guidance: sampling
+/// with "" at w = 1 equals sampling any caption at w = 0 (v = v_u), and whitespace counts as empty.
+#[test]
+fn an_empty_caption_samples_the_unconditional_branch() {
+    let device = Device::flex();
+    let m = models(
+        frame_codec(&device, PadTo::BatchMax),
+        KeyframeConditioning::InputMask,
+        &device,
+    );
+    let cond = RfSampler::new(m.clone(), options(KeyframeConditioning::InputMask), 1.0).unwrap();
+    let uncond = RfSampler::new(m, options(KeyframeConditioning::InputMask), 0.0).unwrap();
+    let gt = wave_clip();
+    let keys = [0, 3];
+    let visible = hide_non_keyframes(&gt, &keys);
+    let empty = cond.sample(&visible, &keys, "", 7).unwrap();
+    let no_text = uncond.sample(&visible, &keys, "a waving flag", 7).unwrap();
+    assert!(rows_diff(&empty, &no_text) < 1e-5, "empty caption ≠ the no-text branch");
+    let blank = cond.sample(&visible, &keys, "   ", 7).unwrap();
+    assert!(rows_diff(&empty, &blank) < 1e-5, "whitespace is not an empty caption");
+    let flag = cond.sample(&visible, &keys, "a waving flag", 7).unwrap();
+    assert!(rows_diff(&empty, &flag) > 1e-6, "the caption reaches the network");
 }
 
 #[test]

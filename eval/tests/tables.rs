@@ -367,3 +367,60 @@ fn export_writes_every_format_for_dotted_stems() {
         assert_eq!(back.vertices, clip.vertices, "{}", p.display());
     }
 }
+
+/// `--split`: each split draws its items only from its own clips (ids checked against the index), `all` draws from
+/// both, and a split with too few clips is an error naming it.
+#[test]
+fn the_split_option_draws_items_from_that_split_only() {
+    use any4d_data::store::{Split, read_index, write_synth_with};
+    use any4d_data::synth::SynthConfig;
+    use any4d_eval::protocol::{EvalSplit, Manifest, ManifestOptions, StoreSource};
+    use std::collections::HashSet;
+
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("store");
+    let cfg = SynthConfig {
+        clips: 40,
+        seed: 9,
+        frames: 16,
+        min_vertices: 64,
+        max_vertices: 128,
+    };
+    write_synth_with(&cfg, &store, 16, None).unwrap();
+    let index = read_index(&store).unwrap();
+    let ids = |want: Option<Split>| -> HashSet<String> {
+        index
+            .iter()
+            .filter(|r| want.is_none() || r.split == want)
+            .map(|r| r.id.clone())
+            .collect()
+    };
+    let (train, val) = (ids(Some(Split::Train)), ids(Some(Split::Val)));
+    assert!(!train.is_empty() && !val.is_empty());
+    for (split, allowed) in [
+        (EvalSplit::Val, val.clone()),
+        (EvalSplit::Train, train.clone()),
+        (EvalSplit::All, ids(None)),
+    ] {
+        let source = StoreSource::open(&store, split).unwrap();
+        let candidates = source.candidates(16);
+        assert_eq!(candidates.len(), allowed.len(), "{split:?}");
+        assert!(candidates.iter().all(|c| allowed.contains(&c.clip.id)), "{split:?}");
+        let opts = ManifestOptions {
+            n_clips: allowed.len().min(5),
+            split: split.name().into(),
+            ..ManifestOptions::table1("store")
+        };
+        let m = Manifest::build(&candidates, &opts, "store").unwrap();
+        assert!(m.clips.iter().all(|c| allowed.contains(&c.clip.id)));
+        let too_many = ManifestOptions {
+            n_clips: allowed.len() + 1,
+            ..opts
+        };
+        let err = Manifest::build(&candidates, &too_many, "store").unwrap_err().to_string();
+        assert!(err.contains(split.name()), "{err}");
+    }
+    assert_eq!(EvalSplit::parse("val"), Ok(EvalSplit::Val));
+    assert_eq!(EvalSplit::parse("all"), Ok(EvalSplit::All));
+    assert!(EvalSplit::parse("test").unwrap_err().contains("val, train or all"));
+}

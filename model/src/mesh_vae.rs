@@ -26,6 +26,19 @@ pub enum PadKeys {
     Visible,
 }
 
+/// How (V1) averages the per-vertex distances over a batch (docs/method.md (V1)).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RecAverage {
+    /// Mean over each clip's real vertices and frames, then mean over the clips of the batch (the paper's form,
+    /// default): every clip weighs the same whatever its vertex count.
+    #[default]
+    PerClip,
+    /// One mean over all real vertices of all clips of the batch (the AnimateAnyMesh code): clips with more
+    /// vertices weigh more.
+    Batch,
+}
+
 /// Whether the trajectory latent is drawn from the posterior or taken as its mean.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Posterior {
@@ -166,6 +179,9 @@ pub struct MeshVaeBodyConfig {
     pub logvar_min: f64,
     /// Upper clamp of log σ² (20).
     pub logvar_max: f64,
+    /// How the reconstruction loss (V1) averages over a batch (`per_clip` when absent).
+    #[serde(default)]
+    pub rec_average: RecAverage,
 }
 
 impl MeshVaeBodyConfig {
@@ -183,6 +199,7 @@ impl MeshVaeBodyConfig {
             pad_keys: PadKeys::Masked,
             logvar_min: -30.0,
             logvar_max: 20.0,
+            rec_average: RecAverage::PerClip,
         }
     }
 
@@ -250,6 +267,7 @@ impl MeshVaeBodyConfig {
                 .init(device),
             to_offsets: lin(2 * d, out_per_group),
             pad_keys: self.pad_keys,
+            rec_average: self.rec_average,
             logvar_range: (self.logvar_min, self.logvar_max),
         }
     }
@@ -276,6 +294,8 @@ pub struct MeshVaeBody {
     to_offsets: Linear,
     #[module(skip)]
     pad_keys: PadKeys,
+    #[module(skip)]
+    rec_average: RecAverage,
     #[module(skip)]
     logvar_range: (f64, f64),
 }
@@ -364,12 +384,18 @@ pub fn sample(mu: Tensor<4>, logvar: Tensor<4>) -> Tensor<4> {
     mu + logvar.mul_scalar(0.5).exp() * noise
 }
 
-/// (V1) mean per-vertex Euclidean distance over the real vertices of all frames of the batch:
-/// Σ_{b,f,v real} ‖x̂ − x̄‖₂ / (T · Σ_b N_v) (AAM's batch form of docs/method.md (V1)).
+/// (V1) mean per-vertex Euclidean distance over the real vertices of all frames: per clip
+/// (1/B) Σ_b Σ_{f,v real} ‖x̂ − x̄‖₂ / (T · N_v^b), or over the whole batch Σ_{b,f,v real} ‖x̂ − x̄‖₂ / (T · Σ_b N_v)
+/// (the AnimateAnyMesh code), as `average` says.
 ///
 /// # Shapes
 /// - `pred`, `target`: `[B, T, N, 3]`, `vmask`: `[B, N]` (true = real) → `[1]`
-pub fn reconstruction_loss(pred: Tensor<4>, target: Tensor<4>, vmask: Tensor<2, Bool>) -> Tensor<1> {
+pub fn reconstruction_loss(
+    pred: Tensor<4>,
+    target: Tensor<4>,
+    vmask: Tensor<2, Bool>,
+    average: RecAverage,
+) -> Tensor<1> {
     let [b, t, n, _] = pred.dims();
     let padded = vmask.clone().bool_not().reshape([b, 1, n]).expand([b, t, n]);
     let sq: Tensor<3> = (pred - target).powi_scalar(2).sum_dim(3).squeeze_dim(3);
@@ -380,8 +406,17 @@ pub fn reconstruction_loss(pred: Tensor<4>, target: Tensor<4>, vmask: Tensor<2, 
         .clamp_min(1e-20)
         .sqrt()
         .mask_fill(padded, 0.0);
-    let real = vmask.int().sum().float().mul_scalar(t as f64);
-    dist.sum() / real
+    match average {
+        RecAverage::Batch => {
+            let real = vmask.int().sum().float().mul_scalar(t as f64);
+            dist.sum() / real
+        }
+        RecAverage::PerClip => {
+            let per_clip: Tensor<1> = dist.sum_dim(2).sum_dim(1).reshape([b]); // [B]
+            let real: Tensor<1> = vmask.int().sum_dim(1).float().reshape([b]).mul_scalar(t as f64);
+            (per_clip / real).mean()
+        }
+    }
 }
 
 /// (V2) KL divergence of N(μ, σ²) from N(0, I): mean over every element (tokens, channels, groups, batch)
@@ -547,7 +582,8 @@ pub trait MeshVae {
     /// - every term `[1]`
     fn loss(&self, batch: &VaeBatch) -> VaeLoss {
         let (recon, enc) = self.reconstruct(batch, Posterior::Sample);
-        let rec = reconstruction_loss(recon, batch.frames.clone(), batch.vmask.clone()); // (V1)
+        let average = self.body().rec_average;
+        let rec = reconstruction_loss(recon, batch.frames.clone(), batch.vmask.clone(), average); // (V1)
         let kl = kl_loss(enc.mu, enc.logvar); // (V2)
         VaeLoss::new(rec, kl, self.kl_weight()) // (V3)
     }
@@ -556,6 +592,25 @@ pub trait MeshVae {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// (V1) per clip vs over the batch, by hand: clip 0 has 1 real vertex off by 3 (the padded row is off by 100 and
+    /// must not count), clip 1 has 2 real vertices off by 1. Per clip: (3 + 1) / 2 = 2; batch: (3 + 1 + 1) / 3.
+    #[test]
+    fn reconstruction_loss_averages_per_clip_or_over_the_batch() {
+        let device = Device::flex();
+        let target = Tensor::<4>::zeros([2, 1, 2, 3], &device);
+        let pred = Tensor::<4>::from_data(
+            TensorData::new(vec![3.0f32, 0., 0., 100., 0., 0., 0., 1., 0., 0., 0., 1.], [2, 1, 2, 3]),
+            &device,
+        );
+        let vmask = Tensor::<2, Bool>::from_data(TensorData::new(vec![true, false, true, true], [2, 2]), &device);
+        let loss = |average| {
+            reconstruction_loss(pred.clone(), target.clone(), vmask.clone(), average).into_scalar::<f32>()
+        };
+        assert!((loss(RecAverage::PerClip) - 2.0).abs() < 1e-6);
+        assert!((loss(RecAverage::Batch) - 5.0 / 3.0).abs() < 1e-6);
+        assert_eq!(RecAverage::default(), RecAverage::PerClip, "the paper's form unless a config says otherwise");
+    }
 
     #[test]
     fn gather_tokens_picks_the_fps_rows_of_every_group() {

@@ -633,4 +633,59 @@ mod tests {
         assert_eq!(cfg.forward_flops(13, 3).attention, 16_384 * 4);
         assert_eq!(flops.training_step(), 3 * (flops.linear + flops.attention));
     }
+
+    /// Replaces all-zero float parameters (zero-initialised adaLN and output projections) with N(0, 0.3²), so the
+    /// output depends on τ.
+    struct Wake;
+
+    impl burn::module::ModuleMapper for Wake {
+        fn map_float<const D: usize>(
+            &mut self,
+            param: burn::module::Param<Tensor<D>>,
+        ) -> burn::module::Param<Tensor<D>> {
+            param.map(|t| {
+                let peak = t.clone().abs().max().into_scalar::<f32>();
+                if peak == 0.0 {
+                    t.random_like(Distribution::Normal(0.0, 0.3))
+                } else {
+                    t
+                }
+            })
+        }
+    }
+
+    /// docs/method.md §1.4 (4) at the network: `forward(…, τ)` embeds τ itself. The reference below runs the same
+    /// layers with the embedding of τ written out; a flip to 1 − τ anywhere inside `forward` makes the two differ
+    /// (the output is checked to depend on τ, so the comparison can fail).
+    #[test]
+    fn forward_embeds_tau_not_one_minus_tau() {
+        let device = Device::flex();
+        let cfg = MmditConfig::tiny();
+        let model = cfg.init(&device).map(&mut Wake);
+        let (b, p, l) = (2, 5, 3);
+        let input = Tensor::<3>::random([b, p, cfg.in_channels()], Distribution::Normal(0.0, 1.0), &device);
+        let text = Tensor::<3>::random([b, l, cfg.text_dim], Distribution::Normal(0.0, 1.0), &device);
+        let keep = Tensor::<1>::ones([b], &device);
+        let reference = |tau: f32| {
+            let tau = Tensor::<1>::full([b], tau, &device);
+            let motion = model.input_norm.forward(model.input_proj.forward(input.clone()));
+            let text = model.text_norm.forward(model.text_proj.forward(text.clone()));
+            let temb = silu(model.time.fc2.forward(gelu(model.time.fc1.forward(timestep_sinusoid(tau)))));
+            let (mut m, mut t) = (motion, text);
+            for block in &model.blocks {
+                (m, t) = block.forward(m, t, temb.clone());
+            }
+            model.output_proj.forward(model.final_norm.forward(m))
+        };
+        let run = |tau: f32| model.forward(input.clone(), text.clone(), keep.clone(), Tensor::full([b], tau, &device));
+        let gap = |a: Tensor<3>, b: Tensor<3>| (a - b).abs().max().into_scalar::<f32>();
+        for tau in [0.1f32, 0.3, 0.8] {
+            assert!(gap(run(tau), reference(tau)) < 1e-5, "forward(τ = {tau}) is not the network at τ");
+            assert!(
+                gap(reference(tau), reference(1.0 - tau)) > 1e-3,
+                "the output does not depend on τ, so the check above could not fail"
+            );
+        }
+    }
+
 }

@@ -322,24 +322,25 @@ pub fn cfg_combine(v_cond: Tensor<3>, v_uncond: Tensor<3>, guidance: f64) -> Ten
     v_uncond.clone() + (v_cond - v_uncond).mul_scalar(guidance)
 }
 
-/// The MMDiT as a velocity closure for [`sample`], with CFG. For w = 1 only the conditional branch runs
-/// (keep_txt = 1); otherwise both branches run as one batch of 2B, the unconditional one with keep_txt = 0 and the
-/// same input (same z₀, keyframes and mask).
+/// The MMDiT as a velocity closure for [`sample`], with CFG. For w = 1 only the conditional branch runs (keep_txt =
+/// `keep`: 1, or 0 for a caption with no text, [`crate::text::caption_keep`]); otherwise both branches run as one
+/// batch of 2B, the unconditional one with keep_txt = 0 and the same input (same z₀, keyframes and mask).
 ///
 /// # Shapes
-/// - text: `[B, L, D_txt]`; the closure maps `[B, P, in]`, `[B]` to `[B, P, T·C]`
+/// - text: `[B, L, D_txt]`; keep: `[B]`; the closure maps `[B, P, in]`, `[B]` to `[B, P, T·C]`
 pub fn mmdit_velocity(
     model: &Mmdit,
     text: Tensor<3>,
+    keep: Tensor<1>,
     guidance: f64,
 ) -> impl FnMut(Tensor<3>, Tensor<1>) -> Tensor<3> + '_ {
     move |input: Tensor<3>, tau: Tensor<1>| {
         let [b, _, _] = input.dims();
         let device = input.device();
         if guidance == 1.0 {
-            return model.forward(input, text.clone(), Tensor::ones([b], &device), tau);
+            return model.forward(input, text.clone(), keep.clone(), tau);
         }
-        let keep = Tensor::cat(vec![Tensor::ones([b], &device), Tensor::zeros([b], &device)], 0);
+        let keep = Tensor::cat(vec![keep.clone(), Tensor::zeros([b], &device)], 0);
         let v = model.forward(
             Tensor::cat(vec![input.clone(), input], 0),
             Tensor::cat(vec![text.clone(), text.clone()], 0),
@@ -355,14 +356,16 @@ pub fn mmdit_velocity(
 /// Samples trajectory latents with the MMDiT (docs/method.md §4.6): [`sample`] over [`mmdit_velocity`].
 ///
 /// # Shapes
-/// - text: `[B, L, D_txt]`; eps: `[B, P, T, C]`; output `[B, P, T, C]`
+/// - text: `[B, L, D_txt]`; keep: `[B]` keep_txt of the conditional branch; eps: `[B, P, T, C]`; output
+///   `[B, P, T, C]`
 pub fn sample_mmdit(
     model: &Mmdit,
     cond: &Conditioning,
     text: Tensor<3>,
+    keep: Tensor<1>,
     eps: Tensor<4>,
     guidance: f64,
     opts: &SampleOptions,
 ) -> Tensor<4> {
-    sample(mmdit_velocity(model, text, guidance), cond, eps, opts)
+    sample(mmdit_velocity(model, text, keep, guidance), cond, eps, opts)
 }

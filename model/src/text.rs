@@ -26,6 +26,16 @@ pub struct TextBatch {
     pub pad_mask: Tensor<2, Bool>,
 }
 
+/// keep_txt of each caption: 0 for a caption with no text (empty or only whitespace), 1 otherwise. A caption with
+/// no text is then the same network input as the unconditional branch of classifier-free guidance (keep_txt = 0
+/// zeroes the projected text before its LayerNorm, docs/method.md §4.3), in training, validation and sampling.
+pub fn caption_keep(captions: &[String]) -> Vec<f32> {
+    captions
+        .iter()
+        .map(|c| if c.trim().is_empty() { 0.0 } else { 1.0 })
+        .collect()
+}
+
 /// A caption encoder.
 pub trait TextEncoder {
     /// Encodes captions, padded/truncated to [`TextEncoder::max_len`] tokens.

@@ -471,9 +471,9 @@ fn cfg_with_unit_guidance_equals_the_conditional_branch() {
     );
     assert!(max_abs_diff(cfg_combine(v_cond.clone(), v_uncond.clone(), 1.0), v_cond.clone()) < 1e-6);
     assert!(max_abs_diff(cfg_combine(v_cond.clone(), v_uncond.clone(), 0.0), v_uncond.clone()) < 1e-6);
-    let mut w1 = mmdit_velocity(&model, text.clone(), 1.0);
+    let mut w1 = mmdit_velocity(&model, text.clone(), Tensor::ones([2], &d), 1.0);
     assert!(max_abs_diff(w1(input.clone(), tau.clone()), v_cond.clone()) < 1e-5);
-    let mut w3 = mmdit_velocity(&model, text, 3.0);
+    let mut w3 = mmdit_velocity(&model, text, Tensor::ones([2], &d), 3.0);
     let expect = v_uncond.clone() + (v_cond - v_uncond).mul_scalar(3.0);
     assert!(
         max_abs_diff(w3(input, tau), expect) < 1e-4,

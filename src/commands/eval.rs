@@ -9,6 +9,7 @@ use any4d_data::keyframes::Placement;
 use any4d_eval::bench::{MetricsBench, timed, write_f32_clips};
 use any4d_eval::methods::MethodKind;
 use any4d_eval::metrics::{ClipMetrics, Coordinates, Motion, Scoring, average, evaluate_clip_with};
+use any4d_eval::protocol::EvalSplit;
 use any4d_eval::rollout::OverlapSource;
 use any4d_eval::tables::long_horizon::LongHorizon;
 use any4d_eval::tables::reconstruction::Reconstruction;
@@ -16,7 +17,7 @@ use any4d_eval::tables::short_horizon::ShortHorizon;
 use any4d_eval::tables::summary::TableHeader;
 use any4d_eval::tables::timing::{PAPER_REPS, Timing};
 use any4d_eval::tables::{Items, PAPER_CLIPS, Protocol, TableOptions, render_results, run_protocol};
-use any4d_model::rectified_flow::Solver;
+use any4d_model::rectified_flow::{ReplaceNoise, Solver};
 use any4d_train::backend::{self, Backend, Precision};
 use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods, build_reconstructors};
 use anyhow::Context;
@@ -166,6 +167,15 @@ pub enum SolverArg {
     Midpoint,
 }
 
+/// `--replace-noise` (docs/method.md §8 X9).
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReplaceNoiseArg {
+    /// ε_key = the trajectory's initial noise (the paper).
+    Fixed,
+    /// New noise at every evaluation, seeded from the items' noise seeds.
+    Fresh,
+}
+
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OverlapArg {
     /// Ground-truth overlap frame (keyframe methods).
@@ -211,6 +221,11 @@ pub struct RunArgs {
     /// Noise seeds; several give mean ± 95 % CI (docs/method.md §8 X8).
     #[arg(long, value_delimiter = ',', default_value = "42")]
     pub seeds: Vec<u64>,
+    /// Which clips of the store the items come from: val (the paper's protocol), train, or all (a held-out store
+    /// imported from real files, scored whole).
+    #[arg(long, default_value = "val", value_parser = EvalSplit::parse)]
+    pub split: EvalSplit,
+
     /// Keyframe placement of table 1: random, every_<r> or bernoulli_<p> (docs/method.md §8 X4).
     #[arg(long, default_value = "random", value_parser = Placement::parse)]
     pub placement: Placement,
@@ -232,6 +247,9 @@ pub struct RunArgs {
     /// Classifier-free guidance weight (docs/method.md §9 item 9: 1.0).
     #[arg(long, default_value_t = 1.0)]
     pub guidance: f64,
+    /// Noise that re-noises the Baseline's keyframes (docs/method.md §8 X9).
+    #[arg(long, value_enum, default_value_t = ReplaceNoiseArg::Fixed)]
+    pub replace_noise: ReplaceNoiseArg,
     /// Table 4: vertex counts timed [default: 512,1024,2048,4096].
     #[arg(long, value_delimiter = ',')]
     pub timing_vertices: Option<Vec<usize>>,
@@ -330,6 +348,10 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 SolverArg::Midpoint => Solver::Midpoint,
             },
             guidance: args.guidance,
+            replace_noise: match args.replace_noise {
+                ReplaceNoiseArg::Fixed => ReplaceNoise::Fixed,
+                ReplaceNoiseArg::Fresh => ReplaceNoise::Fresh,
+            },
         };
         let built = build_methods(&kinds, &runs, sampling, &device)?;
         opts.methods = built.methods;
@@ -337,6 +359,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     };
     opts.export_items = args.export;
     opts.progress = !args.no_progress;
+    opts.split = args.split;
     let uses_rf = kinds.iter().any(|k| k.needs_model());
     opts.header = TableHeader {
         text_encoder: if uses_rf { "scratch".into() } else { "none".into() },

@@ -11,7 +11,7 @@ use any4d_eval::methods::vertex_methods;
 use any4d_eval::methods::{Method, MethodKind, RfMethod};
 use any4d_eval::tables::reconstruction::Reconstructor;
 use any4d_model::any_vae::VaeKind;
-use any4d_model::rectified_flow::{SampleOptions, Solver};
+use any4d_model::rectified_flow::{ReplaceNoise, SampleOptions, Solver};
 use any4d_model::text::scratch::ScratchTextEncoder;
 use burn::prelude::{Device, Module};
 
@@ -40,6 +40,8 @@ pub struct SamplingSetup {
     pub solver: Solver,
     /// Classifier-free guidance weight (1.0 in the paper).
     pub guidance: f64,
+    /// Noise that re-noises the Baseline's keyframes (docs/method.md §8 X9; fixed in the paper).
+    pub replace_noise: ReplaceNoise,
 }
 
 impl Default for SamplingSetup {
@@ -48,6 +50,7 @@ impl Default for SamplingSetup {
             n_grid: 64,
             solver: Solver::Midpoint,
             guidance: 1.0,
+            replace_noise: ReplaceNoise::Fixed,
         }
     }
 }
@@ -101,6 +104,7 @@ fn rf_method(
     let mut base = SampleOptions::paper(rf.config.model.conditioning);
     base.n_grid = sampling.n_grid;
     base.solver = sampling.solver;
+    base.replace_noise = sampling.replace_noise;
     let sampler = RfSampler::for_method(kind, Arc::new(models), base, sampling.guidance)?;
     let method = RfMethod::new(kind, sampler)?;
     Ok((Box::new(method), label))

@@ -12,7 +12,6 @@ use any4d_eval::methods::MethodKind;
 use any4d_eval::tables::short_horizon::ShortHorizon;
 use any4d_eval::tables::summary::TableHeader;
 use any4d_eval::tables::{Items, Protocol, TableOptions, TableReport, run_protocol};
-use any4d_model::rectified_flow::Solver;
 
 use crate::backend;
 use crate::config::{Duration, Embedded};
@@ -189,8 +188,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
     ];
     let sampling = SamplingSetup {
         n_grid: opts.n_grid,
-        solver: Solver::Midpoint,
-        guidance: 1.0,
+        ..SamplingSetup::default()
     };
     let built = build_methods(&kinds, &runs, sampling, &device)?;
     let eval_dir = out.join("eval");

@@ -174,10 +174,17 @@ pub fn write_vae_record(run: &RunFolder, record: &VaeRunRecord) -> Result<()> {
     write_atomic(&run.path(VAE_RUN_FILE), &json)
 }
 
-/// Reads `vae_run.json` of the RF run in `run_dir`.
+/// Reads `vae_run.json` of the RF run in `run_dir`. A relative `run` is resolved against `run_dir`, so run folders
+/// shipped side by side (`weights/small/rf` naming `../vae`) load from wherever the repository is cloned.
 pub fn read_vae_record(run_dir: &Path) -> Result<VaeRunRecord> {
     let text = read_run_file(run_dir, VAE_RUN_FILE, " (not an RF run folder?)")?;
-    serde_json::from_str(&text).map_err(|e| run_err(run_dir, format!("bad `{VAE_RUN_FILE}`: {e}")))
+    let mut record: VaeRunRecord =
+        serde_json::from_str(&text).map_err(|e| run_err(run_dir, format!("bad `{VAE_RUN_FILE}`: {e}")))?;
+    if record.run.is_relative() {
+        let joined = run_dir.join(&record.run);
+        record.run = std::fs::canonicalize(&joined).unwrap_or(joined);
+    }
+    Ok(record)
 }
 
 /// An RF run ready for sampling.

@@ -106,7 +106,7 @@ fn every_combination_of_the_rf_switches_trains_and_samples() {
                             mask: mask.clone(),
                         };
                         let eps = Tensor::random([B, P, t, c], normal, &device);
-                        let x = sample_mmdit(&model, &cond, text.clone(), eps, 1.0, &opts);
+                        let x = sample_mmdit(&model, &cond, text.clone(), Tensor::ones([B], &device), eps, 1.0, &opts);
                         let what = format!("{conditioning:?} {solver:?} {replace_noise:?}");
                         assert_eq!(x.dims(), [B, P, t, c], "{what}");
                         let values = floats(x.clone());

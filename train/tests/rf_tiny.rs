@@ -281,6 +281,42 @@ fn batch_masks_respect_k_max_and_none_has_no_keyframes() {
     }
 }
 
+/// The configured text-dropout rate is the fraction of keep_txt = 0 in training batches (within 4.5 σ of a
+/// binomial), 0 disables it, and validation batches keep every caption.
+#[test]
+fn text_dropout_rate_reaches_the_batch() {
+    let _g = serial();
+    let dev = inference_device();
+    let vae = load_vae_run(&fixture().vae_run, &dev).unwrap();
+    for rate in [0.0, 0.3] {
+        let mut cfg = tiny_rf(1);
+        cfg.rf.text_dropout = rate;
+        let (objective, vocab) = make_objective(&cfg, &vae, &dev);
+        let model = cfg.model_config(vocab).init(&dev);
+        let all: Vec<usize> = (0..objective.train_len()).collect();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let (mut dropped, mut total) = (0usize, 0usize);
+        for _ in 0..60 {
+            let step = objective
+                .batcher()
+                .batch(&model, Subset::Train, &all, &mut rng, TextDropout::Apply, &dev)
+                .unwrap();
+            let keep: Vec<f32> = step.batch.keep_txt.into_data().try_to_vec().unwrap();
+            assert!(keep.iter().all(|&k| k == 0.0 || k == 1.0), "{keep:?}");
+            dropped += keep.iter().filter(|&&k| k == 0.0).count();
+            total += keep.len();
+        }
+        let frac = dropped as f64 / total as f64;
+        let sigma = (rate * (1.0 - rate) / total as f64).sqrt();
+        assert!((frac - rate).abs() <= 4.5 * sigma + 1e-12, "rate {rate}: dropped {frac} of {total}");
+        let valid = objective
+            .batcher()
+            .batch(&model, Subset::Train, &all, &mut rng, TextDropout::Off, &dev)
+            .unwrap();
+        assert_eq!(valid.batch.keep_txt.sum().into_scalar::<f32>(), all.len() as f32);
+    }
+}
+
 #[test]
 fn per_batch_encoding_matches_the_memory_cache() {
     let _g = serial();

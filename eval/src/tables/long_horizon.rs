@@ -10,7 +10,7 @@ use super::{Items, TableOptions, TableReport, run_completion};
 use crate::methods::{Method, metrics_map};
 use crate::metrics::{Motion, evaluate_clip, replace_keyframes};
 use crate::protocol::ManifestOptions;
-use crate::rollout::{OverlapSource, RolloutSpec, rollout, seam_jerk};
+use crate::rollout::{OverlapSource, Rollout, RolloutSpec, rollout, seam_jerk};
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
 
@@ -50,7 +50,6 @@ impl LongHorizon {
 }
 
 /// A prediction and its metrics by name.
-/// A prediction and its metrics by name.
 pub(crate) type Scored = (Vec<[f32; 3]>, BTreeMap<String, f64>);
 
 /// One long-horizon generation (docs/method.md §7) scored by (E1)–(E7) over 𝒰 = {0..30} \ {0, 15, 30} plus the seam
@@ -63,31 +62,9 @@ pub(crate) fn long_horizon(
     seed: u64,
     overlap_source: OverlapSource,
 ) -> Result<Scored> {
-    let spec = RolloutSpec {
-        overlap_source,
-        ..RolloutSpec::paper()
-    };
-    let prompts: Vec<&str> = captions.iter().map(String::as_str).collect();
     let n = gt.n_vertices;
     let label = method.kind().label();
-    let r = rollout(&gt.vertices, n, keyframes, &prompts, spec, |w| {
-        let window = Clip::new(
-            &gt.id,
-            w.vertices.clone(),
-            spec.window,
-            n,
-            gt.faces.clone(),
-            w.caption,
-            &gt.source,
-        )?;
-        let mut pred = method.complete(&window, &w.keyframes, w.caption, seed.wrapping_add(w.index as u64))?;
-        // The window's assembly (docs/method.md §4.6, §7 step 2): its keyframes are the meshes it was given, so the
-        // overlap frame a later window starts from is the keyframe itself.
-        for &k in w.keyframes.iter().filter(|&&k| k < spec.window) {
-            pred[k * n..(k + 1) * n].copy_from_slice(&w.vertices[k * n..(k + 1) * n]);
-        }
-        Ok(pred)
-    })?;
+    let r = generate_long(method, gt, keyframes, captions, seed, overlap_source)?;
     let err = |e: crate::metrics::EvalError| DataError::new(&gt.id, &label, e.to_string());
     let pred = Motion::new(&r.vertices, gt.frames, n).map_err(err)?;
     let truth = Motion::from_clip(gt).map_err(err)?;
@@ -109,4 +86,40 @@ pub(crate) fn long_horizon(
     metrics.insert("seam_jerk_gt".into(), sum_g / seams);
     metrics.insert("seam_jerk_ratio".into(), sum_p / sum_g);
     Ok((r.vertices, metrics))
+}
+
+/// The two-stage generation alone (docs/method.md §7): each window completed by `method` and assembled with its own
+/// keyframes, stitched in the global frame. What P-Table 4 times (no scoring).
+pub(crate) fn generate_long(
+    method: &dyn Method,
+    gt: &Clip,
+    keyframes: &[usize],
+    captions: &[String],
+    seed: u64,
+    overlap_source: OverlapSource,
+) -> Result<Rollout> {
+    let spec = RolloutSpec {
+        overlap_source,
+        ..RolloutSpec::paper()
+    };
+    let prompts: Vec<&str> = captions.iter().map(String::as_str).collect();
+    let n = gt.n_vertices;
+    rollout(&gt.vertices, n, keyframes, &prompts, spec, |w| {
+        let window = Clip::new(
+            &gt.id,
+            w.vertices.clone(),
+            spec.window,
+            n,
+            gt.faces.clone(),
+            w.caption,
+            &gt.source,
+        )?;
+        let mut pred = method.complete(&window, &w.keyframes, w.caption, seed.wrapping_add(w.index as u64))?;
+        // The window's assembly (docs/method.md §4.6, §7 step 2): its keyframes are the meshes it was given, so the
+        // overlap frame a later window starts from is the keyframe itself.
+        for &k in w.keyframes.iter().filter(|&&k| k < spec.window) {
+            pred[k * n..(k + 1) * n].copy_from_slice(&w.vertices[k * n..(k + 1) * n]);
+        }
+        Ok(pred)
+    })
 }

@@ -15,7 +15,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::methods::{Method, complete_and_score_batch, metrics_map};
 use crate::plot::{Series, line_plot};
-use crate::protocol::{MANIFEST_SEED, Manifest, ManifestOptions, StoreSource, noise_seed, write_atomic};
+use crate::protocol::{EvalSplit, MANIFEST_SEED, Manifest, ManifestOptions, StoreSource, noise_seed, write_atomic};
 use crate::render::{ExportFormat, StripOptions, export_sequence, write_strip};
 use crate::rollout::{OverlapSource, RolloutSpec};
 
@@ -101,6 +101,8 @@ pub struct TableOptions {
     pub header: TableHeader,
     /// Show a progress bar over clips on stderr.
     pub progress: bool,
+    /// The store's clips the items are drawn from (validation by default).
+    pub split: EvalSplit,
 }
 
 impl TableOptions {
@@ -114,6 +116,7 @@ impl TableOptions {
             export_items: Self::EXPORT_ITEMS,
             header: TableHeader::default(),
             progress: true,
+            split: EvalSplit::Val,
         }
     }
 
@@ -235,7 +238,7 @@ pub fn evaluate(
 pub(crate) fn header_for(opts: &TableOptions, manifest_path: &Path) -> TableHeader {
     let mut h = opts.header.clone();
     if h.data.is_empty() {
-        h.data = format!("{} (validation split)", opts.data.display());
+        h.data = format!("{} ({} split)", opts.data.display(), opts.split.name());
     }
     h.manifest = manifest_path.display().to_string();
     if h.text_encoder.is_empty() {
@@ -267,7 +270,7 @@ pub(crate) fn run_completion(
     if opts.methods.is_empty() {
         return Err(DataError::new("eval run", "methods", "no methods to evaluate"));
     }
-    let source = StoreSource::open(&opts.data)?;
+    let source = StoreSource::open(&opts.data, opts.split)?;
     let manifest_path = opts.out.join("manifest.json");
     let manifest = match &items.manifest {
         Some(path) => Manifest::load(path)?,
@@ -275,6 +278,7 @@ pub(crate) fn run_completion(
             let draw = ManifestOptions {
                 n_clips: items.clips,
                 seeds: items.seeds.clone(),
+                split: opts.split.name().into(),
                 ..draw
             };
             Manifest::build(&source.candidates(draw.frames), &draw, &opts.data.display().to_string())?
@@ -400,7 +404,7 @@ pub fn render_results(out: &Path, data: &Path) -> Result<Vec<PathBuf>> {
     if !pred_dir.is_dir() {
         return Ok(files);
     }
-    let source = StoreSource::open(data)?;
+    let source = StoreSource::open(data, EvalSplit::All)?;
     let mut bins: Vec<PathBuf> = std::fs::read_dir(&pred_dir)
         .map_err(|e| DataError::io(&pred_dir, e))?
         .map(|e| e.map(|e| e.path()).map_err(|err| DataError::io(&pred_dir, err)))

@@ -57,7 +57,7 @@ impl Reconstruction {
         if opts.vaes.is_empty() {
             return Err(DataError::new("eval run", "vaes", "table5 needs at least one VAE"));
         }
-        let source = StoreSource::open(&opts.data)?;
+        let source = StoreSource::open(&opts.data, opts.split)?;
         let manifest_path = opts.out.join("manifest.json");
         let manifest = match &self.manifest {
             Some(p) => Manifest::load(p)?,
@@ -65,6 +65,7 @@ impl Reconstruction {
                 let mo = ManifestOptions {
                     n_clips: self.clips,
                     seeds: vec![0],
+                    split: opts.split.name().into(),
                     ..ManifestOptions::table1(opts.data.display().to_string())
                 };
                 Manifest::build(&source.candidates(mo.frames), &mo, &opts.data.display().to_string())?

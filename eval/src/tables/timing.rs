@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use any4d_data::{Clip, DataError};
 
-use super::long_horizon::long_horizon;
+use super::long_horizon::generate_long;
 use super::summary::{Layout, TimingRecord, timing_tables};
 use super::{TableOptions, TableReport, header_for, progress_bar, write_text};
 use crate::rollout::{OverlapSource, RolloutSpec};
@@ -135,7 +135,7 @@ impl Timing {
                                 SEED,
                             )?;
                         } else {
-                            long_horizon(method.as_ref(), &clip, &keyframes, &captions, SEED, self.overlap_source)?;
+                            generate_long(method.as_ref(), &clip, &keyframes, &captions, SEED, self.overlap_source)?;
                         }
                         Ok(())
                     };

@@ -12,6 +12,7 @@ use any4d_model::latent_stats::LatentStats;
 use any4d_model::mesh_vae::{self, MeshVae};
 use any4d_model::mmdit::KeyframeConditioning;
 use any4d_model::rectified_flow::RfBatch;
+use any4d_model::text::caption_keep;
 use any4d_model::text::scratch::ScratchTokenizer;
 use burn::prelude::{Device, Tensor, TensorData};
 use burn::tensor::Distribution;
@@ -29,9 +30,9 @@ use super::network::RfModel;
 /// Whether a batch applies the CFG caption dropout.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TextDropout {
-    /// keep_txt ~ Bernoulli(1 − rf.text_dropout) (training).
+    /// keep_txt ~ Bernoulli(1 − rf.text_dropout) (training); always 0 for a caption with no text.
     Apply,
-    /// keep_txt = 1 (validation).
+    /// keep_txt = 1 (validation); 0 for a caption with no text.
     Off,
 }
 
@@ -270,10 +271,12 @@ impl RfBatcher {
             TensorData::new(mask.iter().map(|&m| f32::from(u8::from(m))).collect::<Vec<_>>(), [b, t]),
             device,
         );
-        let keep: Vec<f32> = (0..b)
-            .map(|_| match dropout {
-                TextDropout::Apply => f32::from(u8::from(!rng.random_bool(self.cfg.rf.text_dropout))),
-                TextDropout::Off => 1.0,
+        // A caption with no text is always the unconditional input (caption_keep), whatever the dropout draw.
+        let keep: Vec<f32> = caption_keep(&captions)
+            .into_iter()
+            .map(|has_text| match dropout {
+                TextDropout::Apply => has_text * f32::from(u8::from(!rng.random_bool(self.cfg.rf.text_dropout))),
+                TextDropout::Off => has_text,
             })
             .collect();
         let text = model.encode_text(&self.tokenizer, &captions, self.cfg.text.max_len, device)?;
