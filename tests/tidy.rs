@@ -21,6 +21,14 @@ const LONG_FILES: &[(&str, &str)] = &[
         "one IQM file: header, bounds-checked arrays, skin, animations and the test writer that mirrors them",
     ),
     (
+        "eval/tests/learned.rs",
+        "one fixture (a woken tiny VAE and RF, a byte text encoder, a waving-flag clip) serves every sampler test",
+    ),
+    (
+        "model/src/mesh_vae.rs",
+        "the body both VAEs share, its config and (V1)–(V3): one trait's building blocks",
+    ),
+    (
         "eval/src/learned.rs",
         "the VAE codec and the samplers built on it are one pipeline: encode, sample, decode",
     ),

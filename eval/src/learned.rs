@@ -51,7 +51,8 @@ pub struct WindowEncoding {
     pub reference: Tensor<3>,
     /// Shape latent z₀, `[1, P, C]`.
     pub z0: Tensor<3>,
-    /// Posterior means μ, `[1, G, P, C]`: one per entry of `frames` (frame-wise) or one per clip (sequence-wise).
+    /// Posterior means μ (or the codec's seeded posterior samples, [`KeyPosterior`]), `[1, G, P, C]`: one per entry
+    /// of `frames` (frame-wise) or one per clip (sequence-wise).
     pub mu: Tensor<4>,
     /// The clip frames whose μ is in `mu` (frame-wise), or all frames `0..T` (sequence-wise).
     pub frames: Vec<usize>,
@@ -63,6 +64,19 @@ pub struct WindowEncoding {
     pub id: String,
 }
 
+/// Which latent of the posterior N(μ, σ²) an encoded window hands on (keyframe latents, latent lerp, table 5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum KeyPosterior {
+    /// z = μ (docs/method.md §4.6, the paper).
+    #[default]
+    Mean,
+    /// z = μ + σ·ξ with ξ drawn from `seed`, the clip id and the frame index: the same window always gets the
+    /// same draw, whatever else is in its batch. A VAE trained with a tiny KL weight can leave channels whose σ
+    /// exceeds the prior's; its decoder and an RF trained on sampled latents then never saw μ there
+    /// (experiments/2026-12-01-small).
+    Sample { seed: u64 },
+}
+
 /// A mesh VAE applied to single normalised windows: FPS on frame 0 (docs/method.md §2.5), edges from faces, padding
 /// (docs/method.md §2.4), encode, decode, and the real rows back.
 pub struct MeshCodec {
@@ -70,6 +84,7 @@ pub struct MeshCodec {
     tokens: usize,
     padding: PadTo,
     device: Device,
+    posterior: KeyPosterior,
 }
 
 impl MeshCodec {
@@ -100,7 +115,19 @@ impl MeshCodec {
             tokens,
             padding,
             device,
+            posterior: KeyPosterior::Mean,
         })
+    }
+
+    /// The same codec handing on `posterior` latents from [`Self::encode`].
+    pub fn with_posterior(mut self, posterior: KeyPosterior) -> Self {
+        self.posterior = posterior;
+        self
+    }
+
+    /// Which posterior latent [`Self::encode`] hands on.
+    pub fn posterior(&self) -> KeyPosterior {
+        self.posterior
     }
 
     /// The VAE.
@@ -154,8 +181,9 @@ impl MeshCodec {
         })
     }
 
-    /// Encodes `frames` of a normalised window against its frame 0 and returns the posterior means. The
-    /// sequence-wise VAE encodes the whole window, so `frames` must then be `0..T` (T as it was built for).
+    /// Encodes `frames` of a normalised window against its frame 0 and returns the posterior means (or seeded
+    /// posterior samples, see [`KeyPosterior`]). The sequence-wise VAE encodes the whole window, so `frames` must
+    /// then be `0..T` (T as it was built for).
     ///
     /// # Shapes
     /// `clip.vertices`: `[T, N_v]` rows; returns `mu` `[1, G, P, C]` with G = `frames.len()` (frame-wise) or 1.
@@ -183,9 +211,26 @@ impl MeshCodec {
         }
         let input = self.input(clip, frames)?;
         let reference = input.reference.clone();
-        let VaeEncoding { e0, z0, mu, .. } =
+        let VaeEncoding { e0, z0, mu, logvar } =
             self.vae
                 .encode(input.reference, input.frames, input.vmask, input.fps, &input.edges);
+        let mu = match self.posterior {
+            KeyPosterior::Mean => mu,
+            KeyPosterior::Sample { seed } => {
+                let [_, g, p, c] = mu.dims();
+                let clip_seed = clip
+                    .id
+                    .bytes()
+                    .fold(splitmix64(seed), |h, b| splitmix64(h ^ u64::from(b)));
+                let noise = (0..g)
+                    .map(|i| {
+                        let frame = if g == frames.len() { frames[i] } else { i };
+                        sampler_noise(splitmix64(clip_seed ^ frame as u64), [1, 1, p, c], &self.device)
+                    })
+                    .collect();
+                mu + logvar.mul_scalar(0.5).exp() * Tensor::cat(noise, 1)
+            }
+        };
         Ok(WindowEncoding {
             e0,
             reference,
@@ -220,7 +265,8 @@ impl MeshCodec {
         real_rows(x, enc.n_real, &enc.id)
     }
 
-    /// (E4) encode → posterior mean → decode of every frame of a normalised window (P-Table 5).
+    /// (E4) encode → posterior mean (or the codec's [`KeyPosterior`]) → decode of every frame of a normalised window
+    /// (P-Table 5).
     ///
     /// # Shapes
     /// `clip.vertices`: `[T, N_v]` rows; returns `[T, N_v]` rows.
@@ -576,7 +622,8 @@ impl RfSampler {
             .states;
         let [_, l, d] = text.dims();
         let text = text.expand([b, l, d]);
-        let keep = Tensor::<1>::from_data(TensorData::new(caption_keep(&[caption.to_string()]), [1]), &device).expand([b]);
+        let keep =
+            Tensor::<1>::from_data(TensorData::new(caption_keep(&[caption.to_string()]), [1]), &device).expand([b]);
         let eps = Tensor::cat(
             requests
                 .iter()
@@ -587,9 +634,9 @@ impl RfSampler {
         if self.options.replace_noise == ReplaceNoise::Fresh {
             // Fresh replacement noise comes from the device stream: seed it from the requests, so the same
             // requests in the same batches give the same samples.
-            let mix = requests
-                .iter()
-                .fold(0x5EED_F2E5_u64, |h, r| splitmix64(h ^ r.seed.wrapping_mul(GOLDEN_GAMMA)));
+            let mix = requests.iter().fold(0x5EED_F2E5_u64, |h, r| {
+                splitmix64(h ^ r.seed.wrapping_mul(GOLDEN_GAMMA))
+            });
             device.seed(mix);
         }
         let x1 = sample_mmdit(&m.rf, &cond, text, keep, eps, self.guidance, &self.options); // (R6)

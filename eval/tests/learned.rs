@@ -332,7 +332,15 @@ fn sample_latents_match_a_hand_wired_sample_mmdit() {
     };
     let text = ByteText.encode(&["flag".to_string()], &device).unwrap().states;
     let keep = Tensor::ones([1], &device);
-    let x1 = sample_mmdit(&rf, &cond, text, keep, sampler_noise(3, [1, P, T, C], &device), 1.0, &opts);
+    let x1 = sample_mmdit(
+        &rf,
+        &cond,
+        text,
+        keep,
+        sampler_noise(3, [1, P, T, C], &device),
+        1.0,
+        &opts,
+    );
     let expect = floats(st.destandardize_motion(x1).swap_dims(1, 2));
     let err = max_diff(&floats(got.latents), &expect);
     assert!(err < 1e-4, "latents differ from the hand-wired sampler by {err}");
@@ -377,6 +385,41 @@ fn impute_until_samples_and_differs_from_input_mask() {
     assert!(
         max_diff(slot(&floats(guided.latents), 1), slot(&zb, 1)) > 1e-5,
         "guidance reaches the sampler"
+    );
+}
+
+/// `KeyPosterior::Sample`: μ + σξ with ξ fixed by the seed, the clip id and the frame — the same frame gets the same
+/// draw whichever other frames are encoded with it; the mean codec hands on μ itself.
+#[test]
+fn sampled_keyframe_latents_are_per_frame_and_reproducible() {
+    use any4d_eval::learned::KeyPosterior;
+    let device = Device::flex();
+    let vae = FrameVaeConfig::tiny().init(&device).map(&mut WakeZeros);
+    let codec = |posterior| {
+        MeshCodec::new(AnyMeshVae::Framewise(vae.clone()), P, PadTo::BatchMax, device.clone())
+            .unwrap()
+            .with_posterior(posterior)
+    };
+    let gt = wave_clip();
+    let mean = codec(KeyPosterior::Mean).encode(&gt, &[0, 1, 3]).unwrap();
+    let sample = codec(KeyPosterior::Sample { seed: 1 });
+    let a = sample.encode(&gt, &[0, 1, 3]).unwrap();
+    let again = sample.encode(&gt, &[0, 1, 3]).unwrap();
+    assert_eq!(floats(a.mu.clone()), floats(again.mu.clone()), "reproducible");
+    assert!(
+        max_diff(&floats(a.mu.clone()), &floats(mean.mu.clone())) > 1e-4,
+        "a sample is not μ"
+    );
+    let alone = sample.encode(&gt, &[3]).unwrap();
+    assert_eq!(
+        floats(a.mu.clone().narrow(1, 2, 1)),
+        floats(alone.mu),
+        "frame 3 draws the same noise alone or with others"
+    );
+    let other = codec(KeyPosterior::Sample { seed: 2 }).encode(&gt, &[0, 1, 3]).unwrap();
+    assert!(
+        max_diff(&floats(a.mu), &floats(other.mu)) > 1e-4,
+        "another seed, another draw"
     );
 }
 

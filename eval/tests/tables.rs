@@ -383,8 +383,8 @@ fn the_split_option_draws_items_from_that_split_only() {
         clips: 40,
         seed: 9,
         frames: 16,
-        min_vertices: 64,
-        max_vertices: 128,
+        min_vertices: 512,
+        max_vertices: 768,
     };
     write_synth_with(&cfg, &store, 16, None).unwrap();
     let index = read_index(&store).unwrap();
@@ -417,7 +417,9 @@ fn the_split_option_draws_items_from_that_split_only() {
             n_clips: allowed.len() + 1,
             ..opts
         };
-        let err = Manifest::build(&candidates, &too_many, "store").unwrap_err().to_string();
+        let err = Manifest::build(&candidates, &too_many, "store")
+            .unwrap_err()
+            .to_string();
         assert!(err.contains(split.name()), "{err}");
     }
     assert_eq!(EvalSplit::parse("val"), Ok(EvalSplit::Val));

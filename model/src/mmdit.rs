@@ -634,6 +634,8 @@ mod tests {
         assert_eq!(flops.training_step(), 3 * (flops.linear + flops.attention));
     }
 
+    use burn::tensor::Distribution;
+
     /// Replaces all-zero float parameters (zero-initialised adaLN and output projections) with N(0, 0.3²), so the
     /// output depends on τ.
     struct Wake;
@@ -670,22 +672,36 @@ mod tests {
             let tau = Tensor::<1>::full([b], tau, &device);
             let motion = model.input_norm.forward(model.input_proj.forward(input.clone()));
             let text = model.text_norm.forward(model.text_proj.forward(text.clone()));
-            let temb = silu(model.time.fc2.forward(gelu(model.time.fc1.forward(timestep_sinusoid(tau)))));
+            let temb = silu(
+                model
+                    .time
+                    .fc2
+                    .forward(gelu(model.time.fc1.forward(timestep_sinusoid(tau)))),
+            );
             let (mut m, mut t) = (motion, text);
             for block in &model.blocks {
                 (m, t) = block.forward(m, t, temb.clone());
             }
             model.output_proj.forward(model.final_norm.forward(m))
         };
-        let run = |tau: f32| model.forward(input.clone(), text.clone(), keep.clone(), Tensor::full([b], tau, &device));
+        let run = |tau: f32| {
+            model.forward(
+                input.clone(),
+                text.clone(),
+                keep.clone(),
+                Tensor::full([b], tau, &device),
+            )
+        };
         let gap = |a: Tensor<3>, b: Tensor<3>| (a - b).abs().max().into_scalar::<f32>();
         for tau in [0.1f32, 0.3, 0.8] {
-            assert!(gap(run(tau), reference(tau)) < 1e-5, "forward(τ = {tau}) is not the network at τ");
+            assert!(
+                gap(run(tau), reference(tau)) < 1e-5,
+                "forward(τ = {tau}) is not the network at τ"
+            );
             assert!(
                 gap(reference(tau), reference(1.0 - tau)) > 1e-3,
                 "the output does not depend on τ, so the check above could not fail"
             );
         }
     }
-
 }

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 use any4d_data::formats::read_clip;
 use any4d_data::keyframes::Placement;
 use any4d_eval::bench::{MetricsBench, timed, write_f32_clips};
+use any4d_eval::learned::KeyPosterior;
 use any4d_eval::methods::MethodKind;
 use any4d_eval::metrics::{ClipMetrics, Coordinates, Motion, Scoring, average, evaluate_clip_with};
 use any4d_eval::protocol::EvalSplit;
@@ -167,6 +168,18 @@ pub enum SolverArg {
     Midpoint,
 }
 
+/// Seed of `--posterior sample` draws (mixed with each clip id and frame).
+const POSTERIOR_SEED: u64 = 0x9E37_79B9_7F4A_7C15;
+
+/// `--posterior`: which latent of a keyframe's posterior the learned methods and table 5 use.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PosteriorArg {
+    /// The posterior mean μ (the paper).
+    Mean,
+    /// A posterior sample μ + σξ, ξ seeded by the clip and frame (reproducible).
+    Sample,
+}
+
 /// `--replace-noise` (docs/method.md §8 X9).
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ReplaceNoiseArg {
@@ -250,6 +263,10 @@ pub struct RunArgs {
     /// Noise that re-noises the Baseline's keyframes (docs/method.md §8 X9).
     #[arg(long, value_enum, default_value_t = ReplaceNoiseArg::Fixed)]
     pub replace_noise: ReplaceNoiseArg,
+    /// Keyframe latents (and table 5's): the posterior mean (the paper) or a seeded posterior sample, for a VAE
+    /// whose decoder never saw μ in some channels (experiments/2026-12-01-small).
+    #[arg(long, value_enum, default_value_t = PosteriorArg::Mean)]
+    pub posterior: PosteriorArg,
     /// Table 4: vertex counts timed [default: 512,1024,2048,4096].
     #[arg(long, value_delimiter = ',')]
     pub timing_vertices: Option<Vec<usize>>,
@@ -335,9 +352,13 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         vae_b: args.vae_b.clone(),
     };
     let mut opts = TableOptions::new(args.data.clone(), args.out.clone());
+    let posterior = match args.posterior {
+        PosteriorArg::Mean => KeyPosterior::Mean,
+        PosteriorArg::Sample => KeyPosterior::Sample { seed: POSTERIOR_SEED },
+    };
     let reconstruction = matches!(protocol, Protocol::Reconstruction(_));
     let checkpoints = if reconstruction {
-        let (vaes, ckpts) = build_reconstructors(&runs, &device)?;
+        let (vaes, ckpts) = build_reconstructors(&runs, posterior, &device)?;
         opts.vaes = vaes;
         ckpts
     } else {
@@ -352,6 +373,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
                 ReplaceNoiseArg::Fixed => ReplaceNoise::Fixed,
                 ReplaceNoiseArg::Fresh => ReplaceNoise::Fresh,
             },
+            posterior,
         };
         let built = build_methods(&kinds, &runs, sampling, &device)?;
         opts.methods = built.methods;
@@ -368,8 +390,8 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             format!("{:?}", args.backend)
         } else {
             format!(
-                "{:?}; sampler {:?} on a {}-point grid, guidance {}",
-                args.backend, args.solver, args.n_grid, args.guidance
+                "{:?}; sampler {:?} on a {}-point grid, guidance {}, keyframe latents: posterior {:?}",
+                args.backend, args.solver, args.n_grid, args.guidance, args.posterior
             )
         },
         ..TableHeader::default()

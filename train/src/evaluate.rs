@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use any4d_data::batch::PadTo;
-use any4d_eval::learned::{LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor};
+use any4d_eval::learned::{KeyPosterior, LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor};
 use any4d_eval::methods::vertex_methods;
 use any4d_eval::methods::{Method, MethodKind, RfMethod};
 use any4d_eval::tables::reconstruction::Reconstructor;
@@ -42,6 +42,8 @@ pub struct SamplingSetup {
     pub guidance: f64,
     /// Noise that re-noises the Baseline's keyframes (docs/method.md §8 X9; fixed in the paper).
     pub replace_noise: ReplaceNoise,
+    /// Keyframe latents: the posterior mean (the paper) or a seeded posterior sample.
+    pub posterior: KeyPosterior,
 }
 
 impl Default for SamplingSetup {
@@ -51,6 +53,7 @@ impl Default for SamplingSetup {
             solver: Solver::Midpoint,
             guidance: 1.0,
             replace_noise: ReplaceNoise::Fixed,
+            posterior: KeyPosterior::Mean,
         }
     }
 }
@@ -70,14 +73,11 @@ fn need<'a>(path: &'a Option<PathBuf>, flag: &str, kind: MethodKind) -> Result<&
     })
 }
 
-fn codec_of(vae: &LoadedVae, device: &Device) -> Result<Arc<MeshCodec>> {
+fn codec_of(vae: &LoadedVae, posterior: KeyPosterior, device: &Device) -> Result<Arc<MeshCodec>> {
     let model = vae.model.clone().valid();
-    Ok(Arc::new(MeshCodec::new(
-        model,
-        vae.tokens(),
-        PadTo::BatchMax,
-        device.clone(),
-    )?))
+    Ok(Arc::new(
+        MeshCodec::new(model, vae.tokens(), PadTo::BatchMax, device.clone())?.with_posterior(posterior),
+    ))
 }
 
 fn checkpoint_label(run: &Path, step: u64) -> String {
@@ -93,7 +93,7 @@ fn rf_method(
 ) -> Result<(Box<dyn Method>, String)> {
     let rf = load_rf_run(run_dir, device)?;
     let vae = rf.load_vae(device)?;
-    let codec = codec_of(&vae, device)?;
+    let codec = codec_of(&vae, sampling.posterior, device)?;
     let label = checkpoint_label(&rf.run, rf.step);
     let rf_config = rf.config.model.clone();
     let text = ScratchTextEncoder {
@@ -146,7 +146,7 @@ pub fn build_methods(
             }
             MethodKind::LerpLatent => {
                 let vae = vae_run_for(runs, device)?;
-                let sampler = LatentLerpSampler::new(codec_of(&vae, device)?)?;
+                let sampler = LatentLerpSampler::new(codec_of(&vae, sampling.posterior, device)?)?;
                 let method = RfMethod::new(kind, sampler)?;
                 (
                     Box::new(method) as Box<dyn Method>,
@@ -163,8 +163,13 @@ pub fn build_methods(
 /// Reconstructors in order, with label → checkpoint lines for the table header.
 pub type BuiltReconstructors = (Vec<Box<dyn Reconstructor>>, Vec<(String, String)>);
 
-/// Table 5 rows: `--vae` (and `--vae-b`) as reconstructors labelled by their VAE kind.
-pub fn build_reconstructors(runs: &LearnedRuns, device: &Device) -> Result<BuiltReconstructors> {
+/// Table 5 rows: `--vae` (and `--vae-b`) as reconstructors labelled by their VAE kind, decoding the `posterior`
+/// latent.
+pub fn build_reconstructors(
+    runs: &LearnedRuns,
+    posterior: KeyPosterior,
+    device: &Device,
+) -> Result<BuiltReconstructors> {
     let mut out: Vec<Box<dyn Reconstructor>> = Vec::new();
     let mut ckpts = Vec::new();
     for run in [&runs.vae, &runs.vae_b].into_iter().flatten() {
@@ -174,7 +179,10 @@ pub fn build_reconstructors(runs: &LearnedRuns, device: &Device) -> Result<Built
             VaeKind::Sequencewise => "sequencewise",
         };
         ckpts.push((label.to_string(), checkpoint_label(&vae.run, vae.step)));
-        out.push(Box::new(VaeReconstructor::new(label, codec_of(&vae, device)?)));
+        out.push(Box::new(VaeReconstructor::new(
+            label,
+            codec_of(&vae, posterior, device)?,
+        )));
     }
     if out.is_empty() {
         return Err(TrainError::Setup(

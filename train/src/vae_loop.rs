@@ -69,7 +69,7 @@ struct VaeTables {
 }
 
 /// Keys of `[model]` that moved into `[model.body]` when the VAE body got its own table.
-const BODY_KEYS: [&str; 11] = [
+const BODY_KEYS: [&str; 12] = [
     "width",
     "heads",
     "head_dim",
@@ -81,10 +81,12 @@ const BODY_KEYS: [&str; 11] = [
     "pad_keys",
     "logvar_min",
     "logvar_max",
+    "rec_average",
 ];
 
 /// Reads run folders written before `[model.body]` existed: their `[model]` holds the body's keys flat, and
-/// `pad_keys` as `"Masked"` / `"Visible"`. A table that already has `body` is left alone.
+/// `pad_keys` as `"Masked"` / `"Visible"`; they were trained with the batch form of (V1), so a missing
+/// `rec_average` becomes `"batch"`. A table that already has `body` is left alone.
 fn migrate_flat_model(model: &mut toml::Table) {
     if model.contains_key("body") || !model.contains_key("width") {
         return;
@@ -98,6 +100,7 @@ fn migrate_flat_model(model: &mut toml::Table) {
     if let Some(toml::Value::String(p)) = body.get_mut("pad_keys") {
         *p = p.to_lowercase();
     }
+    body.entry("rec_average").or_insert_with(|| "batch".into());
     model.insert("body".into(), toml::Value::Table(body));
 }
 

@@ -181,6 +181,14 @@ fn run_folders_written_before_the_renames_still_load() {
         VaeRunConfig::parse(&flat, &vae).unwrap(),
         VaeRunConfig::parse(&text, &vae).unwrap()
     );
+    // Those folders predate `rec_average` and were trained with the batch form of (V1).
+    let legacy = flat.replace("rec_average = \"per_clip\"", "");
+    assert_ne!(legacy, flat);
+    let migrated = VaeRunConfig::parse(&legacy, &vae).unwrap();
+    assert_eq!(
+        migrated.model.body().rec_average,
+        any4d_model::mesh_vae::RecAverage::Batch
+    );
     // RF run folders once named the keyframe conditioning `kf_mode`.
     let rf = root().join("configs/rf/tiny.toml");
     let text = std::fs::read_to_string(&rf).unwrap();

@@ -308,7 +308,10 @@ fn text_dropout_rate_reaches_the_batch() {
         }
         let frac = dropped as f64 / total as f64;
         let sigma = (rate * (1.0 - rate) / total as f64).sqrt();
-        assert!((frac - rate).abs() <= 4.5 * sigma + 1e-12, "rate {rate}: dropped {frac} of {total}");
+        assert!(
+            (frac - rate).abs() <= 4.5 * sigma + 1e-12,
+            "rate {rate}: dropped {frac} of {total}"
+        );
         let valid = objective
             .batcher()
             .batch(&model, Subset::Train, &all, &mut rng, TextDropout::Off, &dev)
