@@ -40,7 +40,12 @@ fn read_summary(path: &Path) -> BTreeMap<(String, String), Vec<f64>> {
     let body = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut lines = body.lines();
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}"));
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("no column {name}"))
+    };
     let (method, k) = (col("method"), col("k_extra"));
     let wanted: Vec<usize> = COLUMNS.iter().map(|c| col(c)).collect();
     lines

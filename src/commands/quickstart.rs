@@ -35,6 +35,10 @@ pub struct QuickstartArgs {
     /// ODE grid points of the RF samplers (the paper uses 64).
     #[arg(long, default_value_t = 16)]
     pub n_grid: usize,
+    /// Shipped models evaluated beside the ones trained now, on the same clips and keyframes (skipped when the
+    /// folder has no `rf/`).
+    #[arg(long, default_value = "weights/small")]
+    pub shipped: std::path::PathBuf,
 }
 
 pub fn exec(args: QuickstartArgs) -> anyhow::Result<ExitCode> {
@@ -48,19 +52,24 @@ pub fn exec(args: QuickstartArgs) -> anyhow::Result<ExitCode> {
         rf_steps: Some(args.rf_steps),
         eval_clips: args.eval_clips,
         n_grid: args.n_grid,
+        shipped: Some(args.shipped),
         progress: ProgressMode::Auto,
         stop,
     };
     let report = quickstart(&opts, &|line| println!("{line}"))?;
     println!();
-    println!("{}", report.table.markdown);
+    match &report.combined {
+        Some(table) => println!("{table}"),
+        None => println!("{}", report.table.markdown),
+    }
     println!("Results are in {}:", report.out.display());
     println!("  data (procedural store)   {}", report.data.display());
     println!("  VAE run                   {}", report.vae_run.display());
     println!("  keyframe RF run (ours)    {}", report.rf_run.display());
     println!("  baseline RF run           {}", report.baseline_run.display());
     println!("  evaluation                {}", report.eval_dir.display());
-    println!("    summary.md / summary.csv (this table), clips.parquet (per clip), manifest.json,");
+    println!("    combined.md (this table, with the shipped models' rows; their own summary in shipped/),");
+    println!("    summary.md / summary.csv (the quickstart's rows), clips.parquet (per clip), manifest.json,");
     println!("    rmse_vs_kx.png (plot), strips/*.png (ground truth above, prediction below), predictions/");
     println!("  each run folder has config.toml, log.txt, metrics.csv, loss.png and checkpoints/");
     Ok(ExitCode::SUCCESS)

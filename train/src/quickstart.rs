@@ -6,11 +6,13 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use burn::prelude::Device;
+
 use any4d_data::store::write_synth;
 use any4d_data::synth::SynthConfig;
 use any4d_eval::methods::MethodKind;
-use any4d_eval::tables::short_horizon::ShortHorizon;
-use any4d_eval::tables::summary::TableHeader;
+use any4d_eval::tables::short_horizon::{self, ShortHorizon};
+use any4d_eval::tables::summary::{TableHeader, markdown};
 use any4d_eval::tables::{Items, Protocol, TableOptions, TableReport, run_protocol};
 
 use crate::backend;
@@ -51,6 +53,9 @@ pub struct QuickstartOptions {
     pub eval_clips: usize,
     /// ODE grid points of the samplers (the paper's 64 is slow on a CPU).
     pub n_grid: usize,
+    /// Folder of shipped models (`weights/small`: `vae/`, `rf/`, `baseline-rf/`) evaluated on the same clips and
+    /// keyframes as the quickstart's own; `None` or a folder without them skips that step.
+    pub shipped: Option<PathBuf>,
     /// Progress display.
     pub progress: ProgressMode,
     /// Ctrl-C flag.
@@ -67,6 +72,8 @@ pub struct QuickstartReport {
     pub baseline_run: PathBuf,
     pub eval_dir: PathBuf,
     pub table: TableReport,
+    /// The quickstart's rows and the shipped models' rows in one table (when shipped models were found).
+    pub combined: Option<String>,
 }
 
 /// A folder that does not exist yet: `out`, else `out-2`, `out-3`, …
@@ -213,6 +220,16 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         ..TableHeader::default()
     };
     let table = run_protocol(&protocol, &run_opts)?;
+    let combined = match opts.shipped.as_deref().filter(|d| d.join("rf").is_dir()) {
+        Some(dir) => {
+            stage(format!(
+                "6/6 evaluating the shipped models of {} on the same clips and keyframes",
+                dir.display()
+            ));
+            Some(shipped_rows(dir, &table, &data, &eval_dir, sampling, &device, opts)?)
+        }
+        None => None,
+    };
     stage("done".into());
     Ok(QuickstartReport {
         out,
@@ -222,7 +239,79 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         baseline_run: baseline_run.root().to_path_buf(),
         eval_dir,
         table,
+        combined,
     })
+}
+
+/// Evaluates the shipped RFs of `dir` on the manifest the quickstart table used and returns one Markdown table:
+/// every row names where its weights came from.
+fn shipped_rows(
+    dir: &Path,
+    table: &TableReport,
+    data: &Path,
+    eval_dir: &Path,
+    sampling: SamplingSetup,
+    device: &Device,
+    opts: &QuickstartOptions,
+) -> Result<String> {
+    let runs = LearnedRuns {
+        rf: Some(dir.join("rf")),
+        baseline_rf: Some(dir.join("baseline-rf")),
+        vae: Some(dir.join("vae")),
+        vae_b: None,
+    };
+    let built = build_methods(
+        &[MethodKind::KeyframeRf, MethodKind::ReplacementRf],
+        &runs,
+        sampling,
+        device,
+    )?;
+    let protocol = Protocol::ShortHorizon(ShortHorizon {
+        items: Items {
+            clips: opts.eval_clips,
+            manifest: Some(eval_dir.join("manifest.json")),
+            ..Items::default()
+        },
+        ..ShortHorizon::default()
+    });
+    let mut run_opts = TableOptions::new(data.to_path_buf(), eval_dir.join("shipped"));
+    run_opts.methods = built.methods;
+    run_opts.export_items = 0;
+    run_opts.progress = !matches!(opts.progress, ProgressMode::Quiet);
+    let shipped = run_protocol(&protocol, &run_opts)?;
+    let learned = |m: &str| matches!(m, "keyframe_rf" | "replacement_rf");
+    let mut rows = Vec::new();
+    for r in &table.rows {
+        let mut r = r.clone();
+        if learned(&r.method) {
+            r.method = format!("{} (trained now)", r.method);
+        }
+        rows.push(r);
+    }
+    for r in &shipped.rows {
+        let mut r = r.clone();
+        r.method = format!("{} ({})", r.method, dir.display());
+        rows.push(r);
+    }
+    let mut header = TableHeader {
+        text_encoder: "scratch".into(),
+        checkpoints: built
+            .checkpoints
+            .into_iter()
+            .map(|(label, ckpt)| (format!("{label} ({})", dir.display()), ckpt))
+            .collect(),
+        device: format!(
+            "CPU; sampler midpoint on a {}-point grid, guidance 1.0 (paper: 64 points)",
+            sampling.n_grid
+        ),
+        ..TableHeader::default()
+    };
+    header.data = format!("{} (validation split)", data.display());
+    header.manifest = eval_dir.join("manifest.json").display().to_string();
+    let text = markdown(&short_horizon::LAYOUT, &rows, &header);
+    let path = eval_dir.join("combined.md");
+    std::fs::write(&path, &text).map_err(|e| TrainError::Setup(format!("{}: {e}", path.display())))?;
+    Ok(text)
 }
 
 #[cfg(test)]
