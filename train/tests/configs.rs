@@ -65,6 +65,18 @@ fn typos_and_omissions_are_rejected_in_every_table() {
         ("kind = \"framewise\"", "kind = \"framewize\"", "framewize"),
         ("train_frames = 4", "train_frames = 1", "vae.train_frames = 1"), // frame 0 alone
         ("train_frames = 4", "train_frames = -2", "train_frames"),        // not a count
+        (
+            "progress_every_secs = 5.0",
+            "progress_every_secs = inf",
+            "progress_every_secs",
+        ), // no Duration holds it
+        (
+            "progress_every_secs = 5.0",
+            "progress_every_secs = nan",
+            "progress_every_secs",
+        ),
+        ("heads = 2", "heads = 0", "model.body.heads"), // zero-sized attention
+        ("rec_average = \"per_clip\"", "rec_average = \"sum\"", "rec_average"),
     ] {
         assert!(text.contains(from), "{from}");
         let err = parse_any(&text.replacen(from, to, 1), &vae).unwrap_err();

@@ -154,8 +154,15 @@ impl TrainConfig {
         if self.keep_last == 0 {
             return bad("keep_last", "must keep at least one checkpoint".into());
         }
-        if self.progress_every_secs.is_nan() || self.progress_every_secs <= 0.0 {
-            return bad("progress_every_secs", "must be positive".into());
+        // Also refuses inf, which a Duration cannot hold.
+        if !self.progress_every_secs.is_finite() || self.progress_every_secs <= 0.0 {
+            return bad(
+                "progress_every_secs",
+                format!(
+                    "must be a positive finite number of seconds, got {}",
+                    self.progress_every_secs
+                ),
+            );
         }
         Ok(())
     }
