@@ -39,15 +39,7 @@ fn head(b: &mut Bytes) -> Result<Head> {
 }
 
 fn takes(h: &Head) -> Vec<TakeInfo> {
-    if h.frames < 2 {
-        return Vec::new();
-    }
-    vec![TakeInfo {
-        name: "all".into(),
-        frames: h.frames,
-        fps: 0.0,
-        file: None,
-    }]
+    skeletal::single_take(h.frames)
 }
 
 /// The takes of an `.anime`: `all` when it has at least 2 frames.

@@ -100,15 +100,7 @@ fn parse(b: &mut Bytes) -> Result<Md3> {
 }
 
 fn takes(m: &Md3) -> Vec<TakeInfo> {
-    if m.frames < 2 {
-        return Vec::new();
-    }
-    vec![TakeInfo {
-        name: "all".into(),
-        frames: m.frames,
-        fps: 0.0,
-        file: None,
-    }]
+    skeletal::single_take(m.frames)
 }
 
 /// The takes of an `.md3`: `all` when it has at least 2 frames.

@@ -138,6 +138,20 @@ pub fn pick(path: &Path, takes: &[TakeInfo], sel: &TakeSel) -> Result<usize> {
     }
 }
 
+/// The takes of a format that stores one animation: `all` with its `frames` when there are at least 2, none
+/// otherwise (one frame is no motion).
+pub fn single_take(frames: usize) -> Vec<TakeInfo> {
+    if frames < 2 {
+        return Vec::new();
+    }
+    vec![TakeInfo {
+        name: "all".into(),
+        frames,
+        fps: 0.0,
+        file: None,
+    }]
+}
+
 /// Refuse a take of `frames` frames over `max` (before anything is allocated for it).
 pub fn check_frames(path: &Path, take: &str, frames: usize, max: usize) -> Result<()> {
     if frames > max {
