@@ -27,7 +27,9 @@ def main(out, pairs):
         with open(os.path.join(folder, "summary.csv")) as f:
             for r in csv.DictReader(f):
                 # Vertex-space methods do not read latents: keep one copy of each.
-                if r["method"] in ("lerp", "static_nearest") and any(x["method"] == r["method"] for x in rows):
+                if r["method"] in ("lerp", "static_nearest") and any(
+                    (x["method"], x["k_extra"]) == (r["method"], r["k_extra"]) for x in rows
+                ):
                     continue
                 r = {"keyframe_latents": label if r["method"] not in ("lerp", "static_nearest") else "", **r}
                 r.pop("data", None)
