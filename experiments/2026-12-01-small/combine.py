@@ -2,7 +2,7 @@
 """Table 1 of the small models: merge the `eval run` summaries (one per keyframe-latent choice) into one CSV with a
 `keyframe_latents` column, the ratios the targets name, and one RMSE-vs-K_x plot.
 
-Usage: python3 combine.py OUT_DIR LABEL=EVAL_DIR [LABEL=EVAL_DIR ...]
+Usage: python3 combine.py OUT_DIR (this folder: `.`) LABEL=EVAL_DIR [LABEL=EVAL_DIR ...]
 LABEL is `mean` or `sample` (the `--posterior` the run used); every EVAL_DIR must hold the same manifest.json.
 Writes OUT_DIR/summary.csv, OUT_DIR/ratios.csv and OUT_DIR/rmse_vs_kx.png.
 """
