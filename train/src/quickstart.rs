@@ -220,13 +220,17 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         ..TableHeader::default()
     };
     let table = run_protocol(&protocol, &run_opts)?;
-    let combined = match opts.shipped.as_deref().filter(|d| d.join("rf").is_dir()) {
-        Some(dir) => {
+    let combined = match opts.shipped.as_deref() {
+        Some(dir) if dir.join("rf").is_dir() => {
             stage(format!(
                 "6/6 evaluating the shipped models of {} on the same clips and keyframes",
                 dir.display()
             ));
             Some(shipped_rows(dir, &table, &data, &eval_dir, sampling, &device, opts)?)
+        }
+        Some(dir) => {
+            stage(format!("6/6 skipped: no shipped models in {}", dir.display()));
+            None
         }
         None => None,
     };
