@@ -44,7 +44,12 @@ impl FrameVaeConfig {
                 self.offset_freqs, self.kl_weight
             ));
         }
-        self.body.validate()
+        self.body.validate()?;
+        let offset_embed = (6 * self.offset_freqs as u128 + 3) * self.body.width as u128;
+        crate::summary::check_param_estimate(
+            "model.body and model.offset_freqs",
+            self.body.param_estimate() + offset_embed,
+        )
     }
 
     /// Builds the VAE on `device`.

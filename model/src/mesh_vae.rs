@@ -234,7 +234,18 @@ impl MeshVaeBodyConfig {
                 self.logvar_min, self.logvar_max
             ));
         }
-        Ok(())
+        crate::summary::check_param_estimate("model.body sizes", self.param_estimate())
+    }
+
+    /// An upper estimate of the body's parameter count, computed without allocating: every block's attention
+    /// (4·d·max(d, heads·head_dim)) and GEGLU feed-forward (3m·d²), the query decoder (≈ 12 d²) and the embeddings.
+    pub fn param_estimate(&self) -> u128 {
+        let d = self.width as u128;
+        let inner = (self.heads as u128 * self.head_dim as u128).max(d);
+        let blocks = self.enc_blocks as u128 + self.dec_blocks as u128;
+        let per_block = 4 * d * inner + 3 * self.ffn_mult as u128 * d * d + 4 * d;
+        let embed = (6 * self.point_freqs as u128 + 3) * d + 6 * self.latent_channels as u128 * d;
+        blocks * per_block + 12 * d * d + embed
     }
 
     /// Builds the body on `device`; each vertex decodes `out_per_group` values per motion group (3 per frame, or

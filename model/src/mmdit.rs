@@ -124,7 +124,19 @@ impl MmditConfig {
                 self.width, self.heads
             ));
         }
-        Ok(())
+        crate::summary::check_param_estimate(
+            "model.width, blocks, frames, channels and text_dim",
+            self.param_estimate(),
+        )
+    }
+
+    /// An upper estimate of the parameter count, computed without allocating: per block two streams of qkv, output,
+    /// MLP (4W) and adaLN (6W) projections (≈ 36 W²), plus input, text, time and output projections.
+    pub fn param_estimate(&self) -> u128 {
+        let (w, b) = (self.width as u128, self.blocks as u128);
+        let io = (self.in_channels() as u128 + self.out_channels() as u128 + self.text_dim as u128 + 1) * w;
+        let time = 512 * 4 * w + 4 * w * w;
+        b * 40 * w * w + io + time
     }
 
     /// Builds the network: AAM initialisation (N(0, (0.25/√W)²) for attention, MLP and time MLP, PyTorch-default

@@ -5,6 +5,21 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::prelude::*;
 
 /// Name of the last row of [`param_report`].
+/// The most parameters a config may ask for (2³¹ ≈ 2.1 billion, 8.6 GB in f32): a bound checked before any weight is
+/// allocated, so a mistyped size (`width = 1e6`) is an error naming the field instead of an allocation failure.
+pub const MAX_PARAMS: u128 = 1 << 31;
+
+/// The error of a config whose parameter estimate exceeds [`MAX_PARAMS`].
+pub fn check_param_estimate(what: &str, estimate: u128) -> Result<(), String> {
+    if estimate > MAX_PARAMS {
+        return Err(format!(
+            "{what} ask for about {estimate} parameters ({:.1} GB in f32), over the {MAX_PARAMS} this build allows",
+            estimate as f64 * 4e-9
+        ));
+    }
+    Ok(())
+}
+
 pub const TOTAL: &str = "total";
 
 /// One float parameter: the names of the modules and fields leading to it (`["blocks", "0", "qkv", "weight"]`)

@@ -76,6 +76,10 @@ fn typos_and_omissions_are_rejected_in_every_table() {
             "progress_every_secs",
         ),
         ("heads = 2", "heads = 0", "model.body.heads"), // zero-sized attention
+        ("width = 32\n", "width = 1000000\n", "parameters"), // refused before any weight is allocated
+        ("enc_blocks = 2", "enc_blocks = 1000000", "parameters"),
+        ("offset_freqs = 10", "offset_freqs = 1000000000", "offset_freqs"),
+        ("micro_batch = 4", "micro_batch = 4294967296", "micro_batch"),
         ("rec_average = \"per_clip\"", "rec_average = \"sum\"", "rec_average"),
     ] {
         assert!(text.contains(from), "{from}");
@@ -100,6 +104,8 @@ fn typos_and_omissions_are_rejected_in_every_table() {
     assert!(err.contains("k_min"), "{err}");
     let err = parse_any(&text.replacen("text_dropout = 0.1", "text_dropout = 1.5", 1), &rf).unwrap_err();
     assert!(err.contains("rf.text_dropout"), "{err}");
+    let err = parse_any(&text.replacen("blocks = 2", "blocks = 100000000", 1), &rf).unwrap_err();
+    assert!(err.contains("parameters"), "{err}");
 }
 
 #[test]

@@ -136,6 +136,17 @@ impl TrainConfig {
         if self.batch_size == 0 || self.micro_batch == 0 {
             return bad("batch_size", "batch_size and micro_batch must be positive".into());
         }
+        // A bound no real run reaches, checked before a batch is allocated from it.
+        const MAX_BATCH: usize = 1 << 20;
+        if self.batch_size > MAX_BATCH || self.micro_batch > MAX_BATCH {
+            return bad(
+                "batch_size",
+                format!(
+                    "batch_size {} / micro_batch {} exceed {MAX_BATCH} clips",
+                    self.batch_size, self.micro_batch
+                ),
+            );
+        }
         if !self.batch_size.is_multiple_of(self.micro_batch) {
             return bad(
                 "micro_batch",
