@@ -11,12 +11,13 @@ use std::sync::Arc;
 use any4d_data::batch::PadTo;
 use any4d_data::fps::farthest_point_sampling;
 use any4d_data::preprocess::{edges_from_faces, pad_vertices};
-use any4d_data::rng::{GOLDEN_GAMMA, Rng, rng, splitmix64};
+use any4d_data::rng::{GOLDEN_GAMMA, splitmix64};
 use any4d_data::{Clip, DataError};
 use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mesh_vae::{EdgeList, MeshVae, VaeEncoding};
 use any4d_model::mmdit::{KeyframeConditioning, Mmdit, MmditConfig, replace_keyframes};
+pub use any4d_model::rectified_flow::sampler_noise;
 use any4d_model::rectified_flow::{Conditioning, ReplaceNoise, SampleOptions, sample_mmdit};
 use any4d_model::text::{TextEncoder, caption_keep};
 use burn::prelude::*;
@@ -27,9 +28,6 @@ use crate::methods::{MethodKind, Request, WindowSampler};
 use crate::tables::reconstruction::Reconstructor;
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
-
-/// RNG stream of the sampler's initial noise ε (distinct from the keyframe-noise stream of `methods.rs`).
-const NOISE_STREAM: u64 = 0x7266_6570; // "rfep"
 
 /// Batch-1 tensors of one window for a mesh VAE.
 struct VaeInput {
@@ -361,23 +359,6 @@ fn encoded_frames(keys: &[usize]) -> Vec<usize> {
     frames
 }
 
-/// The initial noise ε of [`RfSampler`] for `seed`: N(0, I) from a ChaCha stream (Box–Muller), so a seed gives
-/// the same noise on every device and thread.
-///
-/// # Shapes
-/// `dims` = `[1, P, T, C]` (token-major, as the RF state); returns `dims`.
-pub fn sampler_noise(seed: u64, dims: [usize; 4], device: &Device) -> Tensor<4> {
-    let mut r = rng(seed, NOISE_STREAM);
-    let len = dims.iter().product();
-    let values: Vec<f32> = (0..len)
-        .map(|_| {
-            let (u1, u2): (f64, f64) = (r.random::<f64>().max(f64::MIN_POSITIVE), r.random::<f64>());
-            ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
-        })
-        .collect();
-    Tensor::from_data(TensorData::new(values, dims), device)
-}
-
 /// One trained RF checkpoint with everything it samples with: the frame-wise VAE (in a [`MeshCodec`], shareable
 /// with [`LatentLerpSampler`]), the MMDiT and its config, the latent statistics of docs/method.md §3.4 and the text
 /// encoder (the scratch encoder is trained jointly with the RF, so it comes from the same checkpoint).
@@ -488,7 +469,7 @@ pub struct RfSampler {
 impl RfSampler {
     /// `options.conditioning` must match the network's input layout (mask channels or not); `guidance` is the CFG
     /// weight w (1.0 in the paper: one conditional branch). ε comes from the seed ([`sampler_noise`]); only
-    /// `ReplaceNoise::Fresh` also draws from the device RNG, which each batch seeds from its requests' seeds.
+    /// `ReplaceNoise::Fresh` draws from a host stream that each batch seeds from its requests' seeds.
     pub fn new(models: Arc<LearnedModels>, options: SampleOptions, guidance: f64) -> Result<Self> {
         let bad = |field: &str, reason: String| Err(DataError::new("rf sampler", field, reason));
         let net = models.rf_config.conditioning;
@@ -631,15 +612,15 @@ impl RfSampler {
                 .collect(),
             0,
         );
-        if self.options.replace_noise == ReplaceNoise::Fresh {
-            // Fresh replacement noise comes from the device stream: seed it from the requests, so the same
-            // requests in the same batches give the same samples.
-            let mix = requests.iter().fold(0x5EED_F2E5_u64, |h, r| {
+        let mut options = self.options;
+        if options.replace_noise == ReplaceNoise::Fresh {
+            // Fresh replacement noise is drawn from a host stream seeded by the requests: the same requests in the
+            // same batches give the same samples, whatever other threads draw.
+            options.fresh_seed = requests.iter().fold(0x5EED_F2E5_u64, |h, r| {
                 splitmix64(h ^ r.seed.wrapping_mul(GOLDEN_GAMMA))
             });
-            device.seed(mix);
         }
-        let x1 = sample_mmdit(&m.rf, &cond, text, keep, eps, self.guidance, &self.options); // (R6)
+        let x1 = sample_mmdit(&m.rf, &cond, text, keep, eps, self.guidance, &options); // (R6)
         let mut latents = m.stats.destandardize_motion(x1); // [B, P, T, C]
         if matches!(
             self.options.conditioning,

@@ -194,7 +194,7 @@ pub enum Solver {
 pub enum ReplaceNoise {
     /// ε_key = the initial noise ε of those slots, fixed for the trajectory.
     Fixed,
-    /// New N(0, I) noise at every evaluation (device random stream).
+    /// New N(0, I) noise at every evaluation, from [`sampler_noise`] seeded by `SampleOptions::fresh_seed` and τ.
     Fresh,
 }
 
@@ -211,6 +211,8 @@ pub struct SampleOptions {
     pub replace_noise: ReplaceNoise,
     /// τ* of (R9), for `KeyframeConditioning::ImputeUntil`.
     pub tau_star: f64,
+    /// Seed of `ReplaceNoise::Fresh` draws (each evaluation mixes in its τ).
+    pub fresh_seed: u64,
 }
 
 impl SampleOptions {
@@ -222,6 +224,7 @@ impl SampleOptions {
             conditioning,
             replace_noise: ReplaceNoise::Fixed,
             tau_star: 0.98,
+            fresh_seed: 0,
         }
     }
 }
@@ -251,7 +254,10 @@ pub fn sampler_input(cond: &Conditioning, x: Tensor<4>, eps: &Tensor<4>, tau: f6
         KeyframeConditioning::ReplaceNoised => {
             let eps_key = match opts.replace_noise {
                 ReplaceNoise::Fixed => eps.clone(),
-                ReplaceNoise::Fresh => Tensor::random(eps.dims(), Distribution::Normal(0.0, 1.0), &eps.device()),
+                ReplaceNoise::Fresh => {
+                    let seed = any4d_data::rng::splitmix64(opts.fresh_seed ^ tau.to_bits());
+                    sampler_noise(seed, eps.dims(), &eps.device())
+                }
             };
             // (R7) keyframe latent noised to the state's level: (1 − τ) ε_key + τ Z_key
             let key_tau = eps_key.mul_scalar(1.0 - tau) + cond.z_key.clone().mul_scalar(tau);
@@ -368,4 +374,25 @@ pub fn sample_mmdit(
     opts: &SampleOptions,
 ) -> Tensor<4> {
     sample(mmdit_velocity(model, text, keep, guidance), cond, eps, opts)
+}
+
+/// RNG stream of the sampler's noise (distinct from the keyframe-noise stream of the evaluation).
+const NOISE_STREAM: u64 = 0x7266_6570; // "rfep"
+
+/// N(0, I) noise for `seed` from a ChaCha stream (Box–Muller) on the host: a seed gives the same noise on every
+/// device and thread (the sampler's initial ε, and fresh replacement noise).
+///
+/// # Shapes
+/// `dims` = `[B, P, T, C]`; returns `dims`.
+pub fn sampler_noise(seed: u64, dims: [usize; 4], device: &Device) -> Tensor<4> {
+    use any4d_data::rng::{Rng, rng};
+    let mut r = rng(seed, NOISE_STREAM);
+    let len = dims.iter().product();
+    let values: Vec<f32> = (0..len)
+        .map(|_| {
+            let (u1, u2): (f64, f64) = (r.random::<f64>().max(f64::MIN_POSITIVE), r.random::<f64>());
+            ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
+        })
+        .collect();
+    Tensor::from_data(TensorData::new(values, dims), device)
 }

@@ -99,6 +99,7 @@ fn every_combination_of_the_rf_switches_trains_and_samples() {
                             conditioning,
                             replace_noise,
                             tau_star: cfg.rf.tau_star,
+                            fresh_seed: 7,
                         };
                         let cond = Conditioning {
                             z0: z0.clone(),

@@ -123,7 +123,7 @@ pub fn validation_samples(batcher: &RfBatcher, model: &RfModel, device: &Device)
             .filter_map(|(f, &k)| k.then_some(f))
             .collect();
         let clip_seed = seed.wrapping_add(i as u64);
-        device.seed(clip_seed); // only `ReplaceNoise::Fresh` draws from the device
+        device.seed(clip_seed);
         let scored = complete_and_score(&method, &clip, &keyframes, &clip.caption, clip_seed)?;
         let m = scored.metrics;
         for (s, v) in sums.iter_mut().zip([m.rmse, m.chamfer, m.dtw]) {
