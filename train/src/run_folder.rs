@@ -220,6 +220,26 @@ pub fn read_table(path: &Path) -> Result<Table> {
     Ok(Table { header, rows })
 }
 
+/// Opens `run_dir` to continue it: the run folder, its stored config read by `parse` (with `backend`, when given,
+/// replacing the `[device] backend` that `device` points at), and its newest complete checkpoint.
+pub fn open_for_resume<C>(
+    run_dir: &Path,
+    parse: impl FnOnce(&str, &Path) -> Result<C>,
+    backend: Option<crate::backend::Backend>,
+    device: impl FnOnce(&mut C) -> &mut crate::config::DeviceConfig,
+) -> Result<(RunFolder, C, PathBuf)> {
+    let run = RunFolder::open(run_dir)?;
+    let mut cfg = parse(&run.config_text()?, &run.path(CONFIG_FILE))?;
+    if let Some(b) = backend {
+        device(&mut cfg).backend = b;
+    }
+    let ckpt = crate::checkpoint::latest(&run.path(CHECKPOINTS_DIR))?.ok_or_else(|| TrainError::Checkpoint {
+        path: run_dir.to_path_buf(),
+        reason: "no complete checkpoint to resume".into(),
+    })?;
+    Ok((run, cfg, ckpt))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -16,12 +16,12 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::backend;
-use crate::config::resolve::{self, ConfigSource, Files, Override};
+use crate::config::resolve;
 use crate::config::{DeviceConfig, OptimConfig, TrainConfig, to_toml};
 use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, RunOptions};
 use crate::multi_device::{run_devices, train_data_parallel};
-use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder, write_atomic};
+use crate::run_folder::{RunFolder, open_for_resume, write_atomic};
 
 /// File in the VAE run folder with the docs/method.md §3.4 statistics of its final checkpoint.
 pub const LATENT_STATS_FILE: &str = "latent_stats.json";
@@ -150,20 +150,7 @@ impl VaeRunConfig {
         })
     }
 
-    /// Parses the text of `file` (its `extends` chain read from the file system).
-    pub fn parse(text: &str, file: &Path) -> Result<Self> {
-        Self::from_table(resolve::resolve_text(&Files, text, file)?, file)
-    }
-
-    /// Reads `file` from `source` with its `extends` chain and `overrides`.
-    pub fn load_with(source: &dyn ConfigSource, file: &Path, overrides: &[Override]) -> Result<Self> {
-        Self::from_table(resolve::resolve(source, file, overrides)?, file)
-    }
-
-    /// Reads a config file with `overrides` (`--set`).
-    pub fn load(file: &Path, overrides: &[Override]) -> Result<Self> {
-        Self::load_with(&Files, file, overrides)
-    }
+    crate::config::loading_methods!();
 
     /// The fully resolved config as TOML (what the run folder stores).
     pub fn to_toml(&self) -> Result<String> {
@@ -386,14 +373,8 @@ pub fn train_vae(cfg: &VaeRunConfig, opts: &RunOptions) -> Result<(RunFolder, Ou
 /// Continues the VAE run in `run_dir` from its newest checkpoint (config from the run folder; the backend may be
 /// overridden, or `opts.parallel` given, whose devices then all run at `[device] precision`).
 pub fn resume_vae(run_dir: &Path, backend: Option<backend::Backend>, opts: &RunOptions) -> Result<Outcome> {
-    let run = RunFolder::open(run_dir)?;
-    let mut cfg = VaeRunConfig::parse(&run.config_text()?, &run.path(CONFIG_FILE))?;
-    if let Some(b) = backend {
-        cfg.device.backend = b;
-    }
-    let ckpt = crate::checkpoint::latest(&run.path(CHECKPOINTS_DIR))?.ok_or_else(|| TrainError::Checkpoint {
-        path: run_dir.to_path_buf(),
-        reason: "no complete checkpoint to resume".into(),
+    let (run, cfg, ckpt) = open_for_resume(run_dir, VaeRunConfig::parse, backend, |c: &mut VaeRunConfig| {
+        &mut c.device
     })?;
     let devices = run_devices(&cfg.device, opts.parallel.as_ref())?;
     run_vae(&cfg, &run, opts, &devices, Some(ckpt))

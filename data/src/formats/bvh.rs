@@ -262,16 +262,7 @@ impl<'a> Tok<'a> {
 }
 
 fn read_text(path: &Path) -> Result<String> {
-    let len = std::fs::metadata(path).map_err(|e| DataError::io(path, e))?.len();
-    if len > MAX_TEXT_BYTES {
-        return Err(DataError::new(
-            path,
-            "file",
-            format!("{len} bytes, more than the limit {MAX_TEXT_BYTES}"),
-        ));
-    }
-    let bytes = super::read_file(path, super::MAX_FILE_BYTES)?;
-    String::from_utf8(bytes).map_err(|e| DataError::new(path, "file", format!("not UTF-8 text: {e}")))
+    super::read_text_file(path, MAX_TEXT_BYTES.min(super::MAX_FILE_BYTES))
 }
 
 fn joint_body(t: &mut Tok, joints: &mut Vec<Joint>, name: String, parent: Option<usize>) -> Result<()> {

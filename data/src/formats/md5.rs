@@ -109,16 +109,7 @@ fn quat(v: [f64; 3]) -> [f64; 4] {
 }
 
 fn read_text(path: &Path) -> Result<String> {
-    let len = std::fs::metadata(path).map_err(|e| DataError::io(path, e))?.len();
-    if len > MAX_TEXT_BYTES {
-        return Err(DataError::new(
-            path,
-            "file",
-            format!("{len} bytes, more than the limit {MAX_TEXT_BYTES}"),
-        ));
-    }
-    let bytes = super::read_file(path, super::MAX_FILE_BYTES)?;
-    String::from_utf8(bytes).map_err(|e| DataError::new(path, "file", format!("not UTF-8 text: {e}")))
+    super::read_text_file(path, MAX_TEXT_BYTES.min(super::MAX_FILE_BYTES))
 }
 
 /// `MD5Version 10` and the `commandline` string, each optional: Red Eclipse ships meshes without one or both

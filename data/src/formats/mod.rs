@@ -37,6 +37,12 @@ pub const MAX_FILE_BYTES: u64 = 1 << 32;
 /// Field of the error that [`guard`] makes from a panic.
 pub const PANIC_FIELD: &str = "panic";
 
+/// Read a whole regular text file of at most `limit` bytes as UTF-8 (the checks of [`read_file`]).
+pub fn read_text_file(path: &Path, limit: u64) -> Result<String> {
+    let bytes = read_file(path, limit)?;
+    String::from_utf8(bytes).map_err(|e| DataError::new(path, "file", format!("not UTF-8 text: {e}")))
+}
+
 /// Read a whole regular file of at most `limit` bytes. FIFOs, devices and folders are refused before they are
 /// opened (reading one could block or never end), and the size is checked before anything is allocated.
 pub fn read_file(path: &Path, limit: u64) -> Result<Vec<u8>> {

@@ -15,6 +15,33 @@ pub mod resolve;
 
 pub use resolve::{ConfigSource, Embedded, Files, Override};
 
+/// `parse`, `load_with` and `load` of a run config, around its own `from_table(table, file)`: both run kinds read
+/// their files the same way (`extends`, then `--set`, then the strict table check).
+macro_rules! loading_methods {
+    () => {
+        /// Parses the text of `file` (its `extends` chain read from the file system).
+        pub fn parse(text: &str, file: &std::path::Path) -> $crate::error::Result<Self> {
+            let files = $crate::config::Files;
+            Self::from_table($crate::config::resolve::resolve_text(&files, text, file)?, file)
+        }
+
+        /// Reads `file` from `source` with its `extends` chain and `overrides`.
+        pub fn load_with(
+            source: &dyn $crate::config::ConfigSource,
+            file: &std::path::Path,
+            overrides: &[$crate::config::Override],
+        ) -> $crate::error::Result<Self> {
+            Self::from_table($crate::config::resolve::resolve(source, file, overrides)?, file)
+        }
+
+        /// Reads a config file with `overrides` (`--set`).
+        pub fn load(file: &std::path::Path, overrides: &[$crate::config::Override]) -> $crate::error::Result<Self> {
+            Self::load_with(&$crate::config::Files, file, overrides)
+        }
+    };
+}
+pub(crate) use loading_methods;
+
 /// How long a run trains.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]

@@ -9,7 +9,7 @@ use any4d_model::rectified_flow::{KeyframeLoss, RfLossOptions, TauSampler};
 use any4d_model::text::scratch::ScratchTextConfig;
 use serde::{Deserialize, Serialize};
 
-use crate::config::resolve::{self, ConfigSource, Files, Override};
+use crate::config::resolve;
 use crate::config::{DeviceConfig, OptimConfig, TrainConfig, to_toml};
 use crate::error::{Result, TrainError};
 
@@ -189,20 +189,7 @@ impl RfRunConfig {
         Ok(cfg)
     }
 
-    /// Parses the text of `file` (its `extends` chain read from the file system).
-    pub fn parse(text: &str, file: &Path) -> Result<Self> {
-        Self::from_table(resolve::resolve_text(&Files, text, file)?, file)
-    }
-
-    /// Reads `file` from `source` with its `extends` chain and `overrides`.
-    pub fn load_with(source: &dyn ConfigSource, file: &Path, overrides: &[Override]) -> Result<Self> {
-        Self::from_table(resolve::resolve(source, file, overrides)?, file)
-    }
-
-    /// Reads a config file with `overrides` (`--set`).
-    pub fn load(file: &Path, overrides: &[Override]) -> Result<Self> {
-        Self::load_with(&Files, file, overrides)
-    }
+    crate::config::loading_methods!();
 
     /// The fully resolved config as TOML.
     pub fn to_toml(&self) -> Result<String> {

@@ -10,7 +10,7 @@ use crate::backend;
 use crate::error::{Result, TrainError, io_err};
 use crate::loop_common::{self, LoopSetup, Objective, Outcome, RunOptions};
 use crate::multi_device::{run_devices, train_data_parallel};
-use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder};
+use crate::run_folder::{RunFolder, open_for_resume};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 
 use super::RF_TERMS;
@@ -57,14 +57,8 @@ pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Ou
 /// Continues the RF run in `run_dir` from its newest checkpoint (config, tokenizer and VAE run from the run
 /// folder; the backend may be overridden).
 pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRunOptions) -> Result<Outcome> {
-    let run = RunFolder::open(run_dir)?;
-    let mut cfg = RfRunConfig::parse(&run.config_text()?, &run.path(CONFIG_FILE))?;
-    if let Some(b) = backend {
-        cfg.device.backend = b;
-    }
-    let ckpt = crate::checkpoint::latest(&run.path(CHECKPOINTS_DIR))?.ok_or_else(|| TrainError::Checkpoint {
-        path: run_dir.to_path_buf(),
-        reason: "no complete checkpoint to resume".into(),
+    let (run, cfg, ckpt) = open_for_resume(run_dir, RfRunConfig::parse, backend, |c: &mut RfRunConfig| {
+        &mut c.device
     })?;
     let record = runs::read_vae_record(run_dir)?;
     if let Some(given) = &opts.vae_run {
