@@ -38,15 +38,11 @@ fn head(b: &mut Bytes) -> Result<Head> {
     }
 }
 
-fn takes(h: &Head) -> Vec<TakeInfo> {
-    skeletal::single_take(h.frames)
-}
-
 /// The takes of an `.anime`: `all` when it has at least 2 frames.
 pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
     let data = super::read_file(path, super::MAX_FILE_BYTES)?;
     let s = path.display().to_string();
-    Ok(takes(&head(&mut Bytes::new(&s, &data))?))
+    Ok(skeletal::single_take(head(&mut Bytes::new(&s, &data))?.frames))
 }
 
 /// Read an `.anime` as a clip (id = file stem, caption empty).
@@ -55,9 +51,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     let s = path.display().to_string();
     let mut b = Bytes::new(&s, &data);
     let h = head(&mut b)?;
-    let t = takes(&h);
-    let info = t[skeletal::pick(path, &t, &opts.take)?].clone();
-    skeletal::check_frames(path, &info.name, h.frames, opts.max_frames)?;
+    let info = skeletal::pick_single(path, h.frames, opts)?;
     let base = (0..h.verts)
         .map(|_| b.f32s::<3>("vertices"))
         .collect::<Result<Vec<_>>>()?;

@@ -99,15 +99,11 @@ fn parse(b: &mut Bytes) -> Result<Md3> {
     Ok(Md3 { frames, surfaces })
 }
 
-fn takes(m: &Md3) -> Vec<TakeInfo> {
-    skeletal::single_take(m.frames)
-}
-
 /// The takes of an `.md3`: `all` when it has at least 2 frames.
 pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
     let data = super::read_file(path, super::MAX_FILE_BYTES)?;
     let s = path.display().to_string();
-    Ok(takes(&parse(&mut Bytes::new(&s, &data))?))
+    Ok(skeletal::single_take(parse(&mut Bytes::new(&s, &data))?.frames))
 }
 
 /// Read the frames of an `.md3` as a clip (id = file stem, caption empty).
@@ -116,9 +112,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     let s = path.display().to_string();
     let mut b = Bytes::new(&s, &data);
     let m = parse(&mut b)?;
-    let t = takes(&m);
-    let info = t[skeletal::pick(path, &t, &opts.take)?].clone();
-    skeletal::check_frames(path, &info.name, m.frames, opts.max_frames)?;
+    let info = skeletal::pick_single(path, m.frames, opts)?;
     let n: usize = m.surfaces.iter().map(|s| s.verts).sum();
     let mut faces = Vec::new();
     let mut base = 0u32;

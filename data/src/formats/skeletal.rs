@@ -152,6 +152,15 @@ pub fn single_take(frames: usize) -> Vec<TakeInfo> {
     }]
 }
 
+/// The take of a one-animation file that `opts` asks for ([`single_take`]), its frame count checked against
+/// `opts.max_frames` before anything is allocated for it.
+pub fn pick_single(path: &Path, frames: usize, opts: &ReadOptions) -> Result<TakeInfo> {
+    let takes = single_take(frames);
+    let info = takes[pick(path, &takes, &opts.take)?].clone();
+    check_frames(path, &info.name, frames, opts.max_frames)?;
+    Ok(info)
+}
+
 /// Refuse a take of `frames` frames over `max` (before anything is allocated for it).
 pub fn check_frames(path: &Path, take: &str, frames: usize, max: usize) -> Result<()> {
     if frames > max {
