@@ -80,7 +80,7 @@ fn typos_and_omissions_are_rejected_in_every_table() {
         ("enc_blocks = 2", "enc_blocks = 1000000", "parameters"),
         ("offset_freqs = 10", "offset_freqs = 1000000000", "offset_freqs"),
         ("micro_batch = 4", "micro_batch = 4294967296", "micro_batch"),
-        ("rec_average = \"per_clip\"", "rec_average = \"sum\"", "rec_average"),
+        ("rec_average = \"batch\"", "rec_average = \"sum\"", "rec_average"),
     ] {
         assert!(text.contains(from), "{from}");
         let err = parse_any(&text.replacen(from, to, 1), &vae).unwrap_err();
@@ -200,7 +200,7 @@ fn run_folders_written_before_the_renames_still_load() {
         VaeRunConfig::parse(&text, &vae).unwrap()
     );
     // Those folders predate `rec_average` and were trained with the batch form of (V1).
-    let legacy = flat.replace("rec_average = \"per_clip\"", "");
+    let legacy = flat.replace("rec_average = \"batch\"", "");
     assert_ne!(legacy, flat);
     let migrated = VaeRunConfig::parse(&legacy, &vae).unwrap();
     assert_eq!(
