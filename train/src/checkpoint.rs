@@ -1,5 +1,6 @@
 //! Checkpoints : `checkpoints/step_N/{model.bpk, optim.bpk, state.json}` with the
-//! model, the optimiser state, the step, the host RNG and the data-order position. A checkpoint is written into
+//! model, the optimiser state, the step, the host RNG and the data-order position, plus `ema.bpk` (the averaged
+//! parameters, docs/method.md §4.8) when the run keeps an average. A checkpoint is written into
 //! `checkpoints/.tmp_step_N/` and renamed into place, so a killed run leaves only complete checkpoints. Old
 //! checkpoints are pruned to the last few plus the best validation: renamed to `.del_step_N/` first, then
 //! deleted, so a run killed while deleting never leaves a `step_N/` that lacks its model.
@@ -18,6 +19,8 @@ use crate::run_folder::write_atomic;
 
 /// Model parameters (burnpack).
 pub const MODEL_FILE: &str = "model.bpk";
+/// Averaged parameters (burnpack, docs/method.md §4.8); only in runs with `train.ema_decay > 0`.
+pub const EMA_FILE: &str = "ema.bpk";
 /// Optimiser state (burnpack).
 pub const OPTIM_FILE: &str = "optim.bpk";
 /// [`TrainState`] as JSON; written last, so its presence marks a complete checkpoint.
@@ -42,8 +45,15 @@ pub fn step_dir_name(step: u64) -> String {
 }
 
 /// Writes a checkpoint of `step` under `dir` (the run's `checkpoints/`) and returns its folder. If a complete
-/// checkpoint of this step already exists (a resumed run interrupted at once) it is kept and returned.
-pub fn save<M: Module + Clone>(dir: &Path, model: &M, optim: &ModuleOptimizer, state: &TrainState) -> Result<PathBuf> {
+/// checkpoint of this step already exists (a resumed run interrupted at once) it is kept and returned. `ema`, the
+/// averaged parameters of a run that keeps them, goes to [`EMA_FILE`].
+pub fn save<M: Module + Clone>(
+    dir: &Path,
+    model: &M,
+    ema: Option<&M>,
+    optim: &ModuleOptimizer,
+    state: &TrainState,
+) -> Result<PathBuf> {
     let final_dir = dir.join(step_dir_name(state.step));
     if final_dir.join(STATE_FILE).exists() {
         return Ok(final_dir);
@@ -62,6 +72,11 @@ pub fn save<M: Module + Clone>(dir: &Path, model: &M, optim: &ModuleOptimizer, s
         .clone()
         .save_file(tmp.join(MODEL_FILE))
         .map_err(|e| ckpt_err("save model", e))?;
+    if let Some(ema) = ema {
+        ema.clone()
+            .save_file(tmp.join(EMA_FILE))
+            .map_err(|e| ckpt_err("save averaged model", e))?;
+    }
     optim
         .save(tmp.join(OPTIM_FILE))
         .map_err(|e| ckpt_err("save optimiser", e))?;
@@ -70,7 +85,8 @@ pub fn save<M: Module + Clone>(dir: &Path, model: &M, optim: &ModuleOptimizer, s
         reason: format!("serialise state: {e}"),
     })?;
     write_atomic(&tmp.join(STATE_FILE), &json)?;
-    for f in [MODEL_FILE, OPTIM_FILE] {
+    let written = [MODEL_FILE, OPTIM_FILE].into_iter().chain(ema.map(|_| EMA_FILE));
+    for f in written {
         let p = tmp.join(f);
         fs::File::open(&p)
             .and_then(|f| f.sync_all())
@@ -127,11 +143,37 @@ pub fn read_state(ckpt: &Path) -> Result<TrainState> {
     })
 }
 
-/// Loads the parameters of a checkpoint into `model` (built from the same config).
+/// Loads the trained parameters of a checkpoint (`model.bpk`) into `model` (built from the same config).
 pub fn load_model<M: Module>(model: M, ckpt: &Path) -> Result<M> {
-    let p = ckpt.join(MODEL_FILE);
-    model.try_load_file(&p).map_err(|e| TrainError::Checkpoint {
-        path: p,
+    load_file(model, &ckpt.join(MODEL_FILE))
+}
+
+/// Loads the averaged parameters of a checkpoint (`ema.bpk`, docs/method.md §4.8) into `model`; an error when
+/// the checkpoint has none.
+pub fn load_ema<M: Module>(model: M, ckpt: &Path) -> Result<M> {
+    let p = ckpt.join(EMA_FILE);
+    if !p.is_file() {
+        return Err(TrainError::Checkpoint {
+            path: p,
+            reason: "missing: the run's config keeps averaged parameters (train.ema_decay > 0)".into(),
+        });
+    }
+    load_file(model, &p)
+}
+
+/// The parameters a trained run samples with: the averaged ones when the checkpoint has them, else the trained
+/// ones. Returns the model and whether it holds the average.
+pub fn load_for_sampling<M: Module>(model: M, ckpt: &Path) -> Result<(M, bool)> {
+    if ckpt.join(EMA_FILE).is_file() {
+        Ok((load_ema(model, ckpt)?, true))
+    } else {
+        Ok((load_model(model, ckpt)?, false))
+    }
+}
+
+fn load_file<M: Module>(model: M, p: &Path) -> Result<M> {
+    model.try_load_file(p).map_err(|e| TrainError::Checkpoint {
+        path: p.to_path_buf(),
         reason: e.to_string(),
     })
 }

@@ -1,14 +1,16 @@
 //! The training loop shared by the VAE (docs/method.md §3.3–3.5) and the RF (docs/method.md §4.5–4.7): gradient
 //! accumulation to the global batch, global-norm gradient clipping, AdamW at a constant learning rate, metrics,
-//! validation, checkpoints that resume exactly, Ctrl-C and the NaN/Inf guard. What a step computes is
+//! validation, checkpoints that resume exactly, Ctrl-C, the NaN/Inf guard and the optional parameter average
+//! (docs/method.md §4.8). What a step computes is
 //! an [`Objective`].
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use burn::module::{Module, ModuleVisitor, Param};
+use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
 use burn::optim::{GradientsAccumulator, GradientsParams, ModuleOptimizer};
 use burn::prelude::{Device, Tensor};
 use burn::tensor::Gradients;
@@ -118,7 +120,8 @@ pub struct LoopSetup<'a> {
 }
 
 /// Trains `model` with `objective` on `setup.device` until the configured duration, a stop request or a
-/// non-finite value. Returns the trained model and how the run ended. Checkpoints go to `run/checkpoints/`.
+/// non-finite value. Returns the model to sample with (the parameter average when `train.ema_decay > 0`, else the
+/// trained parameters) and how the run ended. Checkpoints go to `run/checkpoints/`.
 pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>) -> Result<(O::Model, Outcome)> {
     let one = OneDevice(setup.device.clone());
     run_steps(objective, model, setup, &one)
@@ -260,11 +263,16 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
         return Err(TrainError::Loop("the training set is empty".into()));
     }
     let total_steps = cfg.duration.steps(len, cfg.batch_size);
-    let (mut model, mut optim, mut state) = match &resume {
+    let keeps_average = cfg.ema_decay > 0.0;
+    let (mut model, mut optim, mut state, mut ema) = match &resume {
         Some(ckpt) => {
             let (m, o, s) = checkpoint::load(ckpt, model, optim_cfg.init())?;
+            let ema = match keeps_average {
+                true => Some(checkpoint::load_ema(m.clone(), ckpt)?),
+                false => None,
+            };
             run.log(&format!("resumed from {} at step {}", ckpt.display(), s.step))?;
-            (m, o, s)
+            (m, o, s, ema)
         }
         None => {
             let state = TrainState {
@@ -273,7 +281,8 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
                 order: DataOrder::new(cfg.seed, len),
                 best_valid: None,
             };
-            (model, optim_cfg.init(), state)
+            let ema = keeps_average.then(|| model.clone());
+            (model, optim_cfg.init(), state, ema)
         }
     };
     if state.order.len != len {
@@ -308,7 +317,7 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
 
     while state.step < total_steps {
         if stop.is_set() {
-            let ckpt = save(&ckpt_dir, &model, &optim, &state, cfg)?;
+            let ckpt = save(&ckpt_dir, &model, ema.as_ref(), &optim, &state, cfg)?;
             run.log(&format!(
                 "stopped by request after step {}; checkpoint {}",
                 state.step,
@@ -317,7 +326,7 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
             bar.finish();
             finish_plot(run)?;
             return Ok((
-                model,
+                ema.unwrap_or(model),
                 Outcome::Interrupted {
                     step: state.step,
                     checkpoint: ckpt,
@@ -341,6 +350,9 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
         guard(grad_norm, step, "gradient norm", &last_ckpt)?;
         let lr = optim_cfg.schedule.lr(optim_cfg.lr, step, total_steps);
         model = optim.step(lr, model, grads);
+        if let Some(avg) = ema.take() {
+            ema = Some(ema_update(avg, &model, ema_decay_at(cfg.ema_decay, step))?);
+        }
         state.step = step;
 
         let secs = t0.elapsed().as_secs_f64();
@@ -351,7 +363,11 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
 
         let mut new_best = false;
         if (step.is_multiple_of(cfg.valid_every) || step == total_steps)
-            && let Some(values) = objective.validate(&model.clone().valid(), &main.clone().without_autodiff(), step)?
+            && let Some(values) = objective.validate(
+                &ema.as_ref().unwrap_or(&model).clone().valid(),
+                &main.clone().without_autodiff(),
+                step,
+            )?
         {
             let Some(&loss) = values.last() else {
                 return Err(TrainError::Loop("validate returned no values".into()));
@@ -364,18 +380,18 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
             }
         }
         if step % cfg.checkpoint_every == 0 || step == total_steps || new_best {
-            last_ckpt = Some(save(&ckpt_dir, &model, &optim, &state, cfg)?);
+            last_ckpt = Some(save(&ckpt_dir, &model, ema.as_ref(), &optim, &state, cfg)?);
         }
     }
     bar.finish();
     let ckpt = match last_ckpt {
         Some(c) if c.ends_with(checkpoint::step_dir_name(state.step)) => c,
-        _ => save(&ckpt_dir, &model, &optim, &state, cfg)?,
+        _ => save(&ckpt_dir, &model, ema.as_ref(), &optim, &state, cfg)?,
     };
     run.log(&format!("finished {} steps; checkpoint {}", state.step, ckpt.display()))?;
     finish_plot(run)?;
     Ok((
-        model,
+        ema.unwrap_or(model),
         Outcome::Finished {
             steps: state.step,
             checkpoint: ckpt,
@@ -386,17 +402,71 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
 fn save<M: Module + Clone>(
     dir: &Path,
     model: &M,
+    ema: Option<&M>,
     optim: &ModuleOptimizer,
     state: &TrainState,
     cfg: &TrainConfig,
 ) -> Result<PathBuf> {
-    let path = checkpoint::save(dir, model, optim, state)?;
+    let path = checkpoint::save(dir, model, ema, optim, state)?;
     checkpoint::prune(dir, cfg.keep_last, state.best_valid.map(|(s, _)| s))?;
     Ok(path)
 }
 
 fn finish_plot(run: &RunFolder) -> Result<()> {
     plot::plot_run(&run.path(METRICS_FILE), &run.path(VALID_FILE), &run.path(PLOT_FILE))
+}
+
+/// The averaging decay after optimiser step `step` (1-based) for a configured `decay` (docs/method.md §4.8):
+/// min(d, (1 + s)/(10 + s)), so that the average forgets the first steps' weights quickly.
+pub fn ema_decay_at(decay: f64, step: u64) -> f64 {
+    let s = step as f64;
+    decay.min((1.0 + s) / (10.0 + s))
+}
+
+/// θ̄ ← d θ̄ + (1 − d) θ for every float parameter of `avg`, θ taken from `model` by parameter id
+/// (docs/method.md §4.8). `avg` must have been cloned from `model` or loaded next to it, so that every id matches;
+/// otherwise an error. No autodiff graph is recorded.
+pub fn ema_update<M: Module>(avg: M, model: &M, decay: f64) -> Result<M> {
+    struct Current(HashMap<ParamId, Tensor<1>>);
+    impl ModuleVisitor for Current {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            self.0.insert(param.id, param.val().detach().flatten::<1>(0, D - 1));
+        }
+    }
+    struct Blend {
+        current: HashMap<ParamId, Tensor<1>>,
+        decay: f64,
+        unmatched: usize,
+    }
+    impl ModuleMapper for Blend {
+        fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+            let Some(now) = self.current.remove(&param.id) else {
+                self.unmatched += 1;
+                return param;
+            };
+            let d = self.decay;
+            param.map(|avg| {
+                let shape = avg.shape();
+                avg.detach().mul_scalar(d).add(now.reshape(shape).mul_scalar(1.0 - d))
+            })
+        }
+    }
+    let mut current = Current(HashMap::new());
+    model.visit(&mut current);
+    let mut blend = Blend {
+        current: current.0,
+        decay,
+        unmatched: 0,
+    };
+    let avg = avg.map(&mut blend);
+    if blend.unmatched > 0 || !blend.current.is_empty() {
+        return Err(TrainError::Loop(format!(
+            "parameter average out of step with the model: {} averaged and {} trained parameters without a partner",
+            blend.unmatched,
+            blend.current.len()
+        )));
+    }
+    Ok(avg)
 }
 
 /// Device seed of `step`: a fixed function of (seed, step), so a resumed run draws the same in-model noise.

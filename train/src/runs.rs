@@ -118,8 +118,12 @@ pub fn load_vae_run(run_dir: &Path, device: &Device) -> Result<LoadedVae> {
         ));
     }
     let model = match &config.model {
-        AnyMeshVaeConfig::Framewise(c) => AnyMeshVae::Framewise(checkpoint::load_model(c.init(device), &ckpt)?),
-        AnyMeshVaeConfig::Sequencewise(c) => AnyMeshVae::Sequencewise(checkpoint::load_model(c.init(device), &ckpt)?),
+        AnyMeshVaeConfig::Framewise(c) => {
+            AnyMeshVae::Framewise(checkpoint::load_for_sampling(c.init(device), &ckpt)?.0)
+        }
+        AnyMeshVaeConfig::Sequencewise(c) => {
+            AnyMeshVae::Sequencewise(checkpoint::load_for_sampling(c.init(device), &ckpt)?.0)
+        }
     };
     Ok(LoadedVae {
         model,
@@ -189,7 +193,8 @@ pub fn read_vae_record(run_dir: &Path) -> Result<VaeRunRecord> {
 
 /// An RF run ready for sampling.
 pub struct LoadedRf {
-    /// MMDiT and caption transformer with the newest checkpoint's parameters.
+    /// MMDiT and caption transformer with the newest checkpoint's parameters (the average, docs/method.md §4.8,
+    /// when the run keeps one).
     pub model: RfModel,
     /// The caption tokenizer trained at run start.
     pub tokenizer: ScratchTokenizer,
@@ -234,7 +239,7 @@ pub fn load_rf_run(run_dir: &Path, device: &Device) -> Result<LoadedRf> {
     let tokenizer = ScratchTokenizer::load(&run)?;
     let vae = read_vae_record(&run)?;
     let (ckpt, step) = newest_checkpoint(&run)?;
-    let model = checkpoint::load_model(config.model_config(tokenizer.vocab_size()).init(device), &ckpt)?;
+    let (model, _) = checkpoint::load_for_sampling(config.model_config(tokenizer.vocab_size()).init(device), &ckpt)?;
     Ok(LoadedRf {
         model,
         tokenizer,

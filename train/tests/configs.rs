@@ -81,6 +81,16 @@ fn typos_and_omissions_are_rejected_in_every_table() {
         ("offset_freqs = 10", "offset_freqs = 1000000000", "offset_freqs"),
         ("micro_batch = 4", "micro_batch = 4294967296", "micro_batch"),
         ("rec_average = \"batch\"", "rec_average = \"sum\"", "rec_average"),
+        (
+            "progress_every_secs = 5.0",
+            "progress_every_secs = 5.0\nema_decay = 1.0",
+            "train.ema_decay",
+        ), // an average that never moves
+        (
+            "progress_every_secs = 5.0",
+            "progress_every_secs = 5.0\nema_decay = -0.5",
+            "train.ema_decay",
+        ),
     ] {
         assert!(text.contains(from), "{from}");
         let err = parse_any(&text.replacen(from, to, 1), &vae).unwrap_err();

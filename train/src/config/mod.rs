@@ -82,6 +82,10 @@ pub struct TrainConfig {
     pub valid_every: u64,
     /// Seconds between compact progress lines when stdout is not a terminal.
     pub progress_every_secs: f64,
+    /// Decay d of an exponential moving average of the parameters (docs/method.md §4.8), used for validation and
+    /// sampling and saved next to the raw parameters; 0 = off (the paper). Absent from a file means 0.
+    #[serde(default)]
+    pub ema_decay: f64,
 }
 
 /// How the learning rate moves over a run.
@@ -191,6 +195,9 @@ impl TrainConfig {
         }
         if self.keep_last == 0 {
             return bad("keep_last", "must keep at least one checkpoint".into());
+        }
+        if !(0.0..1.0).contains(&self.ema_decay) {
+            return bad("ema_decay", format!("{} is outside [0, 1)", self.ema_decay));
         }
         // Also refuses inf, which a Duration cannot hold.
         if !self.progress_every_secs.is_finite() || self.progress_every_secs <= 0.0 {

@@ -82,6 +82,16 @@ pub fn quiet_setup<'a>(
 }
 
 /// Every float parameter of `m`, in visiting order, as f32 (never empty, so equality of two dumps means something).
+/// Adds a constant to every float parameter (a second point of the same module, same parameter ids).
+pub struct Shift(pub f32);
+
+impl burn::module::ModuleMapper for Shift {
+    fn map_float<const D: usize>(&mut self, p: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        let by = self.0;
+        p.map(|t| t.add_scalar(by))
+    }
+}
+
 pub fn params<M: Module>(m: &M) -> Vec<f32> {
     struct Collect(Vec<f32>);
     impl ModuleVisitor for Collect {
@@ -221,6 +231,7 @@ pub fn toy_configs(steps: u64) -> (TrainConfig, OptimConfig) {
         keep_last: 2,
         valid_every: 4,
         progress_every_secs: 5.0,
+        ema_decay: 0.0,
     };
     let optim = OptimConfig {
         lr: 1e-2,
