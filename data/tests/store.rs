@@ -128,6 +128,17 @@ fn import_stores_normalised_windows_and_rejects_bad_files() {
         .collect();
     assert_eq!(long.len(), 5);
     assert!(long.iter().all(|r| r.object == "objL" && r.split == long[0].split));
+
+    // Training draws one window per whole clip (docs/method.md §2.6): the five windows form one group.
+    let all: Vec<usize> = (0..st.len()).collect();
+    let mut sizes: Vec<usize> = st.whole_clips(&all).unwrap().iter().map(Vec::len).collect();
+    sizes.sort();
+    assert_eq!(sizes, [1, 1, 1, 5]);
+    let sources = st.sources(&all).unwrap();
+    let long_positions: Vec<usize> = (0..st.len())
+        .filter(|&i| sources[i].ends_with("objL_offset0_0-19.bin"))
+        .collect();
+    assert!(st.whole_clips(&all).unwrap().contains(&long_positions));
 }
 
 #[test]
@@ -275,13 +286,29 @@ fn corrupt_or_truncated_store_gives_errors_not_panics() {
     let e = st.get(0).unwrap_err();
     assert!(e.field.contains("clip 0 vertices at byte"), "{e}");
 
+    // The first record's source length made huge: `sources` names the field instead of reading past the record.
+    let mut bad = good.clone();
+    let mut at = 24;
+    for _ in 0..2 {
+        at += 4 + u32::from_le_bytes(bad[at..at + 4].try_into().unwrap()) as usize;
+    }
+    bad[at..at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    std::fs::write(&path, &bad).unwrap();
+    let e = Store::open(&out).unwrap().sources(&[0]).unwrap_err();
+    assert!(
+        e.field.contains("clip 0 source at byte") && e.reason.contains("past the record"),
+        "{e}"
+    );
+
     // Every truncation and every single-byte flip is an error or a clean read, never a panic.
+    let every: Vec<usize> = (0..2).collect();
     for cut in (0..good.len()).step_by(7) {
         std::fs::write(&path, &good[..cut]).unwrap();
         if let Ok(st) = Store::open(&out) {
             for i in 0..st.len() {
                 let _ = st.get(i);
             }
+            let _ = st.whole_clips(&every[..st.len().min(2)]);
         }
     }
     for pos in (0..good.len()).step_by(11) {
@@ -292,6 +319,7 @@ fn corrupt_or_truncated_store_gives_errors_not_panics() {
             for i in 0..st.len() {
                 let _ = st.get(i);
             }
+            let _ = st.whole_clips(&every[..st.len().min(2)]);
         }
     }
 }

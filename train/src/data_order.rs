@@ -1,6 +1,8 @@
 //! The order in which training examples are visited: a fresh seeded permutation per epoch, and a cursor into
-//! it. The whole state is (seed, epoch, cursor), so a checkpoint resumes mid-epoch exactly.
+//! it. The whole state is (seed, epoch, cursor), so a checkpoint resumes mid-epoch exactly. A training example is
+//! a whole clip; for a clip stored as several windows each visit draws one of them ([`WholeClips`]).
 
+use rand::Rng;
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
@@ -72,9 +74,73 @@ impl DataOrder {
     }
 }
 
+/// The training examples of a split as whole clips (docs/method.md §2.6): example e is the group of stored windows
+/// cut from one clip, and every visit of e draws one of its windows uniformly, so an epoch sees each clip once,
+/// however long it is. A group of one window draws nothing from the RNG: a store of uncut clips trains exactly as
+/// if the windows were the examples.
+#[derive(Clone, Debug)]
+pub struct WholeClips {
+    groups: Vec<Vec<usize>>,
+    windows: usize,
+}
+
+impl WholeClips {
+    /// Groups of positions (into the split's list of stored windows), as [`any4d_data::store::Store::whole_clips`]
+    /// returns them; empty groups are dropped.
+    pub fn new(groups: Vec<Vec<usize>>) -> Self {
+        let groups: Vec<Vec<usize>> = groups.into_iter().filter(|g| !g.is_empty()).collect();
+        let windows = groups.iter().map(Vec::len).sum();
+        WholeClips { groups, windows }
+    }
+
+    /// Number of whole clips (the training examples).
+    pub fn len(&self) -> usize {
+        self.groups.len()
+    }
+
+    /// True when there is no clip.
+    pub fn is_empty(&self) -> bool {
+        self.groups.is_empty()
+    }
+
+    /// Number of stored windows over all clips.
+    pub fn windows(&self) -> usize {
+        self.windows
+    }
+
+    /// One window position per example in `examples`, each drawn uniformly from its clip's windows with `rng`.
+    /// Panics on an example index out of range (the data order only yields `0..len`).
+    pub fn draw(&self, examples: &[usize], rng: &mut ChaCha8Rng) -> Vec<usize> {
+        examples
+            .iter()
+            .map(|&e| match self.groups[e].as_slice() {
+                [one] => *one,
+                many => many[rng.random_range(0..many.len())],
+            })
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn whole_clips_draw_each_window_and_leave_single_windows_alone() {
+        let clips = WholeClips::new(vec![vec![0], vec![1, 2, 3, 4], vec![], vec![5]]);
+        assert_eq!((clips.len(), clips.windows()), (3, 6));
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let before = rng.clone();
+        assert_eq!(clips.draw(&[0, 2, 0], &mut rng), [0, 5, 0]);
+        assert_eq!(rng, before, "single windows draw nothing");
+        let mut seen = [0usize; 6];
+        for _ in 0..4000 {
+            seen[clips.draw(&[1], &mut rng)[0]] += 1;
+        }
+        // Uniform over the four windows: 1000 each, sd ≈ 27.
+        assert!(seen[1..5].iter().all(|&n| (880..=1120).contains(&n)), "{seen:?}");
+        assert_eq!((seen[0], seen[5]), (0, 0));
+    }
 
     #[test]
     fn each_epoch_is_a_permutation_and_resume_continues_the_stream() {

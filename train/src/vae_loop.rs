@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use crate::backend;
 use crate::config::resolve;
 use crate::config::{DeviceConfig, OptimConfig, TrainConfig, to_toml};
+use crate::data_order::WholeClips;
 use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, RunOptions};
 use crate::multi_device::{run_devices, train_data_parallel};
@@ -222,6 +223,8 @@ pub fn vae_batch(batch: &ClipBatch, tokens: usize, device: &Device) -> Result<Va
 pub struct VaeObjective<V> {
     store: Store,
     train: Vec<usize>,
+    /// `train` grouped into whole clips: the training examples (docs/method.md §2.6).
+    train_clips: WholeClips,
     valid: Vec<usize>,
     micro_batch: usize,
     /// `vae.train_frames` (0 = all).
@@ -239,9 +242,11 @@ impl<V> VaeObjective<V> {
         let store = open_store(data, vae)?;
         let train = store.indices(Split::Train);
         let valid = store.indices(Split::Val);
+        let train_clips = WholeClips::new(store.whole_clips(&train)?);
         Ok(VaeObjective {
             store,
             train,
+            train_clips,
             valid,
             micro_batch,
             train_frames,
@@ -294,11 +299,16 @@ impl<V: MeshVae + Module + Clone> Objective for VaeObjective<V> {
     }
 
     fn train_len(&self) -> usize {
-        self.train.len()
+        self.train_clips.len()
     }
 
     fn loss(&self, model: &V, idx: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
-        let ids: Vec<usize> = idx.iter().map(|&i| self.train[i]).collect();
+        let ids: Vec<usize> = self
+            .train_clips
+            .draw(idx, rng)
+            .into_iter()
+            .map(|w| self.train[w])
+            .collect();
         let (mut clips, _) = load_clips(&self.store, &ids, device)?;
         let t = clips.vertices.dims()[1];
         if self.train_frames != 0 && self.train_frames < t {
@@ -414,9 +424,10 @@ where
 {
     let objective = VaeObjective::<V>::new(&opts.data, cfg.train.micro_batch, &cfg.vae)?;
     run.log(&format!(
-        "VAE {:?} on {} ({} train / {} val clips), backend {}",
+        "VAE {:?} on {} ({} train clips in {} windows / {} val clips), backend {}",
         cfg.vae.kind,
         opts.data.display(),
+        objective.train_clips.len(),
         objective.train.len(),
         objective.valid.len(),
         cfg.device.backend

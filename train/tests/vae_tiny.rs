@@ -1,5 +1,6 @@
 //! A short tiny frame-wise VAE run on procedural clips lowers its loss, writes latent statistics, and resumes
-//! exactly (n steps + resume + n steps = 2n steps straight, bitwise on the CPU backend).
+//! exactly (n steps + resume + n steps = 2n steps straight, bitwise on the CPU backend); a store of windows cut
+//! from longer clips trains on one example per whole clip.
 
 mod common;
 
@@ -48,6 +49,36 @@ fn tiny_vae_run_lowers_its_loss_and_stores_latent_stats() {
         serde_json::from_str(&std::fs::read_to_string(run.path(LATENT_STATS_FILE)).unwrap()).unwrap();
     assert_eq!(stats.step, 30);
     assert!(stats.stats.motion_std > 0.0 && stats.stats.shape_std > 0.0, "{stats:?}");
+}
+
+#[test]
+fn windows_of_one_clip_are_one_training_example() {
+    let dir = tempfile::tempdir().unwrap();
+    let synth = any4d_data::synth::SynthConfig {
+        clips: 6,
+        seed: 4,
+        frames: 7,
+        min_vertices: 256,
+        max_vertices: 512,
+    };
+    let data = dir.path().join("windows");
+    // 7-frame clips cut into 4-frame windows at stride 1: four windows per clip.
+    any4d_data::store::write_synth_windows(&synth, &data, 32, 4, 1, None).unwrap();
+    let store = any4d_data::store::Store::open(&data).unwrap();
+    let train = store.indices(any4d_data::store::Split::Train);
+    assert!(!train.is_empty() && train.len().is_multiple_of(4), "{}", train.len());
+    let cfg = tiny(1);
+    let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch, &cfg.vae).unwrap();
+    use any4d_train::loop_common::Objective;
+    assert_eq!(objective.train_len(), train.len() / 4, "an epoch visits each clip once");
+    // Its loss runs on drawn windows.
+    let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
+    let AnyMeshVaeConfig::Framewise(m) = &cfg.model else {
+        panic!("tiny is frame-wise")
+    };
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(1);
+    let l = objective.loss(&m.init(&dev), &[0, 1], &mut rng, &dev).unwrap();
+    assert!(l.total.into_scalar::<f32>().is_finite());
 }
 
 #[test]

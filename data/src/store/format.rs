@@ -361,6 +361,41 @@ pub fn read_at<R: Read + Seek>(file: &mut R, path: &Path, offset: u64, len: usiz
     Ok(buf)
 }
 
+/// The `source` string of the record at `offset` (`len` bytes): reads the three length-prefixed strings that open
+/// it (id, caption, source) and nothing else, each length checked against the record before it is read.
+pub fn read_source<R: Read + Seek>(file: &mut R, path: &Path, offset: u64, len: u64, clip: usize) -> Result<String> {
+    let err = |field: &str, at: u64, reason: String| {
+        DataError::new(path, format!("clip {clip} {field} at byte {at}"), reason)
+    };
+    let end = offset + len;
+    let mut at = offset;
+    let mut string_len = |at: u64, field: &str| -> Result<u64> {
+        if at + 4 > end {
+            return Err(err(
+                field,
+                at,
+                "the record ends before this length (corrupt or truncated)".into(),
+            ));
+        }
+        let b = read_at(file, path, at, 4, field)?;
+        let n = u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+        if at + 4 + n > end {
+            return Err(err(
+                field,
+                at,
+                format!("length {n} runs past the record's end (corrupt or truncated)"),
+            ));
+        }
+        Ok(n)
+    };
+    for field in ["id", "caption"] {
+        at += 4 + string_len(at, field)?;
+    }
+    let n = string_len(at, "source")?;
+    let bytes = read_at(file, path, at + 4, n as usize, "source")?;
+    String::from_utf8(bytes).map_err(|e| err("source", at + 4, e.to_string()))
+}
+
 /// A bounds-checked little-endian reader over one record that names the field and absolute offset on error.
 struct Cursor<'a> {
     bytes: &'a [u8],

@@ -215,6 +215,26 @@ impl Store {
             .collect()
     }
 
+    /// The `source` of each clip in `indices` (its file, `path#take`, or `synth:<seed>:<index>`), reading only the
+    /// start of each record.
+    pub fn sources(&self, indices: &[usize]) -> Result<Vec<String>> {
+        let mut file = File::open(&self.path).map_err(|err| DataError::io(&self.path, err))?;
+        indices
+            .iter()
+            .map(|&i| {
+                let e = self.entry(i)?;
+                format::read_source(&mut file, &self.path, e.offset, e.len, i)
+            })
+            .collect()
+    }
+
+    /// The clips in `indices` grouped into the whole clips they were cut from (docs/method.md §2.6): positions
+    /// into `indices`, grouped by source, groups in order of first appearance. Every window of one clip shares
+    /// its source and no two clips do, so a store of uncut clips gives one group per clip.
+    pub fn whole_clips(&self, indices: &[usize]) -> Result<Vec<Vec<usize>>> {
+        Ok(group_by_source(&self.sources(indices)?))
+    }
+
     /// Read and decode clip `i`.
     pub fn get(&self, i: usize) -> Result<StoredClip> {
         let bytes = self.raw(i)?;
@@ -258,9 +278,30 @@ impl Store {
     }
 }
 
+/// Positions of `sources` grouped by equal value, groups in order of first appearance, positions ascending.
+pub fn group_by_source(sources: &[String]) -> Vec<Vec<usize>> {
+    let mut group_of: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for (i, s) in sources.iter().enumerate() {
+        let g = *group_of.entry(s).or_insert_with(|| {
+            groups.push(Vec::new());
+            groups.len() - 1
+        });
+        groups[g].push(i);
+    }
+    groups
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn groups_keep_first_appearance_order() {
+        let s: Vec<String> = ["a", "b", "a", "c", "b", "a"].iter().map(|x| x.to_string()).collect();
+        assert_eq!(group_by_source(&s), vec![vec![0, 2, 5], vec![1, 4], vec![3]]);
+        assert!(group_by_source(&[]).is_empty());
+    }
 
     #[test]
     fn split_is_about_80_20_and_stable() {

@@ -130,7 +130,7 @@ impl RfBatcher {
         })
     }
 
-    /// Number of TRAIN clips.
+    /// Number of TRAIN clips (stored windows).
     pub fn train_len(&self) -> usize {
         self.train.store_indices.len()
     }
@@ -157,6 +157,11 @@ impl RfBatcher {
     /// The store the clips come from.
     pub fn store(&self) -> &Store {
         &self.store
+    }
+
+    /// Store indices of the TRAIN clips (windows), in store order.
+    pub fn train_indices(&self) -> &[usize] {
+        &self.train.store_indices
     }
 
     /// Store indices of the VAL clips, in store order.

@@ -10,6 +10,7 @@ use burn::prelude::Device;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use crate::data_order::WholeClips;
 use crate::error::Result;
 use crate::loop_common::{self, Losses, Objective};
 use crate::run_folder::{RunFolder, SAMPLES_FILE};
@@ -24,6 +25,8 @@ use super::{RF_TERMS, SAMPLE_TERMS};
 /// Training objective of the keyframe RF on a frozen VAE: terms `rf` (R5) and `kf_frac`.
 pub struct RfObjective {
     batcher: RfBatcher,
+    /// The TRAIN windows grouped into whole clips: the training examples (docs/method.md §2.6).
+    train_clips: WholeClips,
     /// Where validation samples are logged ([`RfObjective::log_validation_samples`]).
     samples_run: Option<RunFolder>,
 }
@@ -37,8 +40,11 @@ impl RfObjective {
         tokenizer: ScratchTokenizer,
         device: &Device,
     ) -> Result<Self> {
+        let batcher = RfBatcher::new(cfg, data, vae, tokenizer, device)?;
+        let train_clips = WholeClips::new(batcher.store().whole_clips(batcher.train_indices())?);
         Ok(RfObjective {
-            batcher: RfBatcher::new(cfg, data, vae, tokenizer, device)?,
+            batcher,
+            train_clips,
             samples_run: None,
         })
     }
@@ -46,6 +52,11 @@ impl RfObjective {
     /// Its batches.
     pub fn batcher(&self) -> &RfBatcher {
         &self.batcher
+    }
+
+    /// Number of TRAIN windows (the examples are the whole clips they come from: [`Objective::train_len`]).
+    pub fn train_windows(&self) -> usize {
+        self.train_clips.windows()
     }
 
     /// Number of VAL clips.
@@ -106,13 +117,14 @@ impl Objective for RfObjective {
     }
 
     fn train_len(&self) -> usize {
-        self.batcher.train_len()
+        self.train_clips.len()
     }
 
     fn loss(&self, model: &RfModel, indices: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
+        let windows = self.train_clips.draw(indices, rng);
         let step = self
             .batcher
-            .batch(model, Subset::Train, indices, rng, TextDropout::Apply, device)?;
+            .batch(model, Subset::Train, &windows, rng, TextDropout::Apply, device)?;
         let kf_frac = step.batch.mask.clone().mean();
         let options = self.batcher.config().loss_options();
         let rf = rf_training_loss(&model.mmdit, &step.batch, step.eps, step.tau, &options); // (R5)

@@ -99,10 +99,11 @@ fn run_rf(
     let mut objective = RfObjective::new(cfg, &opts.run.data, vae, tokenizer, &devices[0])?;
     objective.log_validation_samples(run)?;
     run.log(&format!(
-        "RF {:?} on {} ({} train / {} val clips, latents {:?}: {:.1} MiB), VAE {} step {}, backend {}",
+        "RF {:?} on {} ({} train clips in {} windows / {} val clips, latents {:?}: {:.1} MiB), VAE {} step {}, backend {}",
         cfg.model.conditioning,
         opts.run.data.display(),
         objective.train_len(),
+        objective.train_windows(),
         objective.valid_len(),
         cfg.rf.latent_cache,
         objective.cached_bytes() as f64 / (1024.0 * 1024.0),
