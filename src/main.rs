@@ -34,6 +34,10 @@ enum Command {
     Bench(commands::bench::BenchCmd),
     /// The whole method on procedural clips in minutes: synth → VAE → RFs → evaluation table.
     Quickstart(commands::quickstart::QuickstartArgs),
+    /// Complete a clip from its keyframes with a trained model: the in-between frames, in your coordinates.
+    Complete(Box<commands::complete::CompleteArgs>),
+    /// Extend keyframes to a sequence of any length (--frames) with the windowed long-horizon rollout.
+    Extend(Box<commands::complete::CompleteArgs>),
 }
 
 /// Every error is printed once, with its chain, and gives a non-zero exit code.
@@ -45,6 +49,8 @@ fn main() -> ExitCode {
         Command::Eval(cmd) => commands::eval::exec(cmd),
         Command::Bench(cmd) => commands::bench::exec(cmd),
         Command::Quickstart(args) => commands::quickstart::exec(args),
+        Command::Complete(args) => commands::complete::exec(*args, false),
+        Command::Extend(args) => commands::complete::exec(*args, true),
     };
     match result {
         Ok(code) => code,

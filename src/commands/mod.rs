@@ -7,6 +7,7 @@ use any4d_train::loop_common::StopFlag;
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 
 pub mod bench;
+pub mod complete;
 pub mod data;
 pub mod eval;
 pub mod model;

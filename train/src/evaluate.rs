@@ -84,18 +84,31 @@ fn checkpoint_label(run: &Path, step: u64) -> String {
     format!("{} (step {step})", run.display())
 }
 
+/// A learned method built from one RF run, with what a caller needs to feed it.
+pub struct RunMethod {
+    /// The method.
+    pub method: Box<dyn Method>,
+    /// `run (step N)`, for table headers and provenance.
+    pub checkpoint: String,
+    /// Frames T of one generated window.
+    pub window: usize,
+    /// FPS tokens P its VAE encodes.
+    pub tokens: usize,
+}
+
+/// The keyframe RF of `run_dir` as a method (`any4d complete` / `extend`).
+pub fn keyframe_method(run_dir: &Path, sampling: SamplingSetup, device: &Device) -> Result<RunMethod> {
+    rf_method(MethodKind::KeyframeRf, run_dir, sampling, device)
+}
+
 /// The RF sampler of one RF run (its own VAE and statistics, its scratch text encoder) for `kind`.
-fn rf_method(
-    kind: MethodKind,
-    run_dir: &Path,
-    sampling: SamplingSetup,
-    device: &Device,
-) -> Result<(Box<dyn Method>, String)> {
+fn rf_method(kind: MethodKind, run_dir: &Path, sampling: SamplingSetup, device: &Device) -> Result<RunMethod> {
     let rf = load_rf_run(run_dir, device)?;
     let vae = rf.load_vae(device)?;
     let codec = codec_of(&vae, sampling.posterior, device)?;
     let label = checkpoint_label(&rf.run, rf.step);
     let rf_config = rf.config.model.clone();
+    let (window, tokens) = (rf_config.frames, codec.tokens());
     let text = ScratchTextEncoder {
         tokenizer: rf.tokenizer,
         model: rf.model.text.valid(),
@@ -107,7 +120,12 @@ fn rf_method(
     base.replace_noise = sampling.replace_noise;
     let sampler = RfSampler::for_method(kind, Arc::new(models), base, sampling.guidance)?;
     let method = RfMethod::new(kind, sampler)?;
-    Ok((Box::new(method), label))
+    Ok(RunMethod {
+        method: Box::new(method),
+        checkpoint: label,
+        window,
+        tokens,
+    })
 }
 
 /// The VAE run for latent lerp / table 5: `--vae`, else the VAE of the keyframe RF run.
@@ -139,10 +157,12 @@ pub fn build_methods(
                 (m.remove(0), "none".to_string())
             }
             MethodKind::KeyframeRf | MethodKind::ImputeUntil { .. } => {
-                rf_method(kind, need(&runs.rf, "--rf", kind)?, sampling, device)?
+                let m = rf_method(kind, need(&runs.rf, "--rf", kind)?, sampling, device)?;
+                (m.method, m.checkpoint)
             }
             MethodKind::ReplacementRf => {
-                rf_method(kind, need(&runs.baseline_rf, "--baseline-rf", kind)?, sampling, device)?
+                let m = rf_method(kind, need(&runs.baseline_rf, "--baseline-rf", kind)?, sampling, device)?;
+                (m.method, m.checkpoint)
             }
             MethodKind::LerpLatent => {
                 let vae = vae_run_for(runs, device)?;

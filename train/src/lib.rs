@@ -4,11 +4,12 @@
 //! [`run_folder`] + [`checkpoint`] + [`data_order`] (append-only runs that resume exactly), [`loop_common`] (the
 //! shared loop), [`multi_device`] (its data-parallel strategies), [`progress`], [`plot`], [`vae_loop`]
 //! (docs/method.md §3), [`rf_loop`] (docs/method.md §4), [`runs`] (loading trained VAE and RF runs), [`evaluate`]
-//! (run folders → evaluation methods), [`quickstart`], [`bench`] (`any4d bench train`).
+//! (run folders → evaluation methods), [`complete`] (a trained model on a user's meshes), [`quickstart`], [`bench`] (`any4d bench train`).
 
 pub mod backend;
 pub mod bench;
 pub mod checkpoint;
+pub mod complete;
 pub mod config;
 pub mod data_order;
 pub mod error;

@@ -102,6 +102,22 @@ pub(crate) fn generate_long(
         overlap_source,
         ..RolloutSpec::paper()
     };
+    generate_windows(method, gt, keyframes, captions, seed, spec)
+}
+
+/// Completes a sequence of any length ≥ `spec.window` from its keyframes (docs/method.md §7): windows laid out by
+/// `spec`, each completed by `method` with seed `seed + window index` and assembled with its own keyframes, stitched
+/// in the global frame. `gt` is in the normalised frame of its frame 0; only its frame 0 and its keyframes are read
+/// (plus, with a ground-truth overlap, the keyframes a window starts on). A sequence of exactly one window is one
+/// completion.
+pub fn generate_windows(
+    method: &dyn Method,
+    gt: &Clip,
+    keyframes: &[usize],
+    captions: &[String],
+    seed: u64,
+    spec: RolloutSpec,
+) -> Result<Rollout> {
     let prompts: Vec<&str> = captions.iter().map(String::as_str).collect();
     let n = gt.n_vertices;
     rollout(&gt.vertices, n, keyframes, &prompts, spec, |w| {

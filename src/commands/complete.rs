@@ -1,0 +1,126 @@
+//! `any4d complete` and `any4d extend`: parse arguments, load the keyframe RF run, call
+//! `any4d_train::complete` (docs/method.md §4.6, §7) and write the samples.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use any4d_data::formats;
+use any4d_train::backend::{self, Backend, Precision};
+use any4d_train::complete::{CompleteOptions, KeyMeshes, complete, sample_path};
+use any4d_train::evaluate::{SamplingSetup, keyframe_method};
+use anyhow::{Context, bail};
+use clap::Args;
+
+use super::enum_parser;
+
+/// The shipped small keyframe RF, used when `--rf` is not given (run from the repository root).
+pub const SHIPPED_RF: &str = "weights/small/rf";
+
+#[derive(Args, Debug)]
+pub struct CompleteArgs {
+    /// A clip file whose frames `--keyframes` are kept (any readable format: .glb, .gltf, .bin, an OBJ folder, …).
+    #[arg(long, conflicts_with = "key", requires = "keyframes")]
+    pub clip: Option<PathBuf>,
+    /// Frames of `--clip` to keep, comma-separated; must include 0 (the reference).
+    #[arg(long, value_delimiter = ',', requires = "clip")]
+    pub keyframes: Vec<usize>,
+    /// A keyframe mesh at a frame: `FRAME=FILE` (a single .obj, or frame 0 of any clip file), repeatable; one of
+    /// them at frame 0 (the reference), all of one topology.
+    #[arg(long, value_parser = parse_key)]
+    pub key: Vec<(usize, PathBuf)>,
+    /// The prompt; empty = unconditional. Default: the clip's caption for `--clip`, empty for `--key`.
+    #[arg(long)]
+    pub caption: Option<String>,
+    /// The keyframe RF run (its VAE is the run it was trained on).
+    #[arg(long, default_value = SHIPPED_RF)]
+    pub rf: PathBuf,
+    /// Frames of the output. `complete`: default the clip's frame count (`--clip`) or the model's window (`--key`).
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Sampler seed of the first sample (sample k uses seed + k · 1 000 000).
+    #[arg(long, default_value_t = 42)]
+    pub seed: u64,
+    /// Number of samples; more than one writes `<out stem>_s<k>.<ext>`.
+    #[arg(long, default_value_t = 1)]
+    pub samples: usize,
+    /// Classifier-free guidance weight (1.0 in the paper: one conditional branch).
+    #[arg(long, default_value_t = 1.0)]
+    pub cfg: f64,
+    /// Grid points of the ODE solver over [0, 1] (64 in the paper; midpoint rule).
+    #[arg(long, default_value_t = SamplingSetup::default().n_grid)]
+    pub steps: usize,
+    /// Output: `.glb`, `.gltf`, `.bin`, `.anime` or a folder of OBJ frames (no extension), chosen by the path.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Compute backend.
+    #[arg(long, value_parser = enum_parser(&Backend::ALL), default_value = "flex")]
+    pub backend: Backend,
+}
+
+fn parse_key(s: &str) -> Result<(usize, PathBuf), String> {
+    let (frame, file) = s
+        .split_once('=')
+        .ok_or_else(|| format!("`{s}`: expected FRAME=FILE, e.g. 0=start.obj"))?;
+    let frame = frame
+        .trim()
+        .parse::<usize>()
+        .map_err(|e| format!("`{s}`: frame `{frame}` is not a frame index ({e})"))?;
+    if file.is_empty() {
+        return Err(format!("`{s}`: no file after `=`"));
+    }
+    Ok((frame, PathBuf::from(file)))
+}
+
+/// `any4d complete` (`extend = false`) or `any4d extend` (`--frames` required).
+pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
+    let keys = match (&args.clip, args.key.is_empty()) {
+        (Some(clip), true) => KeyMeshes::from_clip(clip, &args.keyframes)?,
+        (None, false) => KeyMeshes::from_files(&args.key)?,
+        (None, true) => bail!("give the keyframes: --clip FILE --keyframes 0,…  or  --key 0=FILE --key F=FILE …"),
+        (Some(_), false) => bail!("give either --clip with --keyframes or --key, not both"),
+    };
+    if extend && args.frames.is_none() {
+        bail!("`extend` needs the length of the output: --frames N (e.g. 31 or 91)");
+    }
+    if !args.rf.exists() {
+        bail!(
+            "RF run {} not found: pass --rf RUN (the default is the shipped {SHIPPED_RF}, found from the \
+             repository root)",
+            args.rf.display()
+        );
+    }
+    let device = backend::device(args.backend, Precision::F32)?;
+    let sampling = SamplingSetup {
+        n_grid: args.steps,
+        guidance: args.cfg,
+        ..SamplingSetup::default()
+    };
+    let model = keyframe_method(&args.rf, sampling, &device)
+        .with_context(|| format!("loading the keyframe RF run {}", args.rf.display()))?;
+    let frames = args.frames.or(keys.clip_frames).unwrap_or(model.window);
+    let caption = args
+        .caption
+        .clone()
+        .or_else(|| keys.clip_caption.clone())
+        .unwrap_or_default();
+    let opts = CompleteOptions {
+        frames,
+        caption: caption.clone(),
+        seed: args.seed,
+        samples: args.samples,
+    };
+    let clips = complete(&keys, model.method.as_ref(), model.window, model.tokens, &opts)?;
+    println!(
+        "{} frames from keyframes {:?} of {} vertices, caption {caption:?}, model {}",
+        frames,
+        keys.frames(),
+        keys.n_vertices,
+        model.checkpoint
+    );
+    for (k, clip) in clips.iter().enumerate() {
+        let path = sample_path(&args.out, k, clips.len());
+        formats::write_clip(&path, clip).with_context(|| format!("writing sample {k}"))?;
+        println!("wrote {}", path.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,226 @@
+//! `any4d complete` and `any4d extend` with the shipped small RF on a procedural clip moved into user coordinates:
+//! outputs in the user's frame and vertex order, keyframes reproduced bit for bit, samples seeded, the rollout
+//! beyond one window, and clear errors for keyframe sets the method cannot use.
+
+use std::path::{Path, PathBuf};
+
+use any4d_data::Clip;
+use any4d_data::formats::{read_clip, write_clip};
+use any4d_data::synth::{SynthConfig, generate_one};
+
+mod common;
+use common::{any4d, text};
+
+fn shipped_rf() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("weights/small/rf")
+        .display()
+        .to_string()
+}
+
+/// Procedural clip 0 of seed 7 with `frames` frames, scaled by 40 and moved to (100, −20, 5): far from the
+/// normalised frame, so an output left normalised would show.
+fn user_clip(frames: usize) -> Clip {
+    let cfg = SynthConfig {
+        clips: 1,
+        seed: 7,
+        frames,
+        min_vertices: 300,
+        max_vertices: 700,
+    };
+    let mut clip = generate_one(&cfg, 0).unwrap();
+    for p in &mut clip.vertices {
+        *p = [p[0] * 40.0 + 100.0, p[1] * 40.0 - 20.0, p[2] * 40.0 + 5.0];
+    }
+    clip
+}
+
+fn run(args: &[&str]) -> (bool, String) {
+    let out = any4d(args);
+    let (stdout, stderr) = text(&out);
+    (out.status.success(), format!("{stdout}\n{stderr}"))
+}
+
+fn s(p: &Path) -> String {
+    p.display().to_string()
+}
+
+fn centroid(frame: &[[f32; 3]]) -> [f32; 3] {
+    let n = frame.len() as f32;
+    [0, 1, 2].map(|k| frame.iter().map(|p| p[k]).sum::<f32>() / n)
+}
+
+#[test]
+fn complete_a_clip_in_user_coordinates_with_exact_keyframes() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("walk.glb");
+    let clip = user_clip(16);
+    write_clip(&input, &clip).unwrap();
+    let out = dir.path().join("done.glb");
+    let (rf, inp, o) = (shipped_rf(), s(&input), s(&out));
+    let base = [
+        "complete",
+        "--clip",
+        &inp,
+        "--keyframes",
+        "0,15",
+        "--rf",
+        &rf,
+        "--steps",
+        "8",
+        "--out",
+        &o,
+    ];
+    let (ok, log) = run(&base);
+    assert!(ok, "{log}");
+    let got = read_clip(&out).unwrap();
+    let source = read_clip(&input).unwrap();
+    assert_eq!((got.frames, got.n_vertices), (16, source.n_vertices));
+    assert_eq!(
+        got.faces, source.faces,
+        "the user's triangles, in the user's vertex order"
+    );
+    for f in [0, 15] {
+        assert_eq!(got.frame(f), source.frame(f), "keyframe {f} is the input, bit for bit");
+    }
+    assert_ne!(got.frame(7), source.frame(0), "in-between frames are generated");
+    // In the user's coordinates: each generated frame's centroid lies near the input's (size 40, offset 100).
+    for f in 1..15 {
+        let (a, b) = (centroid(got.frame(f)), centroid(source.frame(f)));
+        let d = (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>().sqrt();
+        assert!(d < 40.0, "frame {f}: centroid {a:?} vs {b:?}");
+    }
+
+    // Two samples: sample 0 is the single sample of the same seed, sample 1 differs.
+    let many = dir.path().join("many.glb");
+    let m = s(&many);
+    let mut args = base.to_vec();
+    args.pop();
+    args.extend([&m, "--samples", "2"]);
+    let (ok, log) = run(&args);
+    assert!(ok, "{log}");
+    let s0 = read_clip(&dir.path().join("many_s0.glb")).unwrap();
+    let s1 = read_clip(&dir.path().join("many_s1.glb")).unwrap();
+    assert_eq!(s0.vertices, got.vertices, "sample 0 = the single sample of seed 42");
+    assert_ne!(s1.vertices, s0.vertices, "sample 1 has its own noise");
+}
+
+#[test]
+fn complete_from_separate_meshes_and_extend_past_one_window() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = user_clip(31);
+    // Keyframe meshes as single OBJ files (the first file of a written two-frame OBJ folder each).
+    let key = |f: usize| -> PathBuf {
+        let one = Clip::new(
+            format!("k{f}"),
+            clip.frame(f).repeat(2),
+            2,
+            clip.n_vertices,
+            clip.faces.clone(),
+            "",
+            "test",
+        )
+        .unwrap();
+        let folder = dir.path().join(format!("k{f}"));
+        write_clip(&folder, &one).unwrap();
+        let file = std::fs::read_dir(&folder)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.extension().is_some_and(|e| e == "obj"))
+            .unwrap();
+        let named = dir.path().join(format!("key{f}.obj"));
+        std::fs::copy(file, &named).unwrap();
+        named
+    };
+    let (k0, k15, k30) = (key(0), key(15), key(30));
+    let rf = shipped_rf();
+    let out = dir.path().join("long.bin");
+    let keys = [
+        format!("0={}", s(&k0)),
+        format!("15={}", s(&k15)),
+        format!("30={}", s(&k30)),
+    ];
+    let o = s(&out);
+    let (ok, log) = run(&[
+        "extend",
+        "--key",
+        &keys[0],
+        "--key",
+        &keys[1],
+        "--key",
+        &keys[2],
+        "--frames",
+        "31",
+        "--caption",
+        "",
+        "--rf",
+        &rf,
+        "--steps",
+        "8",
+        "--out",
+        &o,
+    ]);
+    assert!(ok, "{log}");
+    let got = read_clip(&out).unwrap();
+    let reference = read_clip(&dir.path().join("k0")).unwrap();
+    assert_eq!((got.frames, got.n_vertices), (31, clip.n_vertices));
+    for (f, k) in [(0, "k0"), (15, "k15"), (30, "k30")] {
+        let given = read_clip(&dir.path().join(k)).unwrap();
+        assert_eq!(got.frame(f), given.frame(0), "keyframe {f} is the given mesh");
+    }
+    assert_ne!(got.frame(20), reference.frame(0));
+
+    // `extend` without a length, a key set without frame 0, and a mesh of another topology are refused clearly.
+    let (ok, log) = run(&["extend", "--key", &keys[0], "--key", &keys[1], "--rf", &rf, "--out", &o]);
+    assert!(!ok && log.contains("--frames"), "{log}");
+    let (ok, log) = run(&[
+        "complete", "--key", &keys[1], "--key", &keys[2], "--rf", &rf, "--out", &o,
+    ]);
+    assert!(!ok && log.contains("frame 0 must be given"), "{log}");
+    let other = dir.path().join("other.obj");
+    std::fs::write(&other, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let bad = format!("15={}", s(&other));
+    let (ok, log) = run(&["complete", "--key", &keys[0], "--key", &bad, "--rf", &rf, "--out", &o]);
+    assert!(!ok && log.contains("other.obj") && log.contains("topology"), "{log}");
+}
+
+#[test]
+fn bad_requests_name_what_is_wrong() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("clip.glb");
+    write_clip(&input, &user_clip(16)).unwrap();
+    let (rf, inp) = (shipped_rf(), s(&input));
+    let o = s(&dir.path().join("o.glb"));
+    for (args, needle) in [
+        (vec!["--keyframes", "0,16"], "frame 16 is outside"),
+        (vec!["--keyframes", "0,7,7"], "given twice"),
+        (vec!["--keyframes", "0,15", "--frames", "8"], "at least"),
+        (vec!["--keyframes", "0,15", "--samples", "0"], "at least one sample"),
+    ] {
+        let mut all = vec!["complete", "--clip", &inp, "--rf", &rf, "--out", &o, "--steps", "4"];
+        all.extend(args.iter().copied());
+        let (ok, log) = run(&all);
+        assert!(!ok && log.contains(needle), "{args:?}: {log}");
+    }
+    let (ok, log) = run(&["complete", "--key", "zero=a.obj", "--out", &o]);
+    assert!(!ok && log.contains("not a frame index"), "{log}");
+    let missing = s(&dir.path().join("no-such-run"));
+    let (ok, log) = run(&[
+        "complete",
+        "--clip",
+        &inp,
+        "--keyframes",
+        "0,15",
+        "--rf",
+        &missing,
+        "--out",
+        &o,
+    ]);
+    assert!(!ok && log.contains("no-such-run"), "{log}");
+    // Fewer vertices than the VAE's P = 128 tokens.
+    let tiny = dir.path().join("tiny.obj");
+    std::fs::write(&tiny, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n").unwrap();
+    let k0 = format!("0={}", s(&tiny));
+    let (ok, log) = run(&["complete", "--key", &k0, "--rf", &rf, "--out", &o]);
+    assert!(!ok && log.contains("fewer than the P = 128"), "{log}");
+}
