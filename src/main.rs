@@ -38,6 +38,8 @@ enum Command {
     Complete(Box<commands::complete::CompleteArgs>),
     /// Extend keyframes to a sequence of any length (--frames) with the windowed long-horizon rollout.
     Extend(Box<commands::complete::CompleteArgs>),
+    /// Play clips side by side in one self-contained HTML page (orbit, timeline, error colouring).
+    View(commands::view::ViewArgs),
 }
 
 /// Every error is printed once, with its chain, and gives a non-zero exit code.
@@ -51,6 +53,7 @@ fn main() -> ExitCode {
         Command::Quickstart(args) => commands::quickstart::exec(args),
         Command::Complete(args) => commands::complete::exec(*args, false),
         Command::Extend(args) => commands::complete::exec(*args, true),
+        Command::View(args) => commands::view::exec(args),
     };
     match result {
         Ok(code) => code,

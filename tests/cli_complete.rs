@@ -71,8 +71,17 @@ fn complete_a_clip_in_user_coordinates_with_exact_keyframes() {
         "--out",
         &o,
     ];
-    let (ok, log) = run(&base);
+    let view = dir.path().join("done.html");
+    let v = s(&view);
+    let mut with_view = base.to_vec();
+    with_view.extend(["--view", &v]);
+    let (ok, log) = run(&with_view);
     assert!(ok, "{log}");
+    let page = std::fs::read_to_string(&view).unwrap();
+    assert!(
+        page.contains("\"keyframes\":[0,15]") && page.contains("sample 0 (seed 42)"),
+        "the viewer page"
+    );
     let got = read_clip(&out).unwrap();
     let source = read_clip(&input).unwrap();
     assert_eq!((got.frames, got.n_vertices), (16, source.n_vertices));

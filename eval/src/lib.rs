@@ -1,4 +1,5 @@
-//! Evaluation (docs/method.md §5–§7): metrics as pure functions, baselines, the long-horizon rollout, paper tables.
+//! Evaluation (docs/method.md §5–§7): metrics as pure functions, baselines, the long-horizon rollout, paper tables,
+//! and the HTML clip viewer ([`view`]).
 
 pub mod baselines;
 pub mod bench;
@@ -10,3 +11,4 @@ pub mod protocol;
 pub mod render;
 pub mod rollout;
 pub mod tables;
+pub mod view;

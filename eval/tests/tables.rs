@@ -276,6 +276,16 @@ fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
     }
     let strips: Vec<_> = std::fs::read_dir(out.join("strips")).unwrap().collect();
     assert_eq!(strips.len(), 2 * 4, "one strip per method and K_x for the first item");
+    // One viewer page per K_x of the first item, every method beside the ground truth.
+    let mut views: Vec<String> = std::fs::read_dir(out.join("view"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    views.sort();
+    assert_eq!(views.len(), 4, "{views:?}");
+    let page = std::fs::read_to_string(out.join("view").join(&views[0])).unwrap();
+    assert_eq!(page.matches("\"label\":").count(), 3, "ground truth + 2 methods");
+    assert!(page.contains("RMSE ×100"));
     let df = ParquetReader::new(std::fs::File::open(out.join("clips.parquet")).unwrap())
         .finish()
         .unwrap();

@@ -5,8 +5,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use any4d_data::formats;
+use any4d_eval::view::{DEFAULT_FPS, Page, Panel, write_page};
 use any4d_train::backend::{self, Backend, Precision};
-use any4d_train::complete::{CompleteOptions, KeyMeshes, complete, sample_path};
+use any4d_train::complete::{CompleteOptions, KeyMeshes, SAMPLE_SEED_STRIDE, complete, sample_path};
 use any4d_train::evaluate::{SamplingSetup, keyframe_method};
 use anyhow::{Context, bail};
 use clap::Args;
@@ -52,6 +53,9 @@ pub struct CompleteArgs {
     /// Output: `.glb`, `.gltf`, `.bin`, `.anime` or a folder of OBJ frames (no extension), chosen by the path.
     #[arg(long)]
     pub out: PathBuf,
+    /// Also write a viewer page (HTML, self-contained) playing every sample with the keyframes marked.
+    #[arg(long)]
+    pub view: Option<PathBuf>,
     /// Compute backend.
     #[arg(long, value_parser = enum_parser(&Backend::ALL), default_value = "flex")]
     pub backend: Backend,
@@ -121,6 +125,27 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
         let path = sample_path(&args.out, k, clips.len());
         formats::write_clip(&path, clip).with_context(|| format!("writing sample {k}"))?;
         println!("wrote {}", path.display());
+    }
+    if let Some(view) = &args.view {
+        let panels = clips
+            .iter()
+            .enumerate()
+            .map(|(k, clip)| Panel {
+                label: format!("sample {k} (seed {})", args.seed + k as u64 * SAMPLE_SEED_STRIDE),
+                clip: clip.clone(),
+                metrics: Vec::new(),
+            })
+            .collect();
+        let page = Page {
+            title: format!("{} — completed by {}", keys.id, model.checkpoint),
+            caption,
+            keyframes: keys.frames(),
+            ground_truth: false,
+            panels,
+            fps: DEFAULT_FPS,
+        };
+        write_page(&page, view)?;
+        println!("wrote {}", view.display());
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -13,6 +13,7 @@ pub mod eval;
 pub mod model;
 pub mod quickstart;
 pub mod train;
+pub mod view;
 
 /// A clap parser for a library enum with `Display` + `FromStr` (so the libraries need no clap): `--help` lists
 /// `all`, and the value is parsed by the enum itself.

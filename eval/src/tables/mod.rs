@@ -18,6 +18,7 @@ use crate::plot::{Series, line_plot};
 use crate::protocol::{EvalSplit, MANIFEST_SEED, Manifest, ManifestOptions, StoreSource, noise_seed, write_atomic};
 use crate::render::{ExportFormat, StripOptions, export_sequence, write_strip};
 use crate::rollout::{OverlapSource, RolloutSpec};
+use crate::view;
 
 pub mod long_horizon;
 pub mod reconstruction;
@@ -351,6 +352,61 @@ fn write_item_outputs(gt: &Clip, preds: &[&Prediction], out: &Path) -> Result<Ve
             &stem,
             &ExportFormat::ALL,
         )?);
+    }
+    files.extend(write_item_views(gt, preds, out)?);
+    Ok(files)
+}
+
+/// One viewer page (`view/item<i>_k<K_x>_seed<s>.html`) per keyframe set and seed of an item: the ground truth and
+/// every method's prediction side by side, coloured by their distance to it, with their scores.
+fn write_item_views(gt: &Clip, preds: &[&Prediction], out: &Path) -> Result<Vec<PathBuf>> {
+    let mut groups: Vec<(&[usize], u64, Vec<&Prediction>)> = Vec::new();
+    for p in preds {
+        match groups
+            .iter_mut()
+            .find(|(k, s, _)| *k == p.keyframes.as_slice() && *s == p.seed)
+        {
+            Some(g) => g.2.push(p),
+            None => groups.push((p.keyframes.as_slice(), p.seed, vec![p])),
+        }
+    }
+    let mut files = Vec::new();
+    for (keyframes, seed, group) in groups {
+        let mut panels = vec![view::Panel {
+            label: "ground truth".into(),
+            clip: gt.clone(),
+            metrics: Vec::new(),
+        }];
+        for p in &group {
+            let clip = Clip {
+                vertices: p.vertices.clone(),
+                ..gt.clone()
+            };
+            let scored = crate::metrics::Motion::from_clip(&clip).and_then(|pred| {
+                crate::metrics::evaluate_clip(pred, crate::metrics::Motion::from_clip(gt)?, keyframes)
+            });
+            let m = scored.map_err(|e| DataError::new(&gt.id, "view metrics", e.to_string()))?;
+            panels.push(view::Panel {
+                label: p.method.clone(),
+                clip,
+                metrics: view::metric_lines(&m),
+            });
+        }
+        let k_extra = keyframes.len().saturating_sub(2);
+        let item = group[0].item;
+        let page = view::Page {
+            title: format!("{} — item {item}, K_x = {k_extra}, seed {seed}", gt.id),
+            caption: gt.caption.clone(),
+            keyframes: keyframes.to_vec(),
+            ground_truth: true,
+            panels,
+            fps: view::DEFAULT_FPS,
+        };
+        let path = out
+            .join("view")
+            .join(format!("item{item:03}_k{k_extra}_seed{seed}.html"));
+        view::write_page(&page, &path)?;
+        files.push(path);
     }
     Ok(files)
 }
