@@ -41,6 +41,18 @@ fn run(args: &[&str]) -> (bool, String) {
     (out.status.success(), format!("{stdout}\n{stderr}"))
 }
 
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &to.join(e.file_name()));
+        } else {
+            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+        }
+    }
+}
+
 fn s(p: &Path) -> String {
     p.display().to_string()
 }
@@ -226,10 +238,97 @@ fn bad_requests_name_what_is_wrong() {
         &o,
     ]);
     assert!(!ok && log.contains("no-such-run"), "{log}");
+    // Nothing to complete, a key past the requested length, an output that exists.
+    let (ok, log) = run(&["complete", "--rf", &rf, "--out", &o]);
+    assert!(!ok && log.contains("give the keyframes"), "{log}");
+    let (k0, k20) = (format!("0={inp}"), format!("20={inp}"));
+    let (ok, log) = run(&[
+        "complete", "--key", &k0, "--key", &k20, "--frames", "16", "--rf", &rf, "--out", &o,
+    ]);
+    assert!(!ok && log.contains("frame 20 is outside the 16 frames"), "{log}");
+    let (ok, log) = run(&[
+        "complete",
+        "--clip",
+        &inp,
+        "--keyframes",
+        "0,15",
+        "--rf",
+        &rf,
+        "--out",
+        &inp,
+    ]);
+    assert!(!ok && log.contains("exists") && log.contains("--force"), "{log}");
+    // An RF whose recorded VAE checkpoint is not the VAE run's: its latents would not match.
+    let copy = dir.path().join("rf-copy");
+    copy_dir(Path::new(&rf), &copy);
+    let vae = Path::new(&rf).join("../vae").canonicalize().unwrap();
+    std::fs::write(
+        copy.join("vae_run.json"),
+        format!("{{\"run\": {:?}, \"step\": 999}}", vae.display().to_string()),
+    )
+    .unwrap();
+    let c = s(&copy);
+    let (ok, log) = run(&[
+        "complete",
+        "--clip",
+        &inp,
+        "--keyframes",
+        "0,15",
+        "--rf",
+        &c,
+        "--out",
+        &o,
+    ]);
+    assert!(
+        !ok && log.contains("step 999") && log.contains("latents changed"),
+        "{log}"
+    );
     // Fewer vertices than the VAE's P = 128 tokens.
     let tiny = dir.path().join("tiny.obj");
     std::fs::write(&tiny, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n").unwrap();
     let k0 = format!("0={}", s(&tiny));
     let (ok, log) = run(&["complete", "--key", &k0, "--rf", &rf, "--out", &o]);
     assert!(!ok && log.contains("fewer than the P = 128"), "{log}");
+}
+
+#[test]
+fn the_readme_example_completes_the_shipped_poses() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let (start, end) = (
+        root.join("examples/twist/start.obj"),
+        root.join("examples/twist/end.obj"),
+    );
+    let (out, view) = (dir.path().join("twist.glb"), dir.path().join("twist.html"));
+    let (k0, k15) = (format!("0={}", s(&start)), format!("15={}", s(&end)));
+    let (o, v, rf) = (s(&out), s(&view), shipped_rf());
+    let caption = "a small lumpy blob twisting slowly counterclockwise";
+    let (ok, log) = run(&[
+        "complete",
+        "--key",
+        &k0,
+        "--key",
+        &k15,
+        "--caption",
+        caption,
+        "--out",
+        &o,
+        "--view",
+        &v,
+        "--rf",
+        &rf,
+        "--steps",
+        "8",
+    ]);
+    assert!(ok, "{log}");
+    let got = read_clip(&out).unwrap();
+    assert_eq!(got.frames, 16);
+    assert!(view.is_file());
+    let given = std::fs::read_to_string(&start).unwrap();
+    let first_vertex = given.lines().find(|l| l.starts_with("v ")).unwrap();
+    let xyz: Vec<f32> = first_vertex[2..]
+        .split_whitespace()
+        .map(|x| x.parse().unwrap())
+        .collect();
+    assert_eq!(got.frame(0)[0].to_vec(), xyz, "frame 0 is start.obj");
 }

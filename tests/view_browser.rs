@@ -1,5 +1,6 @@
 //! `any4d view` in a real browser: the page written for a ground truth and a prediction opens in headless Chromium
-//! (Debian's `chromium`), reports `data-status="ready"` (every panel drew with WebGL, no script error), and its
+//! (Debian's `chromium`), reports `data-status="ready"` (every panel drew with WebGL, no script error), passes its
+//! `#selftest` (the slider moves the frame, and two frames of the moving clip draw different pixels), and its
 //! screenshot shows the meshes (non-white pixels inside the panels, coloured ones where the prediction is off).
 //!
 //! Without Chromium the test says so and passes, unless `ANY4D_REQUIRE_BROWSER=1` (set by `.ci/run`, which installs
@@ -91,7 +92,7 @@ fn the_view_page_plays_in_headless_chromium() {
     let url = format!("file://{}", page.display());
     let dom = browser(&exe, &dir.path().join("profile-a"))
         .arg("--dump-dom")
-        .arg(&url)
+        .arg(format!("{url}#selftest"))
         .output()
         .unwrap();
     let dom_text = String::from_utf8_lossy(&dom.stdout);
@@ -100,6 +101,11 @@ fn the_view_page_plays_in_headless_chromium() {
         "page not ready: {}\nstderr: {}",
         dom_text.lines().find(|l| l.contains("<body")).unwrap_or("(no body)"),
         String::from_utf8_lossy(&dom.stderr)
+    );
+    let body = dom_text.lines().find(|l| l.contains("<body")).unwrap_or("(no body)");
+    assert!(
+        body.contains("data-selftest=\"pass\""),
+        "the slider must move the frame and the pixels: {body}"
     );
     assert!(dom_text.contains("RMSE ×100"), "metrics shown");
     assert_eq!(dom_text.matches("class=\"mark\"").count(), 3, "three keyframe marks");

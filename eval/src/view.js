@@ -194,4 +194,21 @@
   show(0);
   setStatus("ready");
   requestAnimationFrame(tick);
+
+  // `#selftest` (the browser test): with playback paused, moving the slider must change the frame and the pixels.
+  if (location.hash === "#selftest") {
+    playing = false;
+    const canvas = panels[panels.length - 1].canvas;
+    show(0);
+    const before = canvas.toDataURL();
+    const target = Math.floor((data.frames - 1) / 2) || 1;
+    slider.value = String(target);
+    slider.dispatchEvent(new Event("input"));
+    const after = canvas.toDataURL();
+    const problems = [];
+    if (frame !== target) problems.push("the slider left the frame at " + frame);
+    if (!label.textContent.startsWith("frame " + target + " ")) problems.push("label says " + label.textContent);
+    if (before === after) problems.push("frames 0 and " + target + " render the same pixels");
+    body.dataset.selftest = problems.length ? "fail: " + problems.join("; ") : "pass";
+  }
 })();

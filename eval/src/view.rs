@@ -5,6 +5,8 @@
 //!
 //! The page reports its state on `<body data-status=…>`: `loading`, then `ready` once every panel has drawn a frame,
 //! `no-webgl` when the browser has no WebGL, or `error: …` (a script error); tests read it in headless Chromium.
+//! Opened as `page.html#selftest`, the page also pauses, moves its slider to the middle frame and sets
+//! `data-selftest` to `pass` when the frame, its label and the drawn pixels all changed (else `fail: …`).
 
 use std::path::Path;
 

@@ -53,6 +53,9 @@ pub struct CompleteArgs {
     /// Output: `.glb`, `.gltf`, `.bin`, `.anime` or a folder of OBJ frames (no extension), chosen by the path.
     #[arg(long)]
     pub out: PathBuf,
+    /// Overwrite outputs that exist (refused otherwise).
+    #[arg(long)]
+    pub force: bool,
     /// Also write a viewer page (HTML, self-contained) playing every sample with the keyframes marked.
     #[arg(long)]
     pub view: Option<PathBuf>,
@@ -85,6 +88,15 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
     };
     if extend && args.frames.is_none() {
         bail!("`extend` needs the length of the output: --frames N (e.g. 31 or 91)");
+    }
+    let outputs: Vec<PathBuf> = (0..args.samples)
+        .map(|k| sample_path(&args.out, k, args.samples))
+        .chain(args.view.clone())
+        .collect();
+    if !args.force
+        && let Some(existing) = outputs.iter().find(|p| p.exists())
+    {
+        bail!("{} exists; pass --force to overwrite it", existing.display());
     }
     if !args.rf.exists() {
         bail!(
