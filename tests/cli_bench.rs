@@ -1,4 +1,4 @@
-//! `any4d bench train` run as a user would: the built binary, its exit code and its output.
+//! `any4d bench train` and `any4d bench complete` run as a user would: the built binary, its exit code and its output.
 
 use std::path::{Path, PathBuf};
 
@@ -122,4 +122,26 @@ fn broken_configs_and_arguments_give_clear_errors() {
         &["bench", "train", "--config", p(&vae), "--steps", "2"],
         &["--data STORE"],
     );
+}
+
+#[test]
+fn complete_benchmark_prints_one_row_per_vertex_count() {
+    let rf = preset("weights/small/rf");
+    let out = any4d(&[
+        "bench",
+        "complete",
+        "--rf",
+        p(&rf),
+        "--vertices",
+        "300,600",
+        "--reps",
+        "1",
+        "--steps",
+        "2",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stdout.contains("| 300 |") && stdout.contains("| 600 |"), "{stdout}");
+    let out = any4d(&["bench", "complete", "--rf", p(&rf), "--reps", "0"]);
+    assert!(!out.status.success() && text(&out).1.contains("--reps"));
 }

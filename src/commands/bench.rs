@@ -16,6 +16,8 @@ pub enum BenchCmd {
     Train(super::train::BenchArgs),
     /// Metric throughput against the numpy/scipy reference.
     Metrics(super::eval::BenchArgs),
+    /// Wall time of `any4d complete` for one 16-frame clip per vertex count (median over repetitions).
+    Complete(super::complete::BenchArgs),
 }
 
 pub fn exec(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
@@ -24,5 +26,6 @@ pub fn exec(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
         BenchCmd::Model(args) => super::model::bench(args),
         BenchCmd::Train(args) => super::train::bench(args),
         BenchCmd::Metrics(args) => super::eval::bench(args),
+        BenchCmd::Complete(args) => super::complete::bench(args),
     }
 }

@@ -161,3 +161,71 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
     }
     Ok(ExitCode::SUCCESS)
 }
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// The keyframe RF run (default: the shipped small model).
+    #[arg(long, default_value = SHIPPED_RF)]
+    pub rf: PathBuf,
+    /// Vertex counts of the completed meshes.
+    #[arg(long, value_delimiter = ',', default_values = ["512", "1024", "2048", "4096"])]
+    pub vertices: Vec<usize>,
+    /// Timed repetitions per size (after one warm-up); the median is reported.
+    #[arg(long, default_value_t = 5)]
+    pub reps: usize,
+    /// Grid points of the ODE solver (64 in the paper).
+    #[arg(long, default_value_t = SamplingSetup::default().n_grid)]
+    pub steps: usize,
+    /// Compute backend.
+    #[arg(long, value_parser = enum_parser(&Backend::ALL), default_value = "flex")]
+    pub backend: Backend,
+}
+
+/// `any4d bench complete`: wall time of `complete` for one 16-frame clip (two keyframes) per vertex count, the model
+/// loaded once (its load time printed apart).
+pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
+    if args.reps == 0 {
+        bail!("--reps must be at least 1");
+    }
+    let device = backend::device(args.backend, Precision::F32)?;
+    let sampling = SamplingSetup {
+        n_grid: args.steps,
+        ..SamplingSetup::default()
+    };
+    let t0 = std::time::Instant::now();
+    let model = keyframe_method(&args.rf, sampling, &device)
+        .with_context(|| format!("loading the keyframe RF run {}", args.rf.display()))?;
+    println!(
+        "model {} loaded in {:.2} s; {}-point midpoint grid, {} threads",
+        model.checkpoint,
+        t0.elapsed().as_secs_f64(),
+        args.steps,
+        rayon::current_num_threads()
+    );
+    println!("| vertices | median s | min s | max s |\n|---|---|---|---|");
+    for &n in &args.vertices {
+        let keys = any4d_train::complete::benchmark_keys(n, model.window - 1)?;
+        let opts = CompleteOptions {
+            frames: model.window,
+            caption: String::new(),
+            seed: 42,
+            samples: 1,
+        };
+        let mut times = Vec::with_capacity(args.reps);
+        for rep in 0..=args.reps {
+            let t = std::time::Instant::now();
+            complete(&keys, model.method.as_ref(), model.window, model.tokens, &opts)?;
+            if rep > 0 {
+                times.push(t.elapsed().as_secs_f64());
+            }
+        }
+        times.sort_by(f64::total_cmp);
+        println!(
+            "| {n} | {:.3} | {:.3} | {:.3} |",
+            times[times.len() / 2],
+            times[0],
+            times[times.len() - 1]
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

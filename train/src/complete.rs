@@ -321,3 +321,56 @@ pub fn sample_path(out: &Path, k: usize, samples: usize) -> PathBuf {
     };
     out.with_file_name(name)
 }
+
+/// A benchmark input of exactly `n` vertices (n ≥ 3): points on a unit sphere (Fibonacci lattice) joined by a
+/// triangle strip, at frame 0 and, rotated by 90° about the vertical axis, at frame `last`.
+pub fn benchmark_keys(n: usize, last: usize) -> Result<KeyMeshes> {
+    if n < 3 {
+        return Err(bad(
+            "benchmark",
+            "vertices",
+            format!("{n} vertices: a mesh needs at least 3"),
+        ));
+    }
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    let sphere: Vec<[f32; 3]> = (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let r = (1.0 - y * y).max(0.0).sqrt();
+            let a = golden * i as f32;
+            [r * a.cos(), y, r * a.sin()]
+        })
+        .collect();
+    let turned = sphere.iter().map(|p| [p[2], p[1], -p[0]]).collect();
+    let faces = (0..n as u32 - 2).map(|i| [i, i + 1, i + 2]).collect();
+    KeyMeshes::checked(
+        Path::new("benchmark"),
+        format!("sphere{n}"),
+        n,
+        faces,
+        vec![(0, sphere), (last, turned)],
+        None,
+        None,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn benchmark_meshes_have_the_asked_size_and_two_keyframes() {
+        let k = benchmark_keys(512, 15).unwrap();
+        assert_eq!((k.n_vertices, k.frames()), (512, vec![0, 15]));
+        assert!(k.keys.iter().all(|(_, m)| m.len() == 512));
+        assert_ne!(k.keys[0].1, k.keys[1].1, "the second keyframe is turned");
+        assert!(benchmark_keys(2, 15).is_err());
+    }
+
+    #[test]
+    fn sample_paths_number_several_samples() {
+        assert_eq!(sample_path(Path::new("a/b.glb"), 0, 1), Path::new("a/b.glb"));
+        assert_eq!(sample_path(Path::new("a/b.glb"), 1, 2), Path::new("a/b_s1.glb"));
+        assert_eq!(sample_path(Path::new("a/objs"), 0, 3), Path::new("a/objs_s0"));
+    }
+}
