@@ -139,6 +139,15 @@ impl MmditConfig {
         b * 40 * w * w + io + time
     }
 
+    /// A rough count of the bytes one training micro-batch keeps for the backward pass (f32), computed without
+    /// allocating: per block and token about 16 W values (norms, qkv, attention output, projections, the 4W MLP
+    /// twice, residuals) and per block and clip two `heads × S × S` attention maps, S = `tokens + text_len`.
+    pub fn activation_bytes(&self, micro_batch: usize, tokens: usize, text_len: usize) -> u128 {
+        let (b, s) = (micro_batch as u128, (tokens + text_len) as u128);
+        let per_block = b * (16 * self.width as u128 * s + 2 * self.heads as u128 * s * s);
+        4 * self.blocks as u128 * per_block
+    }
+
     /// Builds the network: AAM initialisation (N(0, (0.25/√W)²) for attention, MLP and time MLP, PyTorch-default
     /// adaLN and input projections, zero-initialised output projection).
     ///
@@ -597,6 +606,22 @@ impl Mmdit {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn activation_estimate_grows_with_batch_width_and_tokens() {
+        let cfg = MmditConfig {
+            width: 128,
+            blocks: 4,
+            heads: 4,
+            ..MmditConfig::paper(KeyframeConditioning::InputMask, 128)
+        };
+        let one = cfg.activation_bytes(1, 128, 16);
+        // 4 blocks × (16·128·144 + 2·4·144²) f32 values.
+        assert_eq!(one, 4 * 4 * (16 * 128 * 144 + 2 * 4 * 144 * 144));
+        assert_eq!(cfg.activation_bytes(32, 128, 16), 32 * one);
+        assert!(cfg.activation_bytes(1, 512, 16) > 4 * one);
+    }
+
     use super::*;
     use crate::summary::named_params;
 

@@ -20,6 +20,29 @@ pub fn check_param_estimate(what: &str, estimate: u128) -> Result<(), String> {
     Ok(())
 }
 
+/// Memory of this machine in bytes (`MemTotal` of `/proc/meminfo`), `None` where it cannot be read.
+pub fn host_memory_bytes() -> Option<u128> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kib: u128 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// The error of a micro-batch whose activation estimate exceeds `limit` bytes (the host's memory for CPU
+/// backends): the estimate, the limit and the remedy.
+pub fn check_activation_estimate(what: &str, estimate: u128, limit: u128) -> Result<(), String> {
+    if estimate > limit {
+        let gib = |b: u128| b as f64 / (1u128 << 30) as f64;
+        return Err(format!(
+            "{what} keeps about {:.1} GiB of activations for the backward pass, more than the {:.1} GiB available: \
+             lower train.micro_batch (gradient accumulation keeps train.batch_size)",
+            gib(estimate),
+            gib(limit)
+        ));
+    }
+    Ok(())
+}
+
 pub const TOTAL: &str = "total";
 
 /// One float parameter: the names of the modules and fields leading to it (`["blocks", "0", "qkv", "weight"]`)

@@ -654,3 +654,22 @@ fn tiny_rf_trains_and_resumes_over_two_cpu_devices() {
     let again = resume_rf(run.root(), None, &opts).expect("resume over two devices");
     assert!(matches!(again, Outcome::Finished { steps: 3, .. }), "{again:?}");
 }
+
+#[test]
+fn a_micro_batch_too_large_for_memory_is_refused_before_a_run_starts() {
+    let _g = serial();
+    let mut cfg = tiny_rf(1);
+    // 2^20 clips per micro-batch: terabytes of activations at any width.
+    cfg.train.batch_size = 1 << 20;
+    cfg.train.micro_batch = 1 << 20;
+    let opts = rf_opts("huge");
+    let err = train_rf(&cfg, &opts).err().expect("refused").to_string();
+    assert!(
+        err.contains("GiB of activations") && err.contains("train.micro_batch"),
+        "{err}"
+    );
+    assert!(
+        !fixture().dir.join("runs").join("huge-1").exists(),
+        "no run folder is claimed"
+    );
+}

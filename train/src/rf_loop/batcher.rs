@@ -350,6 +350,9 @@ pub(super) fn open_store(data: &Path) -> Result<Store> {
 }
 
 /// docs/method.md §4.1: the RF slots must match the VAE latents and the store windows.
+/// Activation bound where the device's memory is not known (GPU backends): 1 TiB, beyond any single device.
+pub const MAX_ACTIVATION_BYTES: u128 = 1 << 40;
+
 pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
     vae.frame_vae()?;
     if vae.tokens() > store.p() {
@@ -370,6 +373,24 @@ pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae
             vae.run.display()
         )));
     }
+    // Refused before the first batch is built: a micro-batch whose activations cannot fit this machine.
+    let estimate = cfg
+        .model
+        .activation_bytes(cfg.train.micro_batch, vae.tokens(), cfg.text.max_len);
+    let host = match cfg.device.backend {
+        crate::backend::Backend::Flex | crate::backend::Backend::Ndarray => any4d_model::summary::host_memory_bytes(),
+        _ => None,
+    };
+    let what = format!(
+        "a micro-batch of {} clips × ({} tokens + {} caption tokens) at model.width {} × {} blocks",
+        cfg.train.micro_batch,
+        vae.tokens(),
+        cfg.text.max_len,
+        cfg.model.width,
+        cfg.model.blocks
+    );
+    any4d_model::summary::check_activation_estimate(&what, estimate, host.unwrap_or(MAX_ACTIVATION_BYTES))
+        .map_err(TrainError::Setup)?;
     if cfg.model.frames != store.frames() {
         return Err(TrainError::Setup(format!(
             "model.frames = {} but the store {} holds {}-frame clips: set model.frames = {}",
