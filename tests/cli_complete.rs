@@ -216,7 +216,11 @@ fn bad_requests_name_what_is_wrong() {
         (vec!["--keyframes", "0,16"], "frame 16 is outside"),
         (vec!["--keyframes", "0,7,7"], "given twice"),
         (vec!["--keyframes", "0,15", "--frames", "8"], "at least"),
-        (vec!["--keyframes", "0,15", "--samples", "0"], "at least one sample"),
+        (vec!["--keyframes", "0,15", "--samples", "0"], "--samples 0 is outside"),
+        (
+            vec!["--keyframes", "0,15", "--samples", "1000000000000"],
+            "outside 1..=1000",
+        ),
     ] {
         let mut all = vec!["complete", "--clip", &inp, "--rf", &rf, "--out", &o, "--steps", "4"];
         all.extend(args.iter().copied());

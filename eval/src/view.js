@@ -47,7 +47,7 @@
   const VS = "attribute vec3 p; attribute vec3 nrm; attribute float err; uniform mat4 mvp; uniform float scale;" +
     "varying vec3 vn; varying float ve; void main(){ gl_Position = mvp * vec4(p, 1.0); vn = nrm; ve = err / scale; }";
   const FS = "precision mediump float; varying vec3 vn; varying float ve; uniform float colored; uniform vec3 light;" +
-    "void main(){ float l = 0.35 + 0.65 * abs(dot(normalize(vn), light));" +
+    "void main(){ float l = length(vn) > 0.0 ? 0.35 + 0.65 * abs(dot(normalize(vn), light)) : 0.7;" +
     " float t = clamp(ve, 0.0, 1.0); vec3 heat = mix(mix(vec3(0.2,0.4,0.9), vec3(0.95,0.85,0.2), min(t*2.0,1.0))," +
     " vec3(0.85,0.1,0.1), max(t*2.0-1.0,0.0)); vec3 c = mix(vec3(0.72,0.74,0.78), heat, colored);" +
     " gl_FragColor = vec4(c * l, 1.0); }";
@@ -177,7 +177,7 @@
   // Orbit: drag on any panel rotates every panel; the wheel zooms.
   let drag = null;
   for (const p of panels) {
-    p.canvas.addEventListener("mousedown", (e) => { drag = [e.clientX, e.clientY]; });
+    p.canvas.addEventListener("mousedown", (e) => { e.preventDefault(); drag = [e.clientX, e.clientY]; });
     p.canvas.addEventListener("wheel", (e) => {
       e.preventDefault(); cam.dist *= Math.exp(e.deltaY * 0.001); draw(frame);
     }, { passive: false });

@@ -14,6 +14,9 @@ use clap::Args;
 
 use super::enum_parser;
 
+/// Most samples one call writes (each is a file; more is a loop in a script).
+pub const MAX_SAMPLES: usize = 1000;
+
 /// The shipped small keyframe RF, used when `--rf` is not given (run from the repository root).
 pub const SHIPPED_RF: &str = "weights/small/rf";
 
@@ -86,6 +89,9 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
         (None, true) => bail!("give the keyframes: --clip FILE --keyframes 0,…  or  --key 0=FILE --key F=FILE …"),
         (Some(_), false) => bail!("give either --clip with --keyframes or --key, not both"),
     };
+    if !(1..=MAX_SAMPLES).contains(&args.samples) {
+        bail!("--samples {} is outside 1..={MAX_SAMPLES}", args.samples);
+    }
     if extend && args.frames.is_none() {
         bail!("`extend` needs the length of the output: --frames N (e.g. 31 or 91)");
     }
@@ -143,7 +149,10 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
             .iter()
             .enumerate()
             .map(|(k, clip)| Panel {
-                label: format!("sample {k} (seed {})", args.seed + k as u64 * SAMPLE_SEED_STRIDE),
+                label: format!(
+                    "sample {k} (seed {})",
+                    args.seed.wrapping_add(k as u64 * SAMPLE_SEED_STRIDE)
+                ),
                 clip: clip.clone(),
                 metrics: Vec::new(),
             })

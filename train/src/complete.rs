@@ -225,7 +225,10 @@ pub fn complete(
     if let Some(&(f, _)) = keys.keys.iter().find(|(f, _)| *f >= opts.frames) {
         return setup(
             "keyframes",
-            format!("frame {f} is outside the {} frames asked for", opts.frames),
+            format!(
+                "frame {f} is outside the {} frames asked for (ask for more with --frames N, or `any4d extend`)",
+                opts.frames
+            ),
         );
     }
     if n < tokens {
@@ -277,7 +280,7 @@ pub fn complete(
     };
     let key_frames = keys.frames();
     let captions = [opts.caption.clone()];
-    let mut out = Vec::with_capacity(opts.samples);
+    let mut out = Vec::with_capacity(opts.samples.min(64));
     for k in 0..opts.samples {
         let seed = opts.seed.wrapping_add(k as u64 * SAMPLE_SEED_STRIDE);
         let r = generate_windows(method, &normalised, &key_frames, &captions, seed, spec)?;

@@ -289,7 +289,8 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
         return Err(TrainError::Checkpoint {
             path: resume.unwrap_or_default(),
             reason: format!(
-                "saved with {} training examples, the data now has {len}",
+                "saved with {} training examples, the data now has {len} (an example is a whole clip, all its \
+                 windows together, docs/method.md §2.6; a run checkpointed when windows were examples cannot resume)",
                 state.order.len
             ),
         });

@@ -349,10 +349,10 @@ pub(super) fn open_store(data: &Path) -> Result<Store> {
     Ok(Store::open(data)?)
 }
 
-/// docs/method.md §4.1: the RF slots must match the VAE latents and the store windows.
 /// Activation bound where the device's memory is not known (GPU backends): 1 TiB, beyond any single device.
 pub const MAX_ACTIVATION_BYTES: u128 = 1 << 40;
 
+/// docs/method.md §4.1: the RF slots must match the VAE latents and the store windows.
 pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
     vae.frame_vae()?;
     if vae.tokens() > store.p() {
