@@ -287,6 +287,40 @@ fn bad_requests_name_what_is_wrong() {
         !ok && log.contains("step 999") && log.contains("latents changed"),
         "{log}"
     );
+    // --vae must be the VAE the RF was trained on.
+    let other_vae = s(&Path::new(&rf).join("../baseline-rf"));
+    let (ok, log) = run(&[
+        "complete",
+        "--clip",
+        &inp,
+        "--keyframes",
+        "0,15",
+        "--rf",
+        &rf,
+        "--vae",
+        &other_vae,
+        "--out",
+        &o,
+    ]);
+    assert!(!ok && log.contains("is not the VAE run the RF"), "{log}");
+    let same_vae = s(&Path::new(&rf).join("../vae"));
+    let good = s(&dir.path().join("with-vae.glb"));
+    let (ok, log) = run(&[
+        "complete",
+        "--clip",
+        &inp,
+        "--keyframes",
+        "0,15",
+        "--rf",
+        &rf,
+        "--vae",
+        &same_vae,
+        "--out",
+        &good,
+        "--steps",
+        "2",
+    ]);
+    assert!(ok, "{log}");
     // Fewer vertices than the VAE's P = 128 tokens.
     let tiny = dir.path().join("tiny.obj");
     std::fs::write(&tiny, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\n").unwrap();

@@ -38,6 +38,10 @@ pub struct CompleteArgs {
     /// The keyframe RF run (its VAE is the run it was trained on).
     #[arg(long, default_value = SHIPPED_RF)]
     pub rf: PathBuf,
+    /// The VAE run; optional, since the RF run records the VAE it was trained on, and refused when it is another
+    /// one (its latents would not be the ones the RF learned).
+    #[arg(long)]
+    pub vae: Option<PathBuf>,
     /// Frames of the output. `complete`: default the clip's frame count (`--clip`) or the model's window (`--key`).
     #[arg(long)]
     pub frames: Option<usize>,
@@ -110,6 +114,22 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
              repository root)",
             args.rf.display()
         );
+    }
+    if let Some(vae) = &args.vae {
+        let recorded = any4d_train::runs::read_vae_record(&args.rf)?.run;
+        let given = vae
+            .canonicalize()
+            .with_context(|| format!("VAE run {}", vae.display()))?;
+        let recorded = recorded.canonicalize().unwrap_or(recorded);
+        if given != recorded {
+            bail!(
+                "--vae {} is not the VAE run the RF {} was trained on ({}): its latents and statistics differ; \
+                 leave --vae out to use the recorded one",
+                vae.display(),
+                args.rf.display(),
+                recorded.display()
+            );
+        }
     }
     let device = backend::device(args.backend, Precision::F32)?;
     let sampling = SamplingSetup {
