@@ -70,7 +70,8 @@ pub fn exec(args: QuickstartArgs) -> anyhow::Result<ExitCode> {
     println!("  evaluation                {}", report.eval_dir.display());
     println!("    combined.md (this table, with the shipped models' rows; their own summary in shipped/),");
     println!("    summary.md / summary.csv (the quickstart's rows), clips.parquet (per clip), manifest.json,");
-    println!("    rmse_vs_kx.png (plot), strips/*.png (ground truth above, prediction below), predictions/");
+    println!("    rmse_vs_kx.png (plot), strips/*.png (ground truth above, prediction below), predictions/,");
+    println!("    view/*.html (open in a browser: every method beside the ground truth, playing)");
     println!("  each run folder has config.toml, log.txt, metrics.csv, loss.png and checkpoints/");
     Ok(ExitCode::SUCCESS)
 }
