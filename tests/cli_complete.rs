@@ -9,6 +9,7 @@ use any4d_data::formats::{read_clip, write_clip};
 use any4d_data::synth::{SynthConfig, generate_one};
 
 mod common;
+use common::fixtures::copy_dir;
 use common::{any4d, text};
 
 fn shipped_rf() -> String {
@@ -39,18 +40,6 @@ fn run(args: &[&str]) -> (bool, String) {
     let out = any4d(args);
     let (stdout, stderr) = text(&out);
     (out.status.success(), format!("{stdout}\n{stderr}"))
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        if e.file_type().unwrap().is_dir() {
-            copy_dir(&e.path(), &to.join(e.file_name()));
-        } else {
-            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
-        }
-    }
 }
 
 fn s(p: &Path) -> String {

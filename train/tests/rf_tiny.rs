@@ -27,7 +27,7 @@ use any4d_train::run_folder::{LOG_FILE, METRICS_FILE, RunFolder, SAMPLES_FILE, V
 use any4d_train::runs::{LoadedVae, VAE_RUN_FILE, load_rf_run, load_vae_run};
 use any4d_train::vae_loop::train_vae;
 use burn::prelude::{Device, Tensor};
-use common::{params, quiet_setup, root, serial, synth_store, tiny_vae};
+use common::{copy_dir, params, quiet_setup, root, serial, synth_store, tiny_vae};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -601,18 +601,6 @@ fn mismatched_configs_and_incomplete_runs_are_reported() {
         err.contains("vae-without-stats") && err.contains("latent_stats.json"),
         "{err}"
     );
-}
-
-fn copy_dir(from: &Path, to: &Path) {
-    std::fs::create_dir_all(to).unwrap();
-    for e in std::fs::read_dir(from).unwrap() {
-        let e = e.unwrap();
-        if e.path().is_dir() {
-            copy_dir(&e.path(), &to.join(e.file_name()));
-        } else {
-            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
-        }
-    }
 }
 
 #[test]

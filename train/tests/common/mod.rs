@@ -40,6 +40,19 @@ pub fn root() -> PathBuf {
         .to_path_buf()
 }
 
+/// Copies the folder `from` to `to`, recursively (a run folder a test then alters).
+pub fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        if e.path().is_dir() {
+            copy_dir(&e.path(), &to.join(e.file_name()));
+        } else {
+            std::fs::copy(e.path(), to.join(e.file_name())).unwrap();
+        }
+    }
+}
+
 /// Writes `dir/store`: 10 procedural clips of 4 frames and 256–512 vertices drawn with `seed`, P = 32 FPS points.
 pub fn synth_store(dir: &Path, seed: u64) -> PathBuf {
     let store = dir.join("store");
