@@ -9,6 +9,7 @@ use any4d_model::any_vae::AnyMeshVaeConfig;
 use any4d_model::bench::{BenchSizes, ModelTimings, StepTiming, time_networks};
 use any4d_model::summary::{format_report, param_report};
 use any4d_train::config::RunConfig;
+use any4d_train::pack::{Precision, pack_run};
 use anyhow::{Context, bail};
 use burn::prelude::Device;
 use clap::{Args, Subcommand, ValueEnum};
@@ -20,6 +21,27 @@ use crate::reference::{PythonReference, Skipped};
 pub enum ModelCmd {
     /// Parameter counts per submodule of the network in a run config's `[model]` table.
     Summary(SummaryArgs),
+    /// Reduce a trained run folder to what sampling needs (config, the newest checkpoint's sampling parameters,
+    /// side files; no optimiser state), optionally in half precision. The result loads with `--vae`, `--rf` and
+    /// `--baseline-rf` like the run, but cannot resume.
+    Pack(PackArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct PackArgs {
+    /// The trained run folder (VAE or RF).
+    #[arg(long)]
+    pub run: PathBuf,
+    /// The new folder to write (must not exist).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Store the parameters in half precision (half the size; loading casts back to f32).
+    #[arg(long)]
+    pub half: bool,
+    /// RF runs: the VAE folder to record in `vae_run.json` instead of the run's (relative paths are resolved
+    /// against the packed folder, e.g. `../vae` for a VAE packed beside it).
+    #[arg(long)]
+    pub vae_at: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -97,6 +119,7 @@ pub struct BenchArgs {
 pub fn exec(cmd: ModelCmd) -> anyhow::Result<ExitCode> {
     match cmd {
         ModelCmd::Summary(args) => summary(&args.config, &args.overrides),
+        ModelCmd::Pack(args) => pack(&args),
     }
 }
 
@@ -125,6 +148,22 @@ fn summary(path: &Path, overrides: &ConfigArgs) -> anyhow::Result<ExitCode> {
         },
     };
     print!("{}", format_report(&title, &rows));
+    Ok(ExitCode::SUCCESS)
+}
+
+fn pack(args: &PackArgs) -> anyhow::Result<ExitCode> {
+    let precision = if args.half { Precision::Half } else { Precision::Full };
+    let packed = pack_run(&args.run, &args.out, precision, args.vae_at.as_deref(), &Device::flex())?;
+    println!(
+        "packed {} run {} step {} ({} parameters, {}) into {} ({:.1} MB)",
+        packed.kind,
+        args.run.display(),
+        packed.step,
+        if packed.averaged { "averaged" } else { "trained" },
+        if args.half { "f16" } else { "f32" },
+        args.out.display(),
+        packed.model_bytes as f64 / 1e6
+    );
     Ok(ExitCode::SUCCESS)
 }
 

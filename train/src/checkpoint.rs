@@ -171,11 +171,15 @@ pub fn load_for_sampling<M: Module>(model: M, ckpt: &Path) -> Result<(M, bool)> 
     }
 }
 
+/// Loads a parameter file into `model`, casting each tensor to the dtype of the parameter it fills: a file stored
+/// in half precision (`any4d model pack --half`) loads into an f32 model as f32.
 fn load_file<M: Module>(model: M, p: &Path) -> Result<M> {
-    model.try_load_file(p).map_err(|e| TrainError::Checkpoint {
+    let err = |e: burn::store::RecordError| TrainError::Checkpoint {
         path: p.to_path_buf(),
         reason: e.to_string(),
-    })
+    };
+    let record = burn::store::ModuleRecord::load(p).map_err(err)?.cast_to_module_dtype();
+    model.try_load_record(record).map_err(err)
 }
 
 /// Loads model, optimiser state and [`TrainState`] of a checkpoint.

@@ -16,6 +16,7 @@ pub mod error;
 pub mod evaluate;
 pub mod loop_common;
 pub mod multi_device;
+pub mod pack;
 pub mod plot;
 pub mod progress;
 pub mod quickstart;

@@ -1,7 +1,7 @@
 //! The keyframe RF loop on a tiny frozen VAE (docs/method.md §4.5, §5.4): a short run lowers (R5), keyframe
 //! masks follow the sampler (k ≤ k_max, k = 0 drawn; no keyframes for `none`/`replace_noised`), `impute_until`
 //! trains on noisy keyframes, resume is bitwise equal to straight training (validation sampling on), `load_rf_run`
-//! round-trips, validation sampling writes seeded `samples.csv` rows at its steps for every
+//! round-trips (and so do its packed copies, full and half precision), validation sampling writes seeded `samples.csv` rows at its steps for every
 //! `conditioning` without touching the training streams, and mismatched configs or incomplete run folders give errors
 //! naming the field or file. One tiny VAE run on
 //! procedural clips is shared by all tests.
@@ -18,6 +18,7 @@ use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::Duration;
 use any4d_train::loop_common::{Objective, Outcome, RunOptions, StopFlag, train};
 use any4d_train::multi_device::{Parallel, Strategy};
+use any4d_train::pack::{Precision as PackPrecision, pack_run};
 use any4d_train::progress::ProgressMode;
 use any4d_train::rf_loop::{
     LatentCache, LatentDraw, RF_TERMS, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS, Subset, TextDropout,
@@ -208,6 +209,73 @@ fn load_rf_run_round_trips_the_trained_run() {
         .encode_text(&["a small sphere spins".into(), String::new()], &dev)
         .unwrap();
     assert_eq!(text.dims(), [2, cfg.text.max_len, cfg.model.text_dim]);
+}
+
+/// `any4d model pack`: the packed VAE and RF load where the runs do, with the recorded VAE redirected beside the RF;
+/// full precision keeps every parameter, half precision is within f16 rounding and half the size; an existing
+/// output and `--vae-at` on a VAE run are refused, leaving nothing behind.
+#[test]
+fn packed_runs_load_with_their_parameters_in_full_and_half_precision() {
+    let _g = serial();
+    let (run, _) = trained_rf();
+    let dev = inference_device();
+    let out = tempfile::tempdir().unwrap();
+    let original = load_rf_run(run, &dev).unwrap();
+    let want = params(&original.model);
+    let mut sizes = Vec::new();
+    for (precision, tol) in [(PackPrecision::Full, 0.0f32), (PackPrecision::Half, 1.0 / 1024.0)] {
+        let dir = out.path().join(format!("{precision:?}"));
+        let vae = pack_run(&fixture().vae_run, &dir.join("vae"), precision, None, &dev).unwrap();
+        assert_eq!((vae.kind, vae.averaged), ("VAE", false));
+        let rf = pack_run(run, &dir.join("rf"), precision, Some(Path::new("../vae")), &dev).unwrap();
+        assert_eq!((rf.kind, rf.step), ("RF", LOSS_STEPS));
+        sizes.push(rf.model_bytes);
+        let packed = load_rf_run(&dir.join("rf"), &dev).unwrap();
+        assert_eq!(packed.config, original.config);
+        let loaded_vae = packed.load_vae(&dev).unwrap();
+        assert_eq!(loaded_vae.run, std::fs::canonicalize(dir.join("vae")).unwrap());
+        assert_eq!(loaded_vae.stats, load_vae_run(&fixture().vae_run, &dev).unwrap().stats);
+        assert!(
+            !dir.join("rf/checkpoints")
+                .join(format!("step_{LOSS_STEPS}/optim.bpk"))
+                .exists()
+        );
+        let got = params(&packed.model);
+        assert_eq!(got.len(), want.len());
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() <= tol * w.abs().max(1e-3), "{precision:?}: {g} vs {w}");
+        }
+        if precision == PackPrecision::Full {
+            assert_eq!(got, want);
+        }
+        // Loading casts back: the network computes in f32 and agrees with the original within f16 rounding.
+        let caption = ["a small sphere spins".to_string()];
+        let text = packed.encode_text(&caption, &dev).unwrap();
+        assert_eq!(text.dtype(), burn::tensor::DType::F32);
+        let diff = (text - original.encode_text(&caption, &dev).unwrap())
+            .abs()
+            .max()
+            .into_scalar::<f32>();
+        assert!(diff <= 64.0 * tol, "{precision:?}: text states differ by {diff}");
+    }
+    assert!(sizes[1] * 10 < sizes[0] * 6, "half precision sizes {sizes:?}");
+    let existing = out.path().join("Full/rf");
+    let err = pack_run(run, &existing, PackPrecision::Full, None, &dev)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("exists"), "{err}");
+    let bad = out.path().join("vae-at");
+    let err = pack_run(
+        &fixture().vae_run,
+        &bad,
+        PackPrecision::Full,
+        Some(Path::new("x")),
+        &dev,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("RF runs only"), "{err}");
+    assert!(!bad.exists());
 }
 
 #[test]
