@@ -13,6 +13,26 @@ mod reference;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    #[command(flatten)]
+    limits: LimitArgs,
+}
+
+/// Size limits of the readers and generators, raised for unusually large real data (any4d_data::limits; each has a
+/// hard ceiling). Given before or after the subcommand.
+#[derive(clap::Args, Debug)]
+struct LimitArgs {
+    /// Most frames per clip (default 10000).
+    #[arg(long, global = true, value_name = "N")]
+    max_frames: Option<u64>,
+    /// Most vertex rows (frames × vertices) per clip (default 2^26).
+    #[arg(long, global = true, value_name = "N")]
+    max_clip_vertices: Option<u64>,
+    /// Most bytes read from one input file (default 4 GiB).
+    #[arg(long, global = true, value_name = "BYTES")]
+    max_file_bytes: Option<u64>,
+    /// Most bytes of one glTF buffer (default 1 GiB).
+    #[arg(long, global = true, value_name = "BYTES")]
+    max_buffer_bytes: Option<u64>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -44,7 +64,15 @@ enum Command {
 
 /// Every error is printed once, with its chain, and gives a non-zero exit code.
 fn main() -> ExitCode {
-    let result = match Cli::parse().command {
+    let cli = Cli::parse();
+    let l = &cli.limits;
+    if let Err(e) =
+        any4d_data::limits::set_from_cli(l.max_frames, l.max_clip_vertices, l.max_file_bytes, l.max_buffer_bytes)
+    {
+        eprintln!("error: {e}");
+        return ExitCode::FAILURE;
+    }
+    let result = match cli.command {
         Command::Data(cmd) => commands::data::exec(cmd),
         Command::Model(cmd) => commands::model::exec(cmd),
         Command::Train(cmd) => commands::train::exec(cmd),

@@ -206,3 +206,63 @@ fn bench_data_reports_throughput() {
         );
     }
 }
+
+/// The size limits a user with large real data may raise (`--max-frames`, `--max-clip-vertices`,
+/// `--max-file-bytes`, `--max-buffer-bytes`): an input over a limit is refused with the flag that raises it, the flag
+/// moves the limit (either way), and values outside `1..=ceiling` are refused before anything runs.
+#[test]
+fn size_limits_are_named_in_refusals_and_adjustable_within_their_ceilings() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = tmp.path().join("store");
+    let synth = |extra: &[&str]| {
+        let mut args = vec![
+            "data",
+            "synth",
+            "--out",
+            p(&store),
+            "--clips",
+            "1",
+            "--seed",
+            "1",
+            "--max-vertices",
+            "4096",
+        ];
+        args.extend_from_slice(extra);
+        let out = any4d(&args);
+        assert!(!out.status.success());
+        text(&out).1
+    };
+    let err = synth(&["--frames", "20000"]);
+    assert!(err.contains("20000") && err.contains("--max-frames"), "{err}");
+    // Raised past the frame limit, the same request now meets the vertex-row limit (20000 × 4096 > 2^26).
+    let err = synth(&["--frames", "20000", "--max-frames", "20000"]);
+    assert!(
+        err.contains("vertex rows") && err.contains("--max-clip-vertices"),
+        "{err}"
+    );
+    assert!(!store.exists());
+    for (flag, value) in [
+        ("--max-frames", "0"),
+        ("--max-frames", "1000001"),
+        ("--max-clip-vertices", "99999999999"),
+        ("--max-file-bytes", "0"),
+        ("--max-buffer-bytes", "18446744073709551615"),
+    ] {
+        let out = any4d(&["data", "inspect", "no-such-file.bin", flag, value]);
+        let (_, err) = text(&out);
+        assert!(
+            !out.status.success() && err.contains(flag) && err.contains("must be in 1..="),
+            "{err}"
+        );
+    }
+    let obj = tmp.path().join("grid.bin");
+    formats::write_clip(&obj, &grid_clip("grid", 4, 40)).unwrap();
+    let out = any4d(&["--max-file-bytes", "100", "data", "inspect", p(&obj)]);
+    let (stdout, err) = text(&out);
+    assert!(
+        format!("{stdout}{err}").contains("more than the limit of 100 bytes (raise with --max-file-bytes)"),
+        "{stdout}{err}"
+    );
+    let out = any4d(&["data", "inspect", p(&obj)]);
+    assert!(out.status.success(), "{:?}", text(&out));
+}

@@ -168,7 +168,7 @@ fn read_mesh(path: &Path) -> Result<obj::ObjFrame> {
             .extension()
             .is_some_and(|e| e.to_string_lossy().eq_ignore_ascii_case("obj"));
     if is_obj {
-        let text = formats::read_text_file(path, formats::MAX_FILE_BYTES)?;
+        let text = formats::read_text_file(path, any4d_data::limits::FILE_BYTES.get())?;
         return Ok(obj::parse_obj(&text, path)?);
     }
     let clip = formats::read_clip(path)?;
@@ -212,13 +212,15 @@ pub fn complete(
             ),
         );
     }
-    if opts.frames > any4d_data::limits::MAX_FRAMES {
+    let (frames_limit, rows_limit) = (&any4d_data::limits::FRAMES, &any4d_data::limits::CLIP_VERTICES);
+    if opts.frames > frames_limit.get_usize() {
         return setup(
             "frames",
             format!(
-                "{} frames is more than the limit of {}",
+                "{} frames is more than the limit of {}{}",
                 opts.frames,
-                any4d_data::limits::MAX_FRAMES
+                frames_limit.get(),
+                frames_limit.hint()
             ),
         );
     }
@@ -243,14 +245,15 @@ pub fn complete(
     if opts
         .frames
         .checked_mul(n)
-        .is_none_or(|rows| rows > any4d_data::limits::MAX_CLIP_VERTICES)
+        .is_none_or(|rows| rows > rows_limit.get_usize())
     {
         return setup(
             "frames",
             format!(
-                "{} frames × {n} vertices is more than the limit of {} vertex rows",
+                "{} frames × {n} vertices is more than the limit of {} vertex rows{}",
                 opts.frames,
-                any4d_data::limits::MAX_CLIP_VERTICES
+                rows_limit.get(),
+                rows_limit.hint()
             ),
         );
     }

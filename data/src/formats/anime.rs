@@ -40,14 +40,14 @@ fn head(b: &mut Bytes) -> Result<Head> {
 
 /// The takes of an `.anime`: `all` when it has at least 2 frames.
 pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
-    let data = super::read_file(path, super::MAX_FILE_BYTES)?;
+    let data = super::read_clip_file(path)?;
     let s = path.display().to_string();
     Ok(skeletal::single_take(head(&mut Bytes::new(&s, &data))?.frames))
 }
 
 /// Read an `.anime` as a clip (id = file stem, caption empty).
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInfo)> {
-    let data = super::read_file(path, super::MAX_FILE_BYTES)?;
+    let data = super::read_clip_file(path)?;
     let s = path.display().to_string();
     let mut b = Bytes::new(&s, &data);
     let h = head(&mut b)?;

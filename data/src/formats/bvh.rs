@@ -262,7 +262,7 @@ impl<'a> Tok<'a> {
 }
 
 fn read_text(path: &Path) -> Result<String> {
-    super::read_text_file(path, MAX_TEXT_BYTES.min(super::MAX_FILE_BYTES))
+    super::read_text_file(path, MAX_TEXT_BYTES.min(crate::limits::FILE_BYTES.get()))
 }
 
 fn joint_body(t: &mut Tok, joints: &mut Vec<Joint>, name: String, parent: Option<usize>) -> Result<()> {

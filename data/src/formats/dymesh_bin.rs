@@ -14,7 +14,7 @@ pub const MISSING_CAPTION: &str = " ";
 
 /// Read a DyMesh `.bin` clip. The id is the file stem.
 pub fn read_bin(path: &Path) -> Result<Clip> {
-    let bytes = super::read_file(path, super::MAX_FILE_BYTES)?;
+    let bytes = super::read_clip_file(path)?;
     read_bin_bytes(&bytes, &path.display().to_string())
 }
 

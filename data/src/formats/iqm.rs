@@ -320,7 +320,7 @@ fn read_mesh(
 }
 
 fn load(path: &Path) -> Result<Iqm> {
-    let data = super::read_file(path, super::MAX_FILE_BYTES)?;
+    let data = super::read_clip_file(path)?;
     parse(path, &data)
 }
 

@@ -158,7 +158,7 @@ fn infos(r: &[(String, usize, usize, f32)]) -> Vec<TakeInfo> {
 }
 
 fn load(path: &Path) -> Result<Vec<u8>> {
-    super::read_file(path, super::MAX_FILE_BYTES)
+    super::read_clip_file(path)
 }
 
 /// The takes of an `.md2` (see the module doc).

@@ -101,14 +101,14 @@ fn parse(b: &mut Bytes) -> Result<Md3> {
 
 /// The takes of an `.md3`: `all` when it has at least 2 frames.
 pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
-    let data = super::read_file(path, super::MAX_FILE_BYTES)?;
+    let data = super::read_clip_file(path)?;
     let s = path.display().to_string();
     Ok(skeletal::single_take(parse(&mut Bytes::new(&s, &data))?.frames))
 }
 
 /// Read the frames of an `.md3` as a clip (id = file stem, caption empty).
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInfo)> {
-    let data = super::read_file(path, super::MAX_FILE_BYTES)?;
+    let data = super::read_clip_file(path)?;
     let s = path.display().to_string();
     let mut b = Bytes::new(&s, &data);
     let m = parse(&mut b)?;

@@ -109,7 +109,7 @@ fn quat(v: [f64; 3]) -> [f64; 4] {
 }
 
 fn read_text(path: &Path) -> Result<String> {
-    super::read_text_file(path, MAX_TEXT_BYTES.min(super::MAX_FILE_BYTES))
+    super::read_text_file(path, MAX_TEXT_BYTES.min(crate::limits::FILE_BYTES.get()))
 }
 
 /// `MD5Version 10` and the `commandline` string, each optional: Red Eclipse ships meshes without one or both

@@ -30,9 +30,15 @@ use crate::clip::Clip;
 use crate::error::{DataError, Result};
 use skeletal::{ReadOptions, SkinStats, TakeInfo};
 
-/// Largest clip file (`.bin`, `.gltf`, `.glb`, one `.obj` frame) read into memory: 4 GiB, far above any clip the
-/// method uses (a 4096-vertex, 300-frame clip is 15 MB), so only a wrong path (a disk image, `/dev/zero`) hits it.
-pub const MAX_FILE_BYTES: u64 = 1 << 32;
+/// Largest clip file (`.bin`, `.gltf`, `.glb`, one `.obj` frame) read into memory by default: 4 GiB, far above any
+/// clip the method uses (a 4096-vertex, 300-frame clip is 15 MB), so only a wrong path (a disk image, `/dev/zero`)
+/// hits it. The current value is [`FILE_BYTES`](crate::limits::FILE_BYTES) (`--max-file-bytes`).
+pub use crate::limits::MAX_FILE_BYTES;
+
+/// [`read_file`] with the current clip-file limit ([`FILE_BYTES`](crate::limits::FILE_BYTES)).
+pub fn read_clip_file(path: &Path) -> Result<Vec<u8>> {
+    read_file(path, crate::limits::FILE_BYTES.get())
+}
 
 /// Field of the error that [`guard`] makes from a panic.
 pub const PANIC_FIELD: &str = "panic";
@@ -58,7 +64,11 @@ pub fn read_file(path: &Path, limit: u64) -> Result<Vec<u8>> {
         return Err(DataError::new(
             path,
             "file",
-            format!("{} bytes, more than the limit of {limit} bytes", meta.len()),
+            format!(
+                "{} bytes, more than the limit of {limit} bytes{}",
+                meta.len(),
+                file_hint(limit)
+            ),
         ));
     }
     let file = std::fs::File::open(path).map_err(|e| DataError::io(path, e))?;
@@ -70,10 +80,19 @@ pub fn read_file(path: &Path, limit: u64) -> Result<Vec<u8>> {
         return Err(DataError::new(
             path,
             "file",
-            format!("grew past the limit of {limit} bytes while being read"),
+            format!(
+                "grew past the limit of {limit} bytes while being read{}",
+                file_hint(limit)
+            ),
         ));
     }
     Ok(bytes)
+}
+
+/// Names the flag when `limit` is the adjustable clip-file limit.
+fn file_hint(limit: u64) -> String {
+    let l = &crate::limits::FILE_BYTES;
+    if limit == l.get() { l.hint() } else { String::new() }
 }
 
 /// Run one file's read, turning a panic anywhere below it into an error naming the file (field [`PANIC_FIELD`]).

@@ -26,7 +26,7 @@ pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
     let mut vertices = Vec::new();
     let mut first: Option<(usize, Vec<[u32; 3]>)> = None;
     for file in &files {
-        let bytes = super::read_file(file, super::MAX_FILE_BYTES)?;
+        let bytes = super::read_clip_file(file)?;
         let text =
             String::from_utf8(bytes).map_err(|e| DataError::new(file, "file", format!("not UTF-8 text: {e}")))?;
         let (v, f) = parse_obj(&text, file)?;

@@ -34,7 +34,7 @@ fn bone(b: &mut Bytes, field: &str) -> Result<Mat> {
 }
 
 fn read_file(path: &Path) -> Result<Vec<u8>> {
-    super::read_file(path, super::MAX_FILE_BYTES)
+    super::read_clip_file(path)
 }
 
 fn parse_pmd(path: &Path) -> Result<Pmd> {

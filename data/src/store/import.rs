@@ -19,7 +19,7 @@ use crate::clip::object_uid;
 use crate::error::{DataError, Result};
 use crate::formats::skeletal::SkinStats;
 use crate::formats::{self, Format};
-use crate::limits::MAX_FRAMES;
+use crate::limits::FRAMES;
 use crate::synth::{self, SynthConfig};
 
 use super::clips::{preprocess_windows, process_file, reason};
@@ -149,7 +149,7 @@ pub fn write_synth_windows(
     progress: Progress,
 ) -> Result<ImportReport> {
     check_p(p, "synth options")?;
-    if window < 2 || window > cfg.frames || stride == 0 || stride > MAX_FRAMES {
+    if window < 2 || window > cfg.frames || stride == 0 || stride > FRAMES.get_usize() {
         return Err(DataError::new(
             out,
             "window",

@@ -6,7 +6,7 @@ use std::time::Duration;
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
 use crate::formats::skeletal;
-use crate::limits::{MAX_FRAMES, MAX_P};
+use crate::limits::{FRAMES, MAX_P};
 use crate::preprocess::{self, VertexFilter};
 
 use super::DEFAULT_P;
@@ -69,7 +69,7 @@ pub struct ImportOptions {
     /// process exits.
     pub time_limit: Duration,
     /// Longest take read from a file with takes, in frames: a longer one is refused before its frames are
-    /// baked (default [`skeletal::MAX_FRAMES`]; at most [`MAX_FRAMES`]).
+    /// baked (default [`skeletal::MAX_FRAMES`]; at most the current [`FRAMES`] limit).
     pub max_frames: usize,
 }
 
@@ -88,26 +88,35 @@ impl Default for ImportOptions {
 }
 
 impl ImportOptions {
-    /// Range checks: 2 ≤ frames ≤ [`MAX_FRAMES`], 1 ≤ stride ≤ [`MAX_FRAMES`], 1 ≤ p ≤ [`MAX_P`],
-    /// frames ≤ max_frames ≤ [`MAX_FRAMES`], filter min ≤ max, a finite weld epsilon ≥ 0, a time limit above zero.
+    /// Range checks (F = the current [`FRAMES`] limit): 2 ≤ frames ≤ F, 1 ≤ stride ≤ F, 1 ≤ p ≤ [`MAX_P`],
+    /// frames ≤ max_frames ≤ F, filter min ≤ max, a finite weld epsilon ≥ 0, a time limit above zero.
     pub fn validate(&self) -> Result<()> {
         let err = |field: &str, reason: String| Err(DataError::new("import options", field, reason));
-        if !(2..=MAX_FRAMES).contains(&self.frames) {
+        let max_frames = FRAMES.get_usize();
+        if !(2..=max_frames).contains(&self.frames) {
             return err(
                 "frames",
-                format!("a window needs 2..={MAX_FRAMES} frames, got {}", self.frames),
+                format!(
+                    "a window needs 2..={max_frames} frames, got {}{}",
+                    self.frames,
+                    FRAMES.hint()
+                ),
             );
         }
-        if !(1..=MAX_FRAMES).contains(&self.stride) {
-            return err("stride", format!("must be in 1..={MAX_FRAMES}, got {}", self.stride));
+        if !(1..=max_frames).contains(&self.stride) {
+            return err("stride", format!("must be in 1..={max_frames}, got {}", self.stride));
         }
         check_p(self.p, "import options")?;
-        if !(self.frames..=MAX_FRAMES).contains(&self.max_frames) {
+        if !(self.frames..=max_frames).contains(&self.max_frames) {
             return err(
                 "max_frames",
                 format!(
-                    "{} must be in {}..={MAX_FRAMES}: a take shorter than the window length {} cannot become a clip",
-                    self.max_frames, self.frames, self.frames
+                    "{} must be in {}..={max_frames}: a take shorter than the window length {} cannot become a \
+                     clip{}",
+                    self.max_frames,
+                    self.frames,
+                    self.frames,
+                    FRAMES.hint()
                 ),
             );
         }

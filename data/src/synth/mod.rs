@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
-use crate::limits::{MAX_CLIP_VERTICES, MAX_FRAMES, MAX_SYNTH_CLIPS, MAX_SYNTH_VERTICES};
+use crate::limits::{CLIP_VERTICES, FRAMES, MAX_SYNTH_CLIPS, MAX_SYNTH_VERTICES};
 use crate::rng::{Rng, rng};
 
 type V3 = [f32; 3];
@@ -146,13 +146,17 @@ impl Default for SynthConfig {
 }
 
 impl SynthConfig {
-    /// Rejects settings the generator cannot honour or that would exhaust memory: 2 ≤ T ≤ [`MAX_FRAMES`],
-    /// 256 ≤ min, min + 256 ≤ max ≤ [`MAX_SYNTH_VERTICES`], T · max ≤ [`MAX_CLIP_VERTICES`],
+    /// Rejects settings the generator cannot honour or that would exhaust memory: 2 ≤ T ≤ [`FRAMES`],
+    /// 256 ≤ min, min + 256 ≤ max ≤ [`MAX_SYNTH_VERTICES`], T · max ≤ [`CLIP_VERTICES`] (current limits),
     /// clips ≤ [`MAX_SYNTH_CLIPS`].
     pub fn validate(&self) -> Result<()> {
         let err = |field: &str, reason: String| Err(DataError::new("synth config", field, reason));
-        if !(2..=MAX_FRAMES).contains(&self.frames) {
-            return err("frames", format!("needs 2..={MAX_FRAMES} frames, got {}", self.frames));
+        let (max_frames, max_rows) = (FRAMES.get_usize(), CLIP_VERTICES.get_usize());
+        if !(2..=max_frames).contains(&self.frames) {
+            return err(
+                "frames",
+                format!("needs 2..={max_frames} frames, got {}{}", self.frames, FRAMES.hint()),
+            );
         }
         if self.clips > MAX_SYNTH_CLIPS {
             return err(
@@ -166,12 +170,14 @@ impl SynthConfig {
                 format!("at most {MAX_SYNTH_VERTICES}, got {}", self.max_vertices),
             );
         }
-        if self.frames * self.max_vertices > MAX_CLIP_VERTICES {
+        if self.frames * self.max_vertices > max_rows {
             return err(
                 "frames",
                 format!(
-                    "{} frames × {} vertices is more than {MAX_CLIP_VERTICES} vertex rows per clip",
-                    self.frames, self.max_vertices
+                    "{} frames × {} vertices is more than {max_rows} vertex rows per clip{}",
+                    self.frames,
+                    self.max_vertices,
+                    CLIP_VERTICES.hint()
                 ),
             );
         }

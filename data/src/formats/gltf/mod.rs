@@ -12,9 +12,9 @@
 //! before use every index, accessor type, component type, stride and byte range (`accessor.rs`), and loads the
 //! buffers itself (`source.rs`): the GLB chunks inside the file, base64 `data:` URIs, and relative URIs naming a
 //! regular file inside the glTF file's folder (no absolute paths, `..`, symlinks out of the folder, FIFOs or
-//! devices), each at most [`MAX_BUFFER_BYTES`] and size-checked before it is read. The frame count is bounded by
-//! [`MAX_FRAMES`](crate::limits::MAX_FRAMES) (a longer animation is an error unless [`GltfReadOptions::max_frames`] asks for its first
-//! frames), the baked vertices by [`MAX_CLIP_VERTICES`](crate::limits::MAX_CLIP_VERTICES), accessors by [`MAX_ACCESSOR_VALUES`] and the baking
+//! devices), each at most [`BUFFER_BYTES`](crate::limits::BUFFER_BYTES) and size-checked before it is read. The frame count is bounded by
+//! [`FRAMES`](crate::limits::FRAMES) (a longer animation is an error unless [`GltfReadOptions::max_frames`] asks for its first
+//! frames), the baked vertices by [`CLIP_VERTICES`](crate::limits::CLIP_VERTICES), accessors by [`MAX_ACCESSOR_VALUES`] and the baking
 //! work by [`MAX_BAKE_STEPS`]. One file's read runs under [`super::guard`], so a panic left anywhere below is an
 //! error naming the file rather than an abort.
 
@@ -36,8 +36,8 @@ pub const DEFAULT_FPS: f32 = 30.0;
 /// Most numbers (count × components) one accessor may decode to: 2^24 are 128 MiB as f64, a 4 M-vertex position
 /// accessor; it bounds accessors whose count no buffer bytes back (sparse or without a buffer view).
 pub const MAX_ACCESSOR_VALUES: usize = 1 << 24;
-/// Largest buffer (GLB chunk, `data:` URI or external file) read: 1 GiB.
-pub const MAX_BUFFER_BYTES: u64 = 1 << 30;
+/// Largest buffer (GLB chunk, `data:` URI or external file) read by default (`--max-buffer-bytes`).
+pub use crate::limits::MAX_BUFFER_BYTES;
 /// Most vertex updates (per frame: vertices × (1 + morph targets with a non-zero weight + joint influences))
 /// one read may do: 2^34 is about a minute of baking, so a small file cannot keep an import busy for hours.
 pub const MAX_BAKE_STEPS: u64 = 1 << 34;
@@ -47,7 +47,7 @@ pub const MAX_BAKE_STEPS: u64 = 1 << 34;
 pub struct GltfReadOptions {
     /// Sampling rate in frames per second.
     pub fps: f32,
-    /// Keep at most this many frames. `None` bakes the whole animation and refuses one longer than [`MAX_FRAMES`](crate::limits::MAX_FRAMES);
+    /// Keep at most this many frames. `None` bakes the whole animation and refuses one longer than [`FRAMES`](crate::limits::FRAMES);
     /// `Some(m)` keeps the first `m` frames of an animation of any length.
     pub max_frames: Option<usize>,
     /// Mesh index to read; `None` = the first mesh that a node instantiates.
@@ -76,7 +76,7 @@ pub enum ExternalBuffers {
 /// Read and bake a `.gltf` / `.glb` clip. Errors name the file and the glTF part (field) at fault.
 pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
     super::guard(path, || {
-        let bytes = super::read_file(path, super::MAX_FILE_BYTES)?;
+        let bytes = super::read_clip_file(path)?;
         let folder = match path.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),

@@ -16,7 +16,7 @@ use super::{Ctx, ExternalBuffers, GltfReadOptions};
 use crate::clip::Clip;
 use crate::error::Result;
 use crate::formats::dymesh_bin::MISSING_CAPTION;
-use crate::limits::{MAX_CLIP_VERTICES, MAX_FRAMES};
+use crate::limits::{CLIP_VERTICES, FRAMES};
 
 /// Read and bake one glTF / GLB file's bytes.
 pub(super) fn read(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: &ExternalBuffers) -> Result<Clip> {
@@ -106,24 +106,29 @@ pub(super) fn read(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: 
 
     let duration = tracks.iter().map(|t| t.times[t.times.len() - 1]).fold(0.0f32, f32::max);
     let wanted = (duration as f64 * opts.fps as f64 + 1e-4).floor() + 1.0;
+    let (max_frames, max_rows) = (FRAMES.get_usize(), CLIP_VERTICES.get_usize());
     let frames = match opts.max_frames {
         Some(m) => wanted.min(m as f64) as usize,
-        None if wanted > MAX_FRAMES as f64 => {
+        None if wanted > max_frames as f64 => {
             return Err(ctx.err(
                 "animations[0]",
                 format!(
-                    "lasts {duration} s = {wanted} frames at {} fps, more than the limit of {MAX_FRAMES} frames \
+                    "lasts {duration} s = {wanted} frames at {} fps, more than the limit of {max_frames} frames{} \
                      (read options `max_frames` keep the first frames of a longer animation)",
-                    opts.fps
+                    opts.fps,
+                    FRAMES.hint()
                 ),
             ));
         }
         None => wanted as usize,
     };
-    if frames.checked_mul(n).is_none_or(|rows| rows > MAX_CLIP_VERTICES) {
+    if frames.checked_mul(n).is_none_or(|rows| rows > max_rows) {
         return Err(ctx.err(
             &mesh_field,
-            format!("{frames} frames × {n} vertices is more than the limit of {MAX_CLIP_VERTICES} baked vertices"),
+            format!(
+                "{frames} frames × {n} vertices is more than the limit of {max_rows} baked vertices{}",
+                CLIP_VERTICES.hint()
+            ),
         ));
     }
     let scene = Scene {

@@ -1,5 +1,5 @@
 //! Loading a glTF document: the GLB container, the JSON (parsed and validated by the gltf crate) and every
-//! buffer, each checked against [`MAX_BUFFER_BYTES`] and its declared `byteLength` before it is used.
+//! buffer, each checked against [`BUFFER_BYTES`](crate::limits::BUFFER_BYTES) and its declared `byteLength` before it is used.
 //!
 //! Buffer URIs: no URI is buffer 0 of a GLB (its BIN chunk); `data:…;base64,` is decoded in memory; anything else
 //! must be a relative path (percent-encoded as a URI reference) that names a regular file inside the folder of the
@@ -15,8 +15,9 @@ use gltf::json::Root;
 use gltf::json::mesh::Semantic;
 use gltf::json::validation::Checked;
 
-use super::{Ctx, ExternalBuffers, MAX_BUFFER_BYTES};
+use super::{Ctx, ExternalBuffers};
 use crate::error::Result;
+use crate::limits::BUFFER_BYTES;
 
 /// A document with its buffers (each exactly `byteLength` bytes) and the caption from `asset.extras.caption`.
 pub(super) struct Document {
@@ -57,10 +58,14 @@ pub(super) fn load(ctx: Ctx, bytes: &[u8], external: &ExternalBuffers) -> Result
     for (i, b) in root.buffers.iter().enumerate() {
         let field = format!("buffers[{i}]");
         let declared = b.byte_length.0;
-        if declared > MAX_BUFFER_BYTES {
+        let limit = BUFFER_BYTES.get();
+        if declared > limit {
             return Err(ctx.err(
                 &field,
-                format!("byteLength {declared} is more than the limit of {MAX_BUFFER_BYTES} bytes"),
+                format!(
+                    "byteLength {declared} is more than the limit of {limit} bytes{}",
+                    BUFFER_BYTES.hint()
+                ),
             ));
         }
         let declared = declared as usize;
@@ -146,8 +151,12 @@ fn data_uri(uri: &str) -> std::result::Result<Vec<u8>, String> {
         return Err("only base64 data URIs are supported".into());
     }
     // A decoded buffer is at most 3/4 of its text, which is part of the file already read.
-    if payload.len() as u64 / 4 * 3 > MAX_BUFFER_BYTES {
-        return Err(format!("data URI decodes to more than {MAX_BUFFER_BYTES} bytes"));
+    let limit = BUFFER_BYTES.get();
+    if payload.len() as u64 / 4 * 3 > limit {
+        return Err(format!(
+            "data URI decodes to more than {limit} bytes{}",
+            BUFFER_BYTES.hint()
+        ));
     }
     const LENIENT: GeneralPurpose = GeneralPurpose::new(
         &base64::alphabet::STANDARD,
