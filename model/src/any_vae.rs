@@ -50,6 +50,16 @@ impl AnyMeshVaeConfig {
         self.body().latent_channels
     }
 
+    /// [`MeshVaeBodyConfig::activation_bytes`] of a training micro-batch of clips with `frames` frames (the
+    /// frame-wise VAE's motion groups; the sequence-wise one encodes each clip as one trajectory group).
+    pub fn activation_bytes(&self, micro_batch: usize, frames: usize, vertices: usize, tokens: usize) -> u128 {
+        let groups = match self {
+            Self::Framewise(_) => frames,
+            Self::Sequencewise(_) => 1,
+        };
+        self.body().activation_bytes(micro_batch, groups, vertices, tokens)
+    }
+
     /// Builds the VAE on `device`.
     pub fn init(&self, device: &Device) -> AnyMeshVae {
         match self {

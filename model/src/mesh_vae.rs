@@ -248,6 +248,22 @@ impl MeshVaeBodyConfig {
         blocks * per_block + 12 * d * d + embed
     }
 
+    /// A rough count of the bytes one training micro-batch keeps for the backward pass (f32), computed without
+    /// allocating, for `groups` motion groups (frames), N = `vertices` (the padded count) and P = `tokens`: per
+    /// stream (shape + groups) and encoder block the P × N cross-attention map twice, keys and values of every
+    /// vertex and about (8 + 3m)·d values per token; per decoder block the tokens and two `heads × P × P` maps; the
+    /// vertex embeddings and the query decoding (a P-wide map per vertex, 2d-wide queries and outputs per group).
+    pub fn activation_bytes(&self, micro_batch: usize, groups: usize, vertices: usize, tokens: usize) -> u128 {
+        let (b, g, n, p) = (micro_batch as u128, groups as u128, vertices as u128, tokens as u128);
+        let (d, heads, m) = (self.width as u128, self.heads as u128, self.ffn_mult as u128);
+        let streams = g + 1;
+        let token_values = (8 + 3 * m) * p * d;
+        let encoder = self.enc_blocks as u128 * streams * (2 * p * n + 2 * n * d + token_values);
+        let decoder = self.dec_blocks as u128 * streams * (token_values + 2 * heads * p * p);
+        let vertices_values = 20 * n * d + 4 * g * n * d + 2 * n * p + 4 * g * n * d;
+        4 * b * (encoder + decoder + vertices_values)
+    }
+
     /// Builds the body on `device`; each vertex decodes `out_per_group` values per motion group (3 per frame, or
     /// 3T for a whole-clip trajectory).
     pub fn init(&self, out_per_group: usize, device: &Device) -> MeshVaeBody {

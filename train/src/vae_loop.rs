@@ -374,7 +374,7 @@ pub struct StoredLatentStats {
 pub fn train_vae(cfg: &VaeRunConfig, opts: &RunOptions) -> Result<(RunFolder, Outcome)> {
     // Fail before claiming a run folder when a backend or the store is unusable.
     let devices = run_devices(&cfg.device, opts.parallel.as_ref())?;
-    open_store(&opts.data, &cfg.vae)?;
+    check_activations(cfg, &open_store(&opts.data, &cfg.vae)?)?;
     let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &["rec", "kl"])?;
     let outcome = run_vae(cfg, &run, opts, &devices, None)?;
     Ok((run, outcome))
@@ -387,7 +387,30 @@ pub fn resume_vae(run_dir: &Path, backend: Option<backend::Backend>, opts: &RunO
         &mut c.device
     })?;
     let devices = run_devices(&cfg.device, opts.parallel.as_ref())?;
+    check_activations(&cfg, &open_store(&opts.data, &cfg.vae)?)?;
     run_vae(&cfg, &run, opts, &devices, Some(ckpt))
+}
+
+/// Refuses a micro-batch whose activation estimate cannot fit this machine (the host's memory for CPU backends),
+/// before anything is allocated: the largest clip of the store (bounded from its record size) at `vae.train_frames`
+/// frames.
+fn check_activations(cfg: &VaeRunConfig, store: &Store) -> Result<()> {
+    let frames = match cfg.vae.train_frames {
+        0 => store.frames(),
+        k => k.min(store.frames()),
+    };
+    let (micro, n, p) = (cfg.train.micro_batch, store.vertex_bound(), cfg.vae.tokens);
+    let estimate = cfg.model.activation_bytes(micro, frames, n, p);
+    let host = match cfg.device.backend {
+        backend::Backend::Flex | backend::Backend::Ndarray => any4d_model::summary::host_memory_bytes(),
+        _ => None,
+    };
+    let what = format!(
+        "a micro-batch of {micro} clips × {frames} frames × up to {n} vertices (P = {p}) at model.body.width {}",
+        cfg.model.body().width
+    );
+    let limit = host.unwrap_or(crate::rf_loop::MAX_ACTIVATION_BYTES);
+    any4d_model::summary::check_activation_estimate(&what, estimate, limit).map_err(TrainError::Setup)
 }
 
 fn run_vae(

@@ -160,3 +160,47 @@ fn tiny_vae_trains_on_two_frames_per_clip_and_validates_on_all() {
         "a run folder was claimed by a run that cannot start"
     );
 }
+
+/// A micro-batch whose activations cannot fit the machine is refused with the estimate and the remedy before a run
+/// folder is claimed; the estimate grows with the store's largest clip, the frames and the micro-batch.
+#[test]
+fn a_vae_micro_batch_too_large_for_memory_is_refused_before_a_run_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = synth_store(dir.path(), 3);
+    let store = any4d_data::store::Store::open(&data).unwrap();
+    let n = store.vertex_bound();
+    let largest = (0..store.len())
+        .map(|i| store.get(i).unwrap().clip.n_vertices)
+        .max()
+        .unwrap();
+    assert!(
+        n >= largest && n <= 2 * largest,
+        "bound {n} for a largest clip of {largest} vertices"
+    );
+    let mut cfg = tiny(1);
+    let est = |c: &VaeRunConfig, b: usize, f: usize| c.model.activation_bytes(b, f, n, c.vae.tokens);
+    assert!(est(&cfg, 2, 4) > est(&cfg, 1, 4) && est(&cfg, 1, 4) > est(&cfg, 1, 2));
+    assert!(cfg.model.activation_bytes(1, 4, 2 * n, cfg.vae.tokens) > est(&cfg, 1, 4));
+    cfg.train.batch_size = 1 << 24;
+    cfg.train.micro_batch = 1 << 24;
+    let opts = RunOptions {
+        data,
+        runs_dir: dir.path().join("runs"),
+        name: "huge".into(),
+        progress: ProgressMode::Quiet,
+        stop: StopFlag::new(),
+        parallel: None,
+    };
+    let Err(err) = train_vae(&cfg, &opts) else {
+        panic!("a 2^24-clip micro-batch was accepted")
+    };
+    let err = err.to_string();
+    assert!(
+        err.contains("GiB of activations") && err.contains("train.micro_batch") && err.contains("vertices"),
+        "{err}"
+    );
+    assert!(
+        !dir.path().join("runs").join("huge-1").exists(),
+        "no run folder is claimed"
+    );
+}

@@ -203,6 +203,14 @@ impl Store {
         self.catalog.p
     }
 
+    /// An upper bound of the vertices of any clip, from the record sizes alone (a record holds T · N · 12 bytes of
+    /// coordinates besides its faces and FPS indices): for memory estimates before any clip is read.
+    pub fn vertex_bound(&self) -> usize {
+        let per_vertex = 12 * self.catalog.frames.max(1) as u64;
+        let longest = self.catalog.entries.iter().map(|e| e.len).max().unwrap_or(0);
+        usize::try_from(longest / per_vertex).unwrap_or(usize::MAX)
+    }
+
     /// Split of clip `i` without reading the clip. Errors if `i` is out of range.
     pub fn split(&self, i: usize) -> Result<Split> {
         Ok(self.entry(i)?.split)
