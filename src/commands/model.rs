@@ -123,6 +123,10 @@ pub fn exec(cmd: ModelCmd) -> anyhow::Result<ExitCode> {
     }
 }
 
+/// The VAE latent size a BD-LSTM summary assumes: the paper's frame-wise VAE (P = 512, C = 12).
+const BDLSTM_SUMMARY_P: usize = 512;
+const BDLSTM_SUMMARY_C: usize = 12;
+
 fn summary(path: &Path, overrides: &ConfigArgs) -> anyhow::Result<ExitCode> {
     let device = Device::flex();
     let (title, rows) = match RunConfig::load(path, &overrides.set)? {
@@ -135,6 +139,14 @@ fn summary(path: &Path, overrides: &ConfigArgs) -> anyhow::Result<ExitCode> {
                 cfg.model.out_channels()
             ),
             param_report(&cfg.model.init(&device)),
+        ),
+        RunConfig::Bdlstm(cfg) => (
+            format!(
+                "{}: BD-LSTM (latent adaptation), codec sized for P = {BDLSTM_SUMMARY_P} tokens of C = \
+                 {BDLSTM_SUMMARY_C} channels (a run takes both from its VAE)",
+                path.display()
+            ),
+            param_report(&cfg.init(BDLSTM_SUMMARY_P, BDLSTM_SUMMARY_C, &device)),
         ),
         RunConfig::Vae(cfg) => match &cfg.model {
             AnyMeshVaeConfig::Framewise(m) => (

@@ -1,4 +1,4 @@
-//! `any4d train vae|rf` and `any4d bench train`: parse arguments, load the config (`extends`, `--set`), call
+//! `any4d train vae|rf|bdlstm` and `any4d bench train`: parse arguments, load the config (`extends`, `--set`), call
 //! `any4d_train` (`vae_loop`, `rf_loop`, `bench`). Ctrl-C saves a checkpoint and exits.
 
 use std::path::{Path, PathBuf};
@@ -7,6 +7,7 @@ use std::process::ExitCode;
 use any4d_data::store::DEFAULT_P;
 use any4d_model::bench::median;
 use any4d_train::backend::{self, Backend, Precision};
+use any4d_train::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, resume_bdlstm, train_bdlstm};
 use any4d_train::bench::{RfShape, rf_step_flops, time_rf_steps, time_vae_steps};
 use any4d_train::config::{Override, RunConfig};
 use any4d_train::loop_common::{Outcome, RunOptions};
@@ -26,6 +27,9 @@ pub enum TrainCmd {
     Vae(VaeArgs),
     /// Train the keyframe rectified flow on a frozen VAE (docs/method.md §4).
     Rf(RfArgs),
+    /// Train the BD-LSTM baseline (latent adaptation, docs/method.md §5.3) on a frozen VAE:
+    /// `--config configs/bdlstm/<preset>.toml --vae RUN --data STORE`.
+    Bdlstm(RfArgs),
 }
 
 #[derive(Args, Debug)]
@@ -123,6 +127,7 @@ pub fn exec(cmd: TrainCmd) -> anyhow::Result<ExitCode> {
     match cmd {
         TrainCmd::Vae(args) => vae(args),
         TrainCmd::Rf(args) => rf(args),
+        TrainCmd::Bdlstm(args) => bdlstm(args),
     }
 }
 
@@ -137,6 +142,22 @@ fn rf(RfArgs { vae, common: args }: RfArgs) -> anyhow::Result<ExitCode> {
             let mut cfg = RfRunConfig::load(args.config()?, &args.overrides.set)?;
             cfg.device.backend = args.backend.unwrap_or(cfg.device.backend);
             started(train_rf(&cfg, &opts)?)
+        }
+    };
+    Ok(report(&outcome))
+}
+
+fn bdlstm(RfArgs { vae, common: args }: RfArgs) -> anyhow::Result<ExitCode> {
+    let opts = BdlstmRunOptions {
+        run: args.options("bdlstm")?,
+        vae_run: vae,
+    };
+    let outcome = match &args.resume {
+        Some(run_dir) => resume_bdlstm(run_dir, args.backend, &opts)?,
+        None => {
+            let mut cfg = BdlstmRunConfig::load(args.config()?, &args.overrides.set)?;
+            cfg.device.backend = args.backend.unwrap_or(cfg.device.backend);
+            started(train_bdlstm(&cfg, &opts)?)
         }
     };
     Ok(report(&outcome))
@@ -221,6 +242,9 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
     match RunConfig::load(&args.config, &args.overrides.set)? {
         RunConfig::Rf(cfg) => bench_rf(&args, &cfg),
         RunConfig::Vae(cfg) => bench_vae(&args, &cfg),
+        RunConfig::Bdlstm(_) => {
+            bail!("bench train times VAE and RF presets; a BD-LSTM run logs its steps/s in metrics.csv")
+        }
     }
 }
 

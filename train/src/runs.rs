@@ -78,7 +78,7 @@ fn read_run_file(run: &Path, file: &str, hint: &str) -> Result<String> {
 }
 
 /// The newest complete checkpoint of a run and its step.
-fn newest_checkpoint(run: &Path) -> Result<(PathBuf, u64)> {
+pub(crate) fn newest_checkpoint(run: &Path) -> Result<(PathBuf, u64)> {
     let dir = run.join(CHECKPOINTS_DIR);
     if !dir.is_dir() {
         return Err(missing(run, CHECKPOINTS_DIR, " (not a run folder?)"));

@@ -262,13 +262,16 @@ pub fn to_toml<C: Serialize>(config: &C) -> Result<String> {
     })
 }
 
-/// A run config of either kind, told apart by its tables: `[vae]` → [`VaeRunConfig`], `[rf]` → [`RfRunConfig`].
+/// A run config of any kind, told apart by its tables: `[vae]` → [`VaeRunConfig`], `[rf]` → [`RfRunConfig`],
+/// `[bdlstm]` → [`crate::bdlstm_loop::BdlstmRunConfig`].
 #[derive(Clone, Debug)]
 pub enum RunConfig {
     /// A `configs/vae/*.toml` run.
     Vae(Box<VaeRunConfig>),
     /// A `configs/rf/*.toml` run.
     Rf(Box<RfRunConfig>),
+    /// A `configs/bdlstm/*.toml` run.
+    Bdlstm(Box<crate::bdlstm_loop::BdlstmRunConfig>),
 }
 
 impl RunConfig {
@@ -285,15 +288,19 @@ impl RunConfig {
 
     /// Parses a resolved table.
     pub fn from_table(table: toml::Table, path: &Path) -> Result<Self> {
-        if table.contains_key("rf") {
+        if table.contains_key("bdlstm") {
+            Ok(RunConfig::Bdlstm(Box::new(
+                crate::bdlstm_loop::BdlstmRunConfig::from_table(table, path)?,
+            )))
+        } else if table.contains_key("rf") {
             Ok(RunConfig::Rf(Box::new(RfRunConfig::from_table(table, path)?)))
         } else if table.contains_key("vae") {
             Ok(RunConfig::Vae(Box::new(VaeRunConfig::from_table(table, path)?)))
         } else {
             Err(TrainError::Config {
                 path: path.to_path_buf(),
-                reason: "neither an RF run config (no [rf] table, see configs/rf/) nor a VAE run config (no [vae] \
-                         table, see configs/vae/)"
+                reason: "neither an RF run config (no [rf] table, see configs/rf/), a VAE run config (no [vae] \
+                         table, see configs/vae/) nor a BD-LSTM run config (no [bdlstm] table, see configs/bdlstm/)"
                     .into(),
             })
         }
