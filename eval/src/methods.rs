@@ -3,8 +3,8 @@
 //!
 //! Methods: keyframe-conditioned RF (ours, (R3)–(R6)), non-keyframe RF with sampling-time replacement (the
 //! paper's Baseline, (R7)–(R8)), SceneMI-style impute-until-τ* with clean or noisy keyframes ((R9), §5.4), linear
-//! interpolation in vertex and latent space ((L1), §5.2) and the static nearest keyframe. BD-LSTM (§5.3) is a later
-//! variant of [`MethodKind`].
+//! interpolation in vertex and latent space ((L1), §5.2), the static nearest keyframe and the BD-LSTM baseline (§5.3,
+//! latent adaptation).
 
 use std::fmt;
 
@@ -49,6 +49,9 @@ pub enum MethodKind {
     LerpLatent,
     /// Hold the nearest keyframe (ties to the earlier one).
     StaticNearest,
+    /// The BD-LSTM baseline, latent adaptation (docs/method.md §5.3): both chains per keyframe segment and the
+    /// merge rule.
+    Bdlstm,
 }
 
 impl MethodKind {
@@ -70,6 +73,7 @@ impl MethodKind {
             MethodKind::Lerp => "lerp".into(),
             MethodKind::LerpLatent => "lerp_latent".into(),
             MethodKind::StaticNearest => "static_nearest".into(),
+            MethodKind::Bdlstm => "bdlstm".into(),
         }
     }
 
@@ -82,6 +86,7 @@ impl MethodKind {
             "lerp" => MethodKind::Lerp,
             "lerp_latent" => MethodKind::LerpLatent,
             "static_nearest" => MethodKind::StaticNearest,
+            "bdlstm" => MethodKind::Bdlstm,
             "impute_until" => MethodKind::ImputeUntil {
                 tau_star: 0.98,
                 keyframes: KeyframeNoise::Clean,
@@ -89,8 +94,8 @@ impl MethodKind {
             other => {
                 let rest = other.strip_prefix("impute_until_").ok_or_else(|| {
                     bad(
-                        "unknown method; expected keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest or \
-                         impute_until[_<tau*>[_noisy<level>]]"
+                        "unknown method; expected keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest, \
+                         bdlstm or impute_until[_<tau*>[_noisy<level>]]"
                             .into(),
                     )
                 })?;
@@ -232,7 +237,8 @@ impl<S: WindowSampler> RfMethod<S> {
             MethodKind::KeyframeRf
             | MethodKind::ReplacementRf
             | MethodKind::ImputeUntil { .. }
-            | MethodKind::LerpLatent => Ok(Self { kind, sampler }),
+            | MethodKind::LerpLatent
+            | MethodKind::Bdlstm => Ok(Self { kind, sampler }),
             other => Err(DataError::new("method", other.label(), "is not a model-based method")),
         }
     }

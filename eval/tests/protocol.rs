@@ -261,6 +261,7 @@ fn method_labels_round_trip() {
         MethodKind::Lerp,
         MethodKind::LerpLatent,
         MethodKind::StaticNearest,
+        MethodKind::Bdlstm,
         MethodKind::ImputeUntil {
             tau_star: 0.98,
             keyframes: KeyframeNoise::Clean,
@@ -272,7 +273,7 @@ fn method_labels_round_trip() {
     ] {
         assert_eq!(MethodKind::parse(&kind.label()).unwrap(), kind, "{kind}");
     }
-    assert!(MethodKind::parse("bdlstm").is_err());
+    assert!(MethodKind::parse("bd_lstm").is_err());
     assert_eq!(
         MethodKind::parse("impute_until_1.5").unwrap_err().field,
         "impute_until_1.5"

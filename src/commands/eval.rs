@@ -208,7 +208,7 @@ pub struct RunArgs {
     /// Output folder for summary.md/.csv, clips.parquet, manifest.json, strips and plots.
     #[arg(long)]
     pub out: PathBuf,
-    /// Methods, comma-separated: keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest,
+    /// Methods, comma-separated: keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest, bdlstm,
     /// impute_until_0.98, impute_until_0.98_noisy1.
     #[arg(
         long,
@@ -228,6 +228,9 @@ pub struct RunArgs {
     /// Second VAE run for table 5.
     #[arg(long)]
     pub vae_b: Option<PathBuf>,
+    /// BD-LSTM run (`any4d train bdlstm`; method `bdlstm`), completed on the VAE it was trained on.
+    #[arg(long)]
+    pub bdlstm: Option<PathBuf>,
     /// Clips in the manifest (docs/method.md §6.1: 100).
     #[arg(long, default_value_t = PAPER_CLIPS)]
     pub clips: usize,
@@ -350,6 +353,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         baseline_rf: args.baseline_rf.clone(),
         vae: args.vae.clone(),
         vae_b: args.vae_b.clone(),
+        bdlstm: args.bdlstm.clone(),
     };
     let mut opts = TableOptions::new(args.data.clone(), args.out.clone());
     let posterior = match args.posterior {

@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use any4d_data::batch::PadTo;
-use any4d_eval::learned::{KeyPosterior, LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor};
+use any4d_eval::learned::{
+    BdlstmSampler, KeyPosterior, LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor,
+};
 use any4d_eval::methods::vertex_methods;
 use any4d_eval::methods::{Method, MethodKind, RfMethod};
 use any4d_eval::tables::reconstruction::Reconstructor;
@@ -15,6 +17,7 @@ use any4d_model::rectified_flow::{ReplaceNoise, SampleOptions, Solver};
 use any4d_model::text::scratch::ScratchTextEncoder;
 use burn::prelude::{Device, Module};
 
+use crate::bdlstm_loop::load_bdlstm_run;
 use crate::error::{Result, TrainError};
 use crate::runs::{LoadedVae, load_rf_run, load_vae_run};
 
@@ -29,6 +32,8 @@ pub struct LearnedRuns {
     pub vae: Option<PathBuf>,
     /// Second VAE run for table 5 (e.g. the sequence-wise ablation).
     pub vae_b: Option<PathBuf>,
+    /// BD-LSTM run (`any4d train bdlstm`), completed on its own VAE.
+    pub bdlstm: Option<PathBuf>,
 }
 
 /// How the RF methods sample.
@@ -163,6 +168,17 @@ pub fn build_methods(
             MethodKind::ReplacementRf => {
                 let m = rf_method(kind, need(&runs.baseline_rf, "--baseline-rf", kind)?, sampling, device)?;
                 (m.method, m.checkpoint)
+            }
+            MethodKind::Bdlstm => {
+                let run = load_bdlstm_run(need(&runs.bdlstm, "--bdlstm", kind)?, device)?;
+                let vae = run.vae.load(device)?;
+                let codec = codec_of(&vae, sampling.posterior, device)?;
+                let merge = run.config.merge_config();
+                let sampler = BdlstmSampler::new(codec, run.model.valid(), vae.stats, merge)?;
+                (
+                    Box::new(RfMethod::new(kind, sampler)?) as Box<dyn Method>,
+                    checkpoint_label(&run.run, run.step),
+                )
             }
             MethodKind::LerpLatent => {
                 let vae = vae_run_for(runs, device)?;

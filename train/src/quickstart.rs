@@ -186,6 +186,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         baseline_rf: Some(baseline_run.root().to_path_buf()),
         vae: Some(vae_run.root().to_path_buf()),
         vae_b: None,
+        bdlstm: None,
     };
     let kinds = [
         MethodKind::KeyframeRf,
@@ -263,6 +264,7 @@ fn shipped_rows(
         baseline_rf: Some(dir.join("baseline-rf")),
         vae: Some(dir.join("vae")),
         vae_b: None,
+        bdlstm: None,
     };
     let built = build_methods(
         &[MethodKind::KeyframeRf, MethodKind::ReplacementRf],

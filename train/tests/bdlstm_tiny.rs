@@ -1,5 +1,5 @@
 //! The BD-LSTM loop (latent adaptation, docs/method.md §5.3) on a tiny frozen VAE: a short run lowers (B3),
-//! validation is deterministic and reproduced by the loaded run, resume is bitwise equal to straight training, and
+//! validation is deterministic and reproduced by the loaded run, the run completes clips as the `bdlstm` row, resume is bitwise equal to straight training, and
 //! bad configs or a missing VAE give errors naming the field.
 
 mod common;
@@ -7,11 +7,13 @@ mod common;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+use any4d_eval::methods::{MethodKind, hide_non_keyframes};
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::bdlstm_loop::{
     BDLSTM_TERMS, BdlstmObjective, BdlstmRunConfig, BdlstmRunOptions, load_bdlstm_run, train_bdlstm,
 };
 use any4d_train::config::{Duration, Override, RunConfig};
+use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods};
 use any4d_train::loop_common::{Objective, Outcome, RunOptions, StopFlag, train};
 use any4d_train::progress::ProgressMode;
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, VALID_FILE, read_table};
@@ -117,6 +119,39 @@ fn tiny_bdlstm_lowers_its_loss_and_its_run_loads() {
             "validation {values:?} vs logged {row:?}"
         );
     }
+    // As an evaluation row: every frame decoded and finite, the same output for the same seed, keyframes
+    // required at both ends, and a clear error without the run.
+    let runs = LearnedRuns {
+        bdlstm: Some(run.root().to_path_buf()),
+        ..LearnedRuns::default()
+    };
+    let built = build_methods(&[MethodKind::Bdlstm], &runs, SamplingSetup::default(), &dev).unwrap();
+    assert!(
+        built.checkpoints[0].1.contains(&format!("step {steps}")),
+        "{:?}",
+        built.checkpoints
+    );
+    let method = &built.methods[0];
+    let store = any4d_data::store::Store::open(&fixture().store).unwrap();
+    let clip = store.get(store.indices(any4d_data::store::Split::Val)[0]).unwrap().clip;
+    let keys = [0, 3];
+    let visible = hide_non_keyframes(&clip, &keys);
+    let a = method.complete(&visible, &keys, "", 7).unwrap();
+    assert_eq!(a.len(), clip.frames * clip.n_vertices);
+    assert!(a.iter().flatten().all(|v| v.is_finite()));
+    assert_eq!(a, method.complete(&visible, &keys, "", 7).unwrap());
+    let err = method.complete(&visible, &[0, 2], "", 7).unwrap_err().to_string();
+    assert!(err.contains("must be keyframes"), "{err}");
+    let err = build_methods(
+        &[MethodKind::Bdlstm],
+        &LearnedRuns::default(),
+        SamplingSetup::default(),
+        &dev,
+    )
+    .err()
+    .unwrap()
+    .to_string();
+    assert!(err.contains("--bdlstm"), "{err}");
     // An RF or VAE folder is not a BD-LSTM run.
     let err = load_bdlstm_run(&fixture().vae_run, &dev).err().unwrap().to_string();
     assert!(err.contains("not a BD-LSTM run"), "{err}");
