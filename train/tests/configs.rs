@@ -258,6 +258,7 @@ fn mutated_configs_parse_or_give_a_clean_error() {
         "configs/rf/tiny.toml",
         "configs/vae/small.toml",
         "configs/rf/small.toml",
+        "configs/bdlstm/small.toml",
     ] {
         let path = root().join(name);
         let text = std::fs::read_to_string(&path).unwrap();
