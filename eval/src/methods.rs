@@ -8,7 +8,7 @@
 
 use std::fmt;
 
-use any4d_data::rng::{Rng, rng};
+use any4d_data::rng::{GOLDEN_GAMMA, Rng, rng, splitmix64};
 use any4d_data::{Clip, DataError};
 use serde::{Deserialize, Serialize};
 
@@ -52,6 +52,10 @@ pub enum MethodKind {
     /// The BD-LSTM baseline, latent adaptation (docs/method.md §5.3): both chains per keyframe segment and the
     /// merge rule.
     Bdlstm,
+    /// The per-vertex mean of `samples` completions by ours (`keyframe_rf`), sample 0 being the single
+    /// completion of the same seed: an estimate of the model's conditional mean, which separates the error of
+    /// the learned distribution's centre from the spread of its samples (not a method of the paper).
+    KeyframeRfMean { samples: u16 },
 }
 
 impl MethodKind {
@@ -74,6 +78,7 @@ impl MethodKind {
             MethodKind::LerpLatent => "lerp_latent".into(),
             MethodKind::StaticNearest => "static_nearest".into(),
             MethodKind::Bdlstm => "bdlstm".into(),
+            MethodKind::KeyframeRfMean { samples } => format!("keyframe_rf_mean{samples}"),
         }
     }
 
@@ -91,11 +96,23 @@ impl MethodKind {
                 tau_star: 0.98,
                 keyframes: KeyframeNoise::Clean,
             },
+            other if other.starts_with("keyframe_rf_mean") => {
+                let n = &other["keyframe_rf_mean".len()..];
+                let samples: u16 = n
+                    .parse()
+                    .map_err(|e| bad(format!("samples {n:?} of keyframe_rf_mean<N>: {e}")))?;
+                if !(2..=MAX_MEAN_SAMPLES).contains(&samples) {
+                    return Err(bad(format!(
+                        "keyframe_rf_mean<N> averages 2..={MAX_MEAN_SAMPLES} samples, got {samples}"
+                    )));
+                }
+                MethodKind::KeyframeRfMean { samples }
+            }
             other => {
                 let rest = other.strip_prefix("impute_until_").ok_or_else(|| {
                     bad(
-                        "unknown method; expected keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest, \
-                         bdlstm or impute_until[_<tau*>[_noisy<level>]]"
+                        "unknown method; expected keyframe_rf, keyframe_rf_mean<N>, replacement_rf, lerp, lerp_latent, \
+                         static_nearest, bdlstm or impute_until[_<tau*>[_noisy<level>]]"
                             .into(),
                     )
                 })?;
@@ -300,6 +317,79 @@ impl<S: WindowSampler> Method for RfMethod<S> {
                 Ok(out)
             })
             .collect()
+    }
+}
+
+/// Most samples a `keyframe_rf_mean<N>` row averages (each one is a full completion).
+pub const MAX_MEAN_SAMPLES: u16 = 64;
+
+/// Seed of sample `k` of a [`SampleMean`] for a request of seed `seed`: sample 0 is `seed` itself.
+pub fn mean_sample_seed(seed: u64, k: usize) -> u64 {
+    if k == 0 {
+        seed
+    } else {
+        splitmix64(seed ^ (k as u64).wrapping_mul(GOLDEN_GAMMA))
+    }
+}
+
+/// The per-vertex mean of several completions of a stochastic method ([`MethodKind::KeyframeRfMean`]): every
+/// request is expanded into `samples` requests with [`mean_sample_seed`] seeds, completed in one batch, and averaged.
+pub struct SampleMean {
+    kind: MethodKind,
+    inner: Box<dyn Method>,
+    samples: usize,
+}
+
+impl SampleMean {
+    /// `kind` must be a mean kind; `inner` completes single samples.
+    pub fn new(kind: MethodKind, inner: Box<dyn Method>) -> Result<Self> {
+        match kind {
+            MethodKind::KeyframeRfMean { samples } => Ok(Self {
+                kind,
+                inner,
+                samples: usize::from(samples),
+            }),
+            other => Err(DataError::new("methods", other.label(), "not a mean of samples")),
+        }
+    }
+}
+
+impl Method for SampleMean {
+    fn kind(&self) -> MethodKind {
+        self.kind
+    }
+
+    fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
+        let mut out = self.complete_batch(&[Request { clip, keyframes, seed }], caption)?;
+        Ok(out.remove(0))
+    }
+
+    fn complete_batch(&self, requests: &[Request<'_>], caption: &str) -> Result<Vec<Vec<[f32; 3]>>> {
+        let k = self.samples;
+        let expanded: Vec<Request<'_>> = requests
+            .iter()
+            .flat_map(|r| {
+                (0..k).map(move |i| Request {
+                    seed: mean_sample_seed(r.seed, i),
+                    ..*r
+                })
+            })
+            .collect();
+        let outs = self.inner.complete_batch(&expanded, caption)?;
+        Ok(outs
+            .chunks(k)
+            .map(|group| {
+                let mut mean = vec![[0.0f32; 3]; group[0].len()];
+                for sample in group {
+                    for (m, v) in mean.iter_mut().zip(sample) {
+                        for c in 0..3 {
+                            m[c] += v[c] / k as f32;
+                        }
+                    }
+                }
+                mean
+            })
+            .collect())
     }
 }
 

@@ -2,10 +2,12 @@
 //! keyframes.
 
 use any4d_data::Clip;
+use any4d_data::DataError;
 use any4d_data::keyframes::Placement;
 use any4d_eval::baselines::VertexBaseline;
 use any4d_eval::methods::{
-    KeyframeNoise, Method, MethodKind, VertexMethod, complete_and_score, hide_non_keyframes, noisy_keyframes,
+    KeyframeNoise, Method, MethodKind, Request, SampleMean, VertexMethod, complete_and_score, hide_non_keyframes,
+    mean_sample_seed, noisy_keyframes,
 };
 use any4d_eval::protocol::{Candidate, ClipRef, Manifest, ManifestOptions, long_horizon_pairs, noise_seed};
 
@@ -365,4 +367,72 @@ fn rf_methods_are_scored_on_their_raw_keyframes_then_assembled() {
     );
     assert_eq!(&raw[..4], &clean[..4], "the first frame stays clean");
     assert!(RfMethod::new(MethodKind::Lerp, Drifting).is_err());
+}
+
+/// A stochastic stand-in: every coordinate of every frame is the seed's low byte, and it counts its requests.
+struct SeedEcho(std::sync::atomic::AtomicUsize);
+
+impl Method for SeedEcho {
+    fn kind(&self) -> MethodKind {
+        MethodKind::KeyframeRf
+    }
+
+    fn complete(
+        &self,
+        clip: &Clip,
+        _keyframes: &[usize],
+        _caption: &str,
+        seed: u64,
+    ) -> Result<Vec<[f32; 3]>, DataError> {
+        self.0.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        Ok(vec![[(seed & 0xff) as f32; 3]; clip.frames * clip.n_vertices])
+    }
+}
+
+#[test]
+fn a_mean_of_samples_averages_the_seeded_completions_with_sample_0_first() {
+    let kind = MethodKind::parse("keyframe_rf_mean4").unwrap();
+    assert_eq!(kind, MethodKind::KeyframeRfMean { samples: 4 });
+    assert_eq!(MethodKind::parse(&kind.label()).unwrap(), kind);
+    for bad in [
+        "keyframe_rf_mean1",
+        "keyframe_rf_mean65",
+        "keyframe_rf_meanx",
+        "keyframe_rf_mean",
+    ] {
+        assert!(MethodKind::parse(bad).is_err(), "{bad}");
+    }
+    assert!(SampleMean::new(MethodKind::Lerp, Box::new(SeedEcho(Default::default()))).is_err());
+    let method = SampleMean::new(kind, Box::new(SeedEcho(Default::default()))).unwrap();
+    let clip = linear_clip(16);
+    let seed = 0x1234_5600 + 7;
+    assert_eq!(mean_sample_seed(seed, 0), seed);
+    let want = (0..4).map(|k| (mean_sample_seed(seed, k) & 0xff) as f32).sum::<f32>() / 4.0;
+    let out = method.complete(&clip, &[0, 15], "", seed).unwrap();
+    assert_eq!(out.len(), 16 * 4);
+    assert!(
+        out.iter().flatten().all(|&v| (v - want).abs() < 1e-4),
+        "{:?} vs {want}",
+        out[0]
+    );
+    // Two requests in one batch: eight inner completions, each request averaged on its own.
+    let other = method.complete(&clip, &[0, 15], "", 99).unwrap();
+    let both = method
+        .complete_batch(
+            &[
+                Request {
+                    clip: &clip,
+                    keyframes: &[0, 15],
+                    seed,
+                },
+                Request {
+                    clip: &clip,
+                    keyframes: &[0, 15],
+                    seed: 99,
+                },
+            ],
+            "",
+        )
+        .unwrap();
+    assert_eq!(both, vec![out, other]);
 }

@@ -10,7 +10,7 @@ use any4d_eval::learned::{
     BdlstmSampler, KeyPosterior, LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor,
 };
 use any4d_eval::methods::vertex_methods;
-use any4d_eval::methods::{Method, MethodKind, RfMethod};
+use any4d_eval::methods::{Method, MethodKind, RfMethod, SampleMean};
 use any4d_eval::tables::reconstruction::Reconstructor;
 use any4d_model::any_vae::VaeKind;
 use any4d_model::rectified_flow::{ReplaceNoise, SampleOptions, Solver};
@@ -164,6 +164,13 @@ pub fn build_methods(
             MethodKind::KeyframeRf | MethodKind::ImputeUntil { .. } => {
                 let m = rf_method(kind, need(&runs.rf, "--rf", kind)?, sampling, device)?;
                 (m.method, m.checkpoint)
+            }
+            MethodKind::KeyframeRfMean { .. } => {
+                let m = rf_method(MethodKind::KeyframeRf, need(&runs.rf, "--rf", kind)?, sampling, device)?;
+                (
+                    Box::new(SampleMean::new(kind, m.method)?) as Box<dyn Method>,
+                    m.checkpoint,
+                )
             }
             MethodKind::ReplacementRf => {
                 let m = rf_method(kind, need(&runs.baseline_rf, "--baseline-rf", kind)?, sampling, device)?;
