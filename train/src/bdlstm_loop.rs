@@ -390,18 +390,7 @@ pub fn resume_bdlstm(run_dir: &Path, backend: Option<backend::Backend>, opts: &B
     let (run, cfg, ckpt) = open_for_resume(run_dir, BdlstmRunConfig::parse, backend, |c: &mut BdlstmRunConfig| {
         &mut c.device
     })?;
-    let record = runs::read_vae_record(run_dir)?;
-    if let Some(given) = &opts.vae_run {
-        let given = std::fs::canonicalize(given).map_err(io_err("resolve VAE run folder", given))?;
-        if given != record.run {
-            return Err(TrainError::Setup(format!(
-                "--vae {} differs from the VAE run {} that {} was trained on",
-                given.display(),
-                record.run.display(),
-                run_dir.display()
-            )));
-        }
-    }
+    let record = runs::recorded_vae(run_dir, opts.vae_run.as_deref())?;
     let devices = run_devices(&cfg.device, None)?;
     let vae = record.load(&devices[0])?;
     run_bdlstm(&cfg, &run, &opts.run, &vae, &devices[0], Some(ckpt))

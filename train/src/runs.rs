@@ -191,6 +191,24 @@ pub fn read_vae_record(run_dir: &Path) -> Result<VaeRunRecord> {
     Ok(record)
 }
 
+/// The VAE record of the run in `run_dir` (an RF or BD-LSTM run) for `--resume`; a `given` `--vae` must name the
+/// same run folder.
+pub fn recorded_vae(run_dir: &Path, given: Option<&Path>) -> Result<VaeRunRecord> {
+    let record = read_vae_record(run_dir)?;
+    if let Some(given) = given {
+        let given = std::fs::canonicalize(given).map_err(io_err("resolve VAE run folder", given))?;
+        if given != record.run {
+            return Err(TrainError::Setup(format!(
+                "--vae {} differs from the VAE run {} that {} was trained on",
+                given.display(),
+                record.run.display(),
+                run_dir.display()
+            )));
+        }
+    }
+    Ok(record)
+}
+
 /// An RF run ready for sampling.
 pub struct LoadedRf {
     /// MMDiT and caption transformer with the newest checkpoint's parameters (the average, docs/method.md §4.8,

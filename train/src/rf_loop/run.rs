@@ -7,7 +7,7 @@ use any4d_model::text::scratch::ScratchTokenizer;
 use burn::prelude::Device;
 
 use crate::backend;
-use crate::error::{Result, TrainError, io_err};
+use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Objective, Outcome, RunOptions};
 use crate::multi_device::{run_devices, train_data_parallel};
 use crate::run_folder::{RunFolder, open_for_resume};
@@ -60,18 +60,7 @@ pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRun
     let (run, cfg, ckpt) = open_for_resume(run_dir, RfRunConfig::parse, backend, |c: &mut RfRunConfig| {
         &mut c.device
     })?;
-    let record = runs::read_vae_record(run_dir)?;
-    if let Some(given) = &opts.vae_run {
-        let given = std::fs::canonicalize(given).map_err(io_err("resolve VAE run folder", given))?;
-        if given != record.run {
-            return Err(TrainError::Setup(format!(
-                "--vae {} differs from the VAE run {} that {} was trained on",
-                given.display(),
-                record.run.display(),
-                run_dir.display()
-            )));
-        }
-    }
+    let record = runs::recorded_vae(run_dir, opts.vae_run.as_deref())?;
     let devices = run_devices(&cfg.device, opts.run.parallel.as_ref())?;
     let vae = record.load(&devices[0])?;
     let tokenizer = ScratchTokenizer::load(run_dir)?;
