@@ -231,8 +231,19 @@ fn run_folders_written_before_the_renames_still_load() {
 /// Stable-toolchain fuzzing of the config loader: 3,000 mutations of the tiny presets (numbers replaced by hostile
 /// values, bytes flipped, lines dropped or duplicated) each parse to a config or a clean error, never a panic;
 /// every accepted config also passes the model-size checks it was validated with.
-#[test]
-fn mutated_configs_parse_or_give_a_clean_error() {
+/// Presets the config mutation tests start from.
+const MUTATED_PRESETS: [&str; 5] = [
+    "configs/vae/tiny.toml",
+    "configs/rf/tiny.toml",
+    "configs/vae/small.toml",
+    "configs/rf/small.toml",
+    "configs/bdlstm/small.toml",
+];
+
+/// Mutates preset lines (hostile values, bit flips, dropped and doubled lines) `rounds` times per preset, or until
+/// `deadline`, and checks that the loader parses or refuses each with a message, never panics. Returns (inputs,
+/// accepted).
+fn mutate_presets(seed: u64, rounds: usize, deadline: Option<std::time::Instant>) -> (usize, usize) {
     use rand::{Rng, SeedableRng};
     let hostile = [
         "0",
@@ -251,20 +262,22 @@ fn mutated_configs_parse_or_give_a_clean_error() {
         "{}",
         "true",
     ];
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-    let mut accepted = 0;
-    for name in [
-        "configs/vae/tiny.toml",
-        "configs/rf/tiny.toml",
-        "configs/vae/small.toml",
-        "configs/rf/small.toml",
-        "configs/bdlstm/small.toml",
-    ] {
-        let path = root().join(name);
-        let text = std::fs::read_to_string(&path).unwrap();
-        let lines: Vec<&str> = text.lines().collect();
-        for _ in 0..750 {
-            let mut out: Vec<String> = lines.iter().map(|l| l.to_string()).collect();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let (mut inputs, mut accepted) = (0, 0);
+    let presets: Vec<(std::path::PathBuf, Vec<String>)> = MUTATED_PRESETS
+        .iter()
+        .map(|name| {
+            let path = root().join(name);
+            let text = std::fs::read_to_string(&path).unwrap();
+            (path, text.lines().map(str::to_string).collect())
+        })
+        .collect();
+    for round in 0.. {
+        if round == rounds || deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+            break;
+        }
+        for (path, lines) in &presets {
+            let mut out = lines.clone();
             for _ in 0..rng.random_range(1..4) {
                 let i = rng.random_range(0..out.len());
                 match rng.random_range(0..4) {
@@ -294,13 +307,38 @@ fn mutated_configs_parse_or_give_a_clean_error() {
                 }
             }
             let mutated = out.join("\n");
-            let result = std::panic::catch_unwind(|| parse_any(&mutated, &path));
-            match result {
+            inputs += 1;
+            match std::panic::catch_unwind(|| parse_any(&mutated, path)) {
                 Ok(Ok(())) => accepted += 1,
                 Ok(Err(e)) => assert!(!e.is_empty()),
-                Err(_) => panic!("{name}: the loader panicked on\n{mutated}"),
+                Err(_) => panic!("{}: the loader panicked on\n{mutated}", path.display()),
             }
         }
     }
+    (inputs, accepted)
+}
+
+#[test]
+fn mutated_configs_parse_or_give_a_clean_error() {
+    let (inputs, accepted) = mutate_presets(11, 750, None);
+    assert_eq!(inputs, 750 * MUTATED_PRESETS.len());
     assert!(accepted > 0, "some mutations (e.g. of comments) must still parse");
+}
+
+/// The long run of the config mutations (`ANY4D_FUZZ_SECS`, default 600; `ANY4D_FUZZ_SEED`), as fuzz/README.md
+/// describes for the readers: `ANY4D_FUZZ_SECS=600 cargo test --workspace --test configs -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn fuzz_configs_for_a_long_time() {
+    let secs: u64 = std::env::var("ANY4D_FUZZ_SECS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(600);
+    let seed: u64 = std::env::var("ANY4D_FUZZ_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(secs);
+    let (inputs, accepted) = mutate_presets(seed, usize::MAX, Some(deadline));
+    println!("config: {inputs} inputs in {secs}s, {accepted} accepted, none panicked");
 }
