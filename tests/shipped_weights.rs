@@ -2,7 +2,8 @@
 //! --vae/--rf/--baseline-rf` and reproduce the metrics committed in `weights/small/check/summary.csv` on the same
 //! few procedural clips (`weights/small/PROVENANCE.md` gives the commands that wrote it).
 //!
-//! Tolerance: 2 % relative (plus 1e-3 absolute on the ×100 scale) per value. The models run in f32 and the
+//! Tolerance: 2 % relative (plus 1e-3 absolute on the ×100 scale) per value. The RFs are stored in f16 and run in
+//! f32 (loading casts them back), as they did when the committed table was written, and the
 //! sampler integrates 16 steps, so a machine whose matrix kernels sum in another order (AVX2 instead of AVX-512)
 //! moves the last digits; a wrong checkpoint, a wrong latent statistic or a changed sampler moves them by far more.
 
