@@ -23,16 +23,16 @@ struct Cli {
 struct LimitArgs {
     /// Most frames per clip (default 10000).
     #[arg(long, global = true, value_name = "N")]
-    max_frames: Option<u64>,
+    limit_frames: Option<u64>,
     /// Most vertex rows (frames × vertices) per clip (default 2^26).
     #[arg(long, global = true, value_name = "N")]
-    max_clip_vertices: Option<u64>,
+    limit_clip_vertices: Option<u64>,
     /// Most bytes read from one input file (default 4 GiB).
     #[arg(long, global = true, value_name = "BYTES")]
-    max_file_bytes: Option<u64>,
+    limit_file_bytes: Option<u64>,
     /// Most bytes of one glTF buffer (default 1 GiB).
     #[arg(long, global = true, value_name = "BYTES")]
-    max_buffer_bytes: Option<u64>,
+    limit_buffer_bytes: Option<u64>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -66,9 +66,12 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let l = &cli.limits;
-    if let Err(e) =
-        any4d_data::limits::set_from_cli(l.max_frames, l.max_clip_vertices, l.max_file_bytes, l.max_buffer_bytes)
-    {
+    if let Err(e) = any4d_data::limits::set_from_cli(
+        l.limit_frames,
+        l.limit_clip_vertices,
+        l.limit_file_bytes,
+        l.limit_buffer_bytes,
+    ) {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
@@ -89,5 +92,44 @@ fn main() -> ExitCode {
             eprintln!("error: {err:#}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// clap's own consistency checks over every subcommand, and no subcommand flag sharing its id or long name with
+    /// a global flag (the size limits): clap accepts such a pair at build time and panics when the command runs.
+    #[test]
+    fn the_command_line_definition_is_consistent() {
+        let cli = super::Cli::command();
+        cli.clone().debug_assert();
+        let globals: Vec<(String, Option<String>)> = cli
+            .get_arguments()
+            .filter(|a| a.is_global_set())
+            .map(|a| (a.get_id().to_string(), a.get_long().map(str::to_string)))
+            .collect();
+        assert!(globals.len() >= 4, "{globals:?}");
+        fn walk(cmd: &clap::Command, path: &str, globals: &[(String, Option<String>)], clashes: &mut Vec<String>) {
+            for a in cmd.get_arguments().filter(|a| !a.is_global_set()) {
+                let (id, long) = (a.get_id().to_string(), a.get_long().map(str::to_string));
+                if globals
+                    .iter()
+                    .any(|(g, gl)| *g == id || (long.is_some() && *gl == long))
+                {
+                    clashes.push(format!("{path} --{}", long.unwrap_or(id)));
+                }
+            }
+            for sub in cmd.get_subcommands() {
+                walk(sub, &format!("{path} {}", sub.get_name()), globals, clashes);
+            }
+        }
+        let mut clashes = Vec::new();
+        walk(&cli, "any4d", &globals, &mut clashes);
+        assert!(
+            clashes.is_empty(),
+            "subcommand flags that shadow a global flag: {clashes:?}"
+        );
     }
 }

@@ -207,8 +207,8 @@ fn bench_data_reports_throughput() {
     }
 }
 
-/// The size limits a user with large real data may raise (`--max-frames`, `--max-clip-vertices`,
-/// `--max-file-bytes`, `--max-buffer-bytes`): an input over a limit is refused with the flag that raises it, the flag
+/// The size limits a user with large real data may raise (`--limit-frames`, `--limit-clip-vertices`,
+/// `--limit-file-bytes`, `--limit-buffer-bytes`): an input over a limit is refused with the flag that raises it, the flag
 /// moves the limit (either way), and values outside `1..=ceiling` are refused before anything runs.
 #[test]
 fn size_limits_are_named_in_refusals_and_adjustable_within_their_ceilings() {
@@ -233,20 +233,20 @@ fn size_limits_are_named_in_refusals_and_adjustable_within_their_ceilings() {
         text(&out).1
     };
     let err = synth(&["--frames", "20000"]);
-    assert!(err.contains("20000") && err.contains("--max-frames"), "{err}");
+    assert!(err.contains("20000") && err.contains("--limit-frames"), "{err}");
     // Raised past the frame limit, the same request now meets the vertex-row limit (20000 × 4096 > 2^26).
-    let err = synth(&["--frames", "20000", "--max-frames", "20000"]);
+    let err = synth(&["--frames", "20000", "--limit-frames", "20000"]);
     assert!(
-        err.contains("vertex rows") && err.contains("--max-clip-vertices"),
+        err.contains("vertex rows") && err.contains("--limit-clip-vertices"),
         "{err}"
     );
     assert!(!store.exists());
     for (flag, value) in [
-        ("--max-frames", "0"),
-        ("--max-frames", "1000001"),
-        ("--max-clip-vertices", "99999999999"),
-        ("--max-file-bytes", "0"),
-        ("--max-buffer-bytes", "18446744073709551615"),
+        ("--limit-frames", "0"),
+        ("--limit-frames", "1000001"),
+        ("--limit-clip-vertices", "99999999999"),
+        ("--limit-file-bytes", "0"),
+        ("--limit-buffer-bytes", "18446744073709551615"),
     ] {
         let out = any4d(&["data", "inspect", "no-such-file.bin", flag, value]);
         let (_, err) = text(&out);
@@ -257,10 +257,10 @@ fn size_limits_are_named_in_refusals_and_adjustable_within_their_ceilings() {
     }
     let obj = tmp.path().join("grid.bin");
     formats::write_clip(&obj, &grid_clip("grid", 4, 40)).unwrap();
-    let out = any4d(&["--max-file-bytes", "100", "data", "inspect", p(&obj)]);
+    let out = any4d(&["--limit-file-bytes", "100", "data", "inspect", p(&obj)]);
     let (stdout, err) = text(&out);
     assert!(
-        format!("{stdout}{err}").contains("more than the limit of 100 bytes (raise with --max-file-bytes)"),
+        format!("{stdout}{err}").contains("more than the limit of 100 bytes (raise with --limit-file-bytes)"),
         "{stdout}{err}"
     );
     let out = any4d(&["data", "inspect", p(&obj)]);

@@ -2,7 +2,7 @@
 //! make the program allocate or compute, and says why its value is safe for real data.
 //!
 //! The four a user with unusually large real data may need to raise are [`Limit`]s, adjustable for one process
-//! (`any4d --max-frames N …`, see [`set_from_cli`]) up to a hard ceiling; the readers ask for their current value.
+//! (`any4d --limit-frames N …`, see [`set_from_cli`]) up to a hard ceiling; the readers ask for their current value.
 //! The `MAX_*` constants are their defaults.
 
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -79,19 +79,24 @@ impl Limit {
 }
 
 /// Most frames in one clip, a window or a generated clip; default [`MAX_FRAMES`], ceiling 10⁶ (9 hours at 30 fps).
-pub static FRAMES: Limit = Limit::new("--max-frames", "frames per clip", MAX_FRAMES as u64, 1_000_000);
+pub static FRAMES: Limit = Limit::new("--limit-frames", "frames per clip", MAX_FRAMES as u64, 1_000_000);
 /// Most vertex rows (frames × vertices) of one clip; default [`MAX_CLIP_VERTICES`], ceiling 2³² rows (48 GiB of
 /// f32 coordinates).
 pub static CLIP_VERTICES: Limit = Limit::new(
-    "--max-clip-vertices",
+    "--limit-clip-vertices",
     "vertex rows (frames × vertices) per clip",
     MAX_CLIP_VERTICES as u64,
     1 << 32,
 );
 /// Most bytes read from one input file; default [`MAX_FILE_BYTES`], ceiling 64 GiB.
-pub static FILE_BYTES: Limit = Limit::new("--max-file-bytes", "bytes per input file", MAX_FILE_BYTES, 1 << 36);
+pub static FILE_BYTES: Limit = Limit::new("--limit-file-bytes", "bytes per input file", MAX_FILE_BYTES, 1 << 36);
 /// Most bytes of one glTF buffer; default [`MAX_BUFFER_BYTES`], ceiling 16 GiB.
-pub static BUFFER_BYTES: Limit = Limit::new("--max-buffer-bytes", "bytes per glTF buffer", MAX_BUFFER_BYTES, 1 << 34);
+pub static BUFFER_BYTES: Limit = Limit::new(
+    "--limit-buffer-bytes",
+    "bytes per glTF buffer",
+    MAX_BUFFER_BYTES,
+    1 << 34,
+);
 
 /// Applies the command line's limit flags (`None` keeps a limit's current value).
 pub fn set_from_cli(

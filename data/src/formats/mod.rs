@@ -32,7 +32,7 @@ use skeletal::{ReadOptions, SkinStats, TakeInfo};
 
 /// Largest clip file (`.bin`, `.gltf`, `.glb`, one `.obj` frame) read into memory by default: 4 GiB, far above any
 /// clip the method uses (a 4096-vertex, 300-frame clip is 15 MB), so only a wrong path (a disk image, `/dev/zero`)
-/// hits it. The current value is [`FILE_BYTES`](crate::limits::FILE_BYTES) (`--max-file-bytes`).
+/// hits it. The current value is [`FILE_BYTES`](crate::limits::FILE_BYTES) (`--limit-file-bytes`).
 pub use crate::limits::MAX_FILE_BYTES;
 
 /// [`read_file`] with the current clip-file limit ([`FILE_BYTES`](crate::limits::FILE_BYTES)).

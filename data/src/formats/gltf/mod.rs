@@ -36,7 +36,7 @@ pub const DEFAULT_FPS: f32 = 30.0;
 /// Most numbers (count × components) one accessor may decode to: 2^24 are 128 MiB as f64, a 4 M-vertex position
 /// accessor; it bounds accessors whose count no buffer bytes back (sparse or without a buffer view).
 pub const MAX_ACCESSOR_VALUES: usize = 1 << 24;
-/// Largest buffer (GLB chunk, `data:` URI or external file) read by default (`--max-buffer-bytes`).
+/// Largest buffer (GLB chunk, `data:` URI or external file) read by default (`--limit-buffer-bytes`).
 pub use crate::limits::MAX_BUFFER_BYTES;
 /// Most vertex updates (per frame: vertices × (1 + morph targets with a non-zero weight + joint influences))
 /// one read may do: 2^34 is about a minute of baking, so a small file cannot keep an import busy for hours.
