@@ -334,17 +334,7 @@ impl Objective for BdlstmObjective {
 
 fn open_store(data: &Path, cfg: &BdlstmRunConfig, vae: &LoadedVae) -> Result<Store> {
     let store = Store::open(data)?;
-    vae.frame_vae()?;
-    if vae.tokens() > store.p() {
-        return Err(TrainError::Setup(format!(
-            "the VAE run {} encodes P = {} FPS tokens, the store {} holds {}: import it with --p {} or more",
-            vae.run.display(),
-            vae.tokens(),
-            data.display(),
-            store.p(),
-            vae.tokens()
-        )));
-    }
+    vae.check_store(&store)?;
     if store.frames() < cfg.bdlstm.min_window {
         return Err(TrainError::Setup(format!(
             "the store {} holds {}-frame clips, shorter than bdlstm.min_window = {}",

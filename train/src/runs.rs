@@ -50,6 +50,23 @@ impl LoadedVae {
         }
     }
 
+    /// Refuses a store whose clips hold fewer FPS tokens than this frame-wise VAE encodes (or a sequence-wise VAE):
+    /// what every model trained on its latents needs.
+    pub fn check_store(&self, store: &any4d_data::store::Store) -> Result<()> {
+        self.frame_vae()?;
+        if self.tokens() > store.p() {
+            return Err(TrainError::Setup(format!(
+                "the VAE run {} encodes P = {} FPS tokens, the store {} holds {}: import it with --p {} or more",
+                self.run.display(),
+                self.tokens(),
+                store.dir().display(),
+                store.p(),
+                self.tokens()
+            )));
+        }
+        Ok(())
+    }
+
     /// FPS tokens P the VAE encodes (`vae.tokens`).
     pub fn tokens(&self) -> usize {
         self.config.vae.tokens

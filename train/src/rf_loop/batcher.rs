@@ -354,17 +354,7 @@ pub const MAX_ACTIVATION_BYTES: u128 = 1 << 40;
 
 /// docs/method.md §4.1: the RF slots must match the VAE latents and the store windows.
 pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
-    vae.frame_vae()?;
-    if vae.tokens() > store.p() {
-        return Err(TrainError::Setup(format!(
-            "the VAE run {} encodes P = {} FPS tokens, the store {} holds {}: import it with --p {} or more",
-            vae.run.display(),
-            vae.tokens(),
-            store.dir().display(),
-            store.p(),
-            vae.tokens()
-        )));
-    }
+    vae.check_store(store)?;
     let c = vae.latent_channels();
     if cfg.model.channels != c {
         return Err(TrainError::Setup(format!(
