@@ -209,7 +209,7 @@ pub struct RunArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Methods, comma-separated: keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest, bdlstm,
-    /// impute_until_0.98, impute_until_0.98_noisy1.
+    /// impute_until_0.98, impute_until_0.98_noisy1, keyframe_rf_mean8 (mean of 8 samples by ours).
     #[arg(
         long,
         value_delimiter = ',',
