@@ -359,3 +359,72 @@ fn the_readme_example_completes_the_shipped_poses() {
         .collect();
     assert_eq!(got.frame(0)[0].to_vec(), xyz, "frame 0 is start.obj");
 }
+
+#[test]
+fn average_writes_the_mean_of_the_samples_with_exact_keyframes() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("walk.bin");
+    let clip = user_clip(16);
+    write_clip(&input, &clip).unwrap();
+    let (rf, inp) = (shipped_rf(), s(&input));
+    let go = |out: &Path, extra: &[&str]| {
+        let o = s(out);
+        let mut args = vec![
+            "complete",
+            "--clip",
+            &inp,
+            "--keyframes",
+            "0,6,15",
+            "--rf",
+            &rf,
+            "--steps",
+            "4",
+            "--samples",
+            "3",
+            "--out",
+            &o,
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let (ok, log) = go(&dir.path().join("s.bin"), &[]);
+    assert!(ok, "{log}");
+    let mean_path = dir.path().join("mean.bin");
+    let (ok, log) = go(&mean_path, &["--average"]);
+    assert!(ok, "{log}");
+    assert!(!dir.path().join("mean_s0.bin").exists(), "--average writes one file");
+    let samples: Vec<Clip> = (0..3)
+        .map(|k| read_clip(&dir.path().join(format!("s_s{k}.bin"))).unwrap())
+        .collect();
+    let mean = read_clip(&mean_path).unwrap();
+    assert_eq!((mean.frames, mean.n_vertices), (16, clip.n_vertices));
+    for f in [0, 6, 15] {
+        assert_eq!(mean.frame(f), clip.frame(f), "keyframe {f} is not exact");
+    }
+    let mut spread = 0.0f32;
+    for (i, m) in mean.vertices.iter().enumerate() {
+        for c in 0..3 {
+            let want = samples.iter().map(|x| x.vertices[i][c]).sum::<f32>() / 3.0;
+            assert!(
+                (m[c] - want).abs() <= 1e-4 * want.abs().max(1.0),
+                "row {i}: {m:?} vs {want}"
+            );
+            spread = spread.max((samples[0].vertices[i][c] - want).abs());
+        }
+    }
+    assert!(spread > 1e-3, "the samples should differ, or the mean proves nothing");
+    let (ok, log) = run(&[
+        "complete",
+        "--clip",
+        &inp,
+        "--keyframes",
+        "0,15",
+        "--rf",
+        &rf,
+        "--average",
+        "--out",
+        &s(&mean_path),
+        "--force",
+    ]);
+    assert!(!ok && log.contains("--samples 2 or more"), "{log}");
+}

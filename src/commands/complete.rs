@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use any4d_data::formats;
 use any4d_eval::view::{DEFAULT_FPS, Page, Panel, write_page};
 use any4d_train::backend::{self, Backend, Precision};
-use any4d_train::complete::{CompleteOptions, KeyMeshes, SAMPLE_SEED_STRIDE, complete, sample_path};
+use any4d_train::complete::{CompleteOptions, KeyMeshes, SAMPLE_SEED_STRIDE, average_samples, complete, sample_path};
 use any4d_train::evaluate::{SamplingSetup, keyframe_method};
 use anyhow::{Context, bail};
 use clap::Args;
@@ -51,6 +51,10 @@ pub struct CompleteArgs {
     /// Number of samples; more than one writes `<out stem>_s<k>.<ext>`.
     #[arg(long, default_value_t = 1)]
     pub samples: usize,
+    /// Write one file, `--out`: the per-vertex mean of the `--samples` (at least 2), keyframes exact. Smoother than
+    /// any one sample, and nearer the ground truth on average (experiments/2026-12-02-small-w256).
+    #[arg(long)]
+    pub average: bool,
     /// Classifier-free guidance weight (1.0 in the paper: one conditional branch).
     #[arg(long, default_value_t = 1.0)]
     pub cfg: f64,
@@ -96,11 +100,15 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
     if !(1..=MAX_SAMPLES).contains(&args.samples) {
         bail!("--samples {} is outside 1..={MAX_SAMPLES}", args.samples);
     }
+    if args.average && args.samples < 2 {
+        bail!("--average needs --samples 2 or more (it writes their per-vertex mean)");
+    }
+    let written = if args.average { 1 } else { args.samples };
     if extend && args.frames.is_none() {
         bail!("`extend` needs the length of the output: --frames N (e.g. 31 or 91)");
     }
-    let outputs: Vec<PathBuf> = (0..args.samples)
-        .map(|k| sample_path(&args.out, k, args.samples))
+    let outputs: Vec<PathBuf> = (0..written)
+        .map(|k| sample_path(&args.out, k, written))
         .chain(args.view.clone())
         .collect();
     if !args.force
@@ -151,7 +159,10 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
         seed: args.seed,
         samples: args.samples,
     };
-    let clips = complete(&keys, model.method.as_ref(), model.window, model.tokens, &opts)?;
+    let mut clips = complete(&keys, model.method.as_ref(), model.window, model.tokens, &opts)?;
+    if args.average {
+        clips = vec![average_samples(&clips, &keys)?];
+    }
     println!(
         "{} frames from keyframes {:?} of {} vertices, caption {caption:?}, model {}",
         frames,
@@ -169,10 +180,14 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
             .iter()
             .enumerate()
             .map(|(k, clip)| Panel {
-                label: format!(
-                    "sample {k} (seed {})",
-                    args.seed.wrapping_add(k as u64 * SAMPLE_SEED_STRIDE)
-                ),
+                label: if args.average {
+                    format!("mean of {} samples (seeds from {})", args.samples, args.seed)
+                } else {
+                    format!(
+                        "sample {k} (seed {})",
+                        args.seed.wrapping_add(k as u64 * SAMPLE_SEED_STRIDE)
+                    )
+                },
                 clip: clip.clone(),
                 metrics: Vec::new(),
             })
