@@ -360,27 +360,6 @@ pub fn benchmark_keys(n: usize, last: usize) -> Result<KeyMeshes> {
     )
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn benchmark_meshes_have_the_asked_size_and_two_keyframes() {
-        let k = benchmark_keys(512, 15).unwrap();
-        assert_eq!((k.n_vertices, k.frames()), (512, vec![0, 15]));
-        assert!(k.keys.iter().all(|(_, m)| m.len() == 512));
-        assert_ne!(k.keys[0].1, k.keys[1].1, "the second keyframe is turned");
-        assert!(benchmark_keys(2, 15).is_err());
-    }
-
-    #[test]
-    fn sample_paths_number_several_samples() {
-        assert_eq!(sample_path(Path::new("a/b.glb"), 0, 1), Path::new("a/b.glb"));
-        assert_eq!(sample_path(Path::new("a/b.glb"), 1, 2), Path::new("a/b_s1.glb"));
-        assert_eq!(sample_path(Path::new("a/objs"), 0, 3), Path::new("a/objs_s0"));
-    }
-}
-
 /// The per-vertex mean of several completions of the same keyframes (`complete --average`), with every keyframe
 /// copied back exactly. It estimates the centre of the model's distribution, which beat linear interpolation where
 /// single samples did not (experiments/2026-12-02-small-w256); it is smoother than any one sample and, like any
@@ -421,4 +400,25 @@ pub fn average_samples(samples: &[Clip], keys: &KeyMeshes) -> Result<Clip> {
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn benchmark_meshes_have_the_asked_size_and_two_keyframes() {
+        let k = benchmark_keys(512, 15).unwrap();
+        assert_eq!((k.n_vertices, k.frames()), (512, vec![0, 15]));
+        assert!(k.keys.iter().all(|(_, m)| m.len() == 512));
+        assert_ne!(k.keys[0].1, k.keys[1].1, "the second keyframe is turned");
+        assert!(benchmark_keys(2, 15).is_err());
+    }
+
+    #[test]
+    fn sample_paths_number_several_samples() {
+        assert_eq!(sample_path(Path::new("a/b.glb"), 0, 1), Path::new("a/b.glb"));
+        assert_eq!(sample_path(Path::new("a/b.glb"), 1, 2), Path::new("a/b_s1.glb"));
+        assert_eq!(sample_path(Path::new("a/objs"), 0, 3), Path::new("a/objs_s0"));
+    }
 }
