@@ -858,9 +858,6 @@ impl WindowSampler for BdlstmSampler {
         let z = self
             .stats
             .destandardize_motion(Tensor::stack::<4>(frames, 1).reshape([1, t, p, c]));
-        let all: Vec<usize> = (0..t).collect();
-        let mut enc_all = enc;
-        enc_all.frames = all;
-        self.codec.decode(&enc_all, z)
+        self.codec.decode(&enc, z)
     }
 }

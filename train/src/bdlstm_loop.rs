@@ -427,8 +427,8 @@ pub struct LoadedBdlstm {
     pub model: BdLstm<LatentCodec>,
     /// The run's resolved config.
     pub config: BdlstmRunConfig,
-    /// The VAE run it was trained on.
-    pub vae: VaeRunRecord,
+    /// The VAE run it was trained on (its recorded checkpoint, loaded: it sizes the codec and decodes completions).
+    pub vae: LoadedVae,
     /// The run folder (canonical path).
     pub run: PathBuf,
     /// Its newest checkpoint's step.
@@ -441,17 +441,17 @@ pub fn load_bdlstm_run(run_dir: &Path, device: &Device) -> Result<LoadedBdlstm> 
     let run = std::fs::canonicalize(run_dir).map_err(io_err("open run folder", run_dir))?;
     let config_path = run.join(CONFIG_FILE);
     let text = std::fs::read_to_string(&config_path).map_err(io_err("read", &config_path))?;
-    if !text.contains("[bdlstm]") {
+    let is_bdlstm = text.parse::<toml::Table>().map_or(true, |t| t.contains_key("bdlstm"));
+    if !is_bdlstm {
         return Err(run_err(
             &run,
             "not a BD-LSTM run folder (its config has no [bdlstm] table)",
         ));
     }
     let config = BdlstmRunConfig::parse(&text, &config_path)?;
-    let vae = runs::read_vae_record(&run)?;
-    let loaded_vae = vae.load(device)?;
+    let vae = runs::read_vae_record(&run)?.load(device)?;
     let (ckpt, step) = runs::newest_checkpoint(&run)?;
-    let model = config.init(loaded_vae.tokens(), loaded_vae.latent_channels(), device);
+    let model = config.init(vae.tokens(), vae.latent_channels(), device);
     let (model, _) = crate::checkpoint::load_for_sampling(model, &ckpt)?;
     Ok(LoadedBdlstm {
         model,

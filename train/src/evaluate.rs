@@ -178,10 +178,9 @@ pub fn build_methods(
             }
             MethodKind::Bdlstm => {
                 let run = load_bdlstm_run(need(&runs.bdlstm, "--bdlstm", kind)?, device)?;
-                let vae = run.vae.load(device)?;
-                let codec = codec_of(&vae, sampling.posterior, device)?;
+                let codec = codec_of(&run.vae, sampling.posterior, device)?;
                 let merge = run.config.merge_config();
-                let sampler = BdlstmSampler::new(codec, run.model.valid(), vae.stats, merge)?;
+                let sampler = BdlstmSampler::new(codec, run.model.valid(), run.vae.stats, merge)?;
                 (
                     Box::new(RfMethod::new(kind, sampler)?) as Box<dyn Method>,
                     checkpoint_label(&run.run, run.step),

@@ -18,37 +18,13 @@ use any4d_train::loop_common::{Objective, Outcome, RunOptions, StopFlag, train};
 use any4d_train::progress::ProgressMode;
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, VALID_FILE, read_table};
 use any4d_train::runs::load_vae_run;
-use any4d_train::vae_loop::train_vae;
 use burn::prelude::Device;
-use common::{params, quiet_setup, root, serial, synth_store, tiny_vae};
+use common::{VaeFixture, params, quiet_setup, root, serial, vae_fixture};
 
-struct Fixture {
-    _dir: tempfile::TempDir,
-    dir: PathBuf,
-    store: PathBuf,
-    vae_run: PathBuf,
-}
-
-/// A store of 4-frame clips and a finished tiny VAE run on it, made once per test process.
-fn fixture() -> &'static Fixture {
-    static FIXTURE: OnceLock<Fixture> = OnceLock::new();
-    FIXTURE.get_or_init(|| {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let store = synth_store(dir.path(), 4);
-        let mut cfg = tiny_vae(6);
-        cfg.train.micro_batch = 4;
-        cfg.train.checkpoint_every = 6;
-        cfg.train.valid_every = 6;
-        let opts = run_options(&store, dir.path(), "vae");
-        let (run, outcome) = train_vae(&cfg, &opts).expect("tiny VAE run");
-        assert!(matches!(outcome, Outcome::Finished { .. }), "{outcome:?}");
-        Fixture {
-            dir: dir.path().to_path_buf(),
-            vae_run: run.root().to_path_buf(),
-            store,
-            _dir: dir,
-        }
-    })
+/// The shared store and tiny VAE run (seed 4), made once per test process.
+fn fixture() -> &'static VaeFixture {
+    static FIXTURE: OnceLock<VaeFixture> = OnceLock::new();
+    FIXTURE.get_or_init(|| vae_fixture(4))
 }
 
 fn run_options(store: &std::path::Path, dir: &std::path::Path, name: &str) -> RunOptions {

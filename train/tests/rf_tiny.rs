@@ -26,46 +26,15 @@ use any4d_train::rf_loop::{
 };
 use any4d_train::run_folder::{LOG_FILE, METRICS_FILE, RunFolder, SAMPLES_FILE, VALID_FILE, read_table};
 use any4d_train::runs::{LoadedVae, VAE_RUN_FILE, load_rf_run, load_vae_run};
-use any4d_train::vae_loop::train_vae;
 use burn::prelude::{Device, Tensor};
-use common::{copy_dir, params, quiet_setup, root, serial, synth_store, tiny_vae};
+use common::{VaeFixture, copy_dir, params, quiet_setup, root, serial, vae_fixture};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-/// A procedural store (4-frame clips, P = 32) and a finished tiny VAE run on it, made once per test process.
-struct Fixture {
-    _dir: tempfile::TempDir,
-    dir: PathBuf,
-    store: PathBuf,
-    vae_run: PathBuf,
-}
-
-fn fixture() -> &'static Fixture {
-    static FIXTURE: OnceLock<Fixture> = OnceLock::new();
-    FIXTURE.get_or_init(|| {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let store = synth_store(dir.path(), 1); // 7 TRAIN and 3 VAL clips
-        let mut cfg = tiny_vae(6);
-        cfg.train.micro_batch = 4;
-        cfg.train.checkpoint_every = 6;
-        cfg.train.valid_every = 6;
-        let opts = RunOptions {
-            data: store.clone(),
-            runs_dir: dir.path().join("runs"),
-            name: "vae".into(),
-            progress: ProgressMode::Quiet,
-            stop: StopFlag::new(),
-            parallel: None,
-        };
-        let (run, outcome) = train_vae(&cfg, &opts).expect("tiny VAE run");
-        assert!(matches!(outcome, Outcome::Finished { .. }), "{outcome:?}");
-        Fixture {
-            dir: dir.path().to_path_buf(),
-            vae_run: run.root().to_path_buf(),
-            store,
-            _dir: dir,
-        }
-    })
+/// The shared store and tiny VAE run (seed 1), made once per test process.
+fn fixture() -> &'static VaeFixture {
+    static FIXTURE: OnceLock<VaeFixture> = OnceLock::new();
+    FIXTURE.get_or_init(|| vae_fixture(1))
 }
 
 /// configs/rf/tiny.toml sized for the fixture: T = 4, k_max = 3, `steps` steps of 4 clips, no validation samples.

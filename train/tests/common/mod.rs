@@ -257,3 +257,44 @@ pub fn toy_configs(steps: u64) -> (TrainConfig, OptimConfig) {
     };
     (train, optim)
 }
+
+/// A procedural store (4-frame clips, P = 32, drawn with `store_seed`) and a finished 6-step tiny VAE run on it, in
+/// a temporary folder that lives as long as the fixture: what the RF and BD-LSTM tests train on.
+pub struct VaeFixture {
+    _dir: tempfile::TempDir,
+    /// The temporary folder (runs go to `dir/runs`).
+    pub dir: PathBuf,
+    /// The store.
+    pub store: PathBuf,
+    /// The VAE run folder.
+    pub vae_run: PathBuf,
+}
+
+/// Makes a [`VaeFixture`]; callers keep it in a `OnceLock` so a test process trains the VAE once.
+pub fn vae_fixture(store_seed: u64) -> VaeFixture {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let store = synth_store(dir.path(), store_seed);
+    let mut cfg = tiny_vae(6);
+    cfg.train.micro_batch = 4;
+    cfg.train.checkpoint_every = 6;
+    cfg.train.valid_every = 6;
+    let opts = any4d_train::loop_common::RunOptions {
+        data: store.clone(),
+        runs_dir: dir.path().join("runs"),
+        name: "vae".into(),
+        progress: ProgressMode::Quiet,
+        stop: StopFlag::new(),
+        parallel: None,
+    };
+    let (run, outcome) = any4d_train::vae_loop::train_vae(&cfg, &opts).expect("tiny VAE run");
+    assert!(
+        matches!(outcome, any4d_train::loop_common::Outcome::Finished { .. }),
+        "{outcome:?}"
+    );
+    VaeFixture {
+        dir: dir.path().to_path_buf(),
+        vae_run: run.root().to_path_buf(),
+        store,
+        _dir: dir,
+    }
+}
