@@ -266,6 +266,29 @@ impl MeshCodec {
         real_rows(x, enc.n_real, &enc.id)
     }
 
+    /// Encodes the reference (frame 0) of a normalised window and nothing else: E₀, x̄₀ and z₀ for decoding, as a
+    /// model conditioned on the reference mesh alone needs (the AnimateAnyMesh reference, docs/method.md §5.5). No
+    /// other frame of `clip` is read: the encoder sees frame 0 held still for `frames` frames (frame-wise VAE: frame
+    /// 0 alone), so `mu` is the motion latent of a motionless window.
+    ///
+    /// # Shapes
+    /// `clip.vertices`: `[T, N_v]` rows (only frame 0 read); returns `mu` `[1, 1, P, C]`.
+    pub fn encode_reference(&self, clip: &Clip) -> Result<WindowEncoding> {
+        let Some(frames) = self.vae.clip_frames() else {
+            return self.encode(clip, &[0]);
+        };
+        if clip.frames == 0 {
+            return Err(DataError::new(&clip.id, "frames", "the window has no frame 0"));
+        }
+        let still = Clip {
+            vertices: clip.frame(0).repeat(frames),
+            frames,
+            ..clip.clone()
+        };
+        let all: Vec<usize> = (0..frames).collect();
+        self.encode(&still, &all)
+    }
+
     /// (E4) encode → posterior mean (or the codec's [`KeyPosterior`]) → decode of every frame of a normalised window
     /// (P-Table 5).
     ///
@@ -383,8 +406,19 @@ impl LearnedModels {
         stats: LatentStats,
         text: Box<dyn TextEncoder + Send + Sync>,
     ) -> Result<Self> {
-        codec.require_frame_wise("learned models")?;
         let bad = |field: &str, reason: String| Err(DataError::new("learned models", field, reason));
+        if codec.vae().clip_frames().is_some()
+            && (rf_config.frames != 1 || rf_config.conditioning != KeyframeConditioning::None)
+        {
+            return bad(
+                "rf config",
+                format!(
+                    "an RF on the sequence-wise VAE (the AnimateAnyMesh reference) has one trajectory slot and no \
+                     keyframes: needs frames = 1 and conditioning none, got frames = {} and {:?}",
+                    rf_config.frames, rf_config.conditioning
+                ),
+            );
+        }
         if let Err(msg) = rf_config.validate() {
             return bad("rf config", msg);
         }
@@ -452,17 +486,19 @@ impl LearnedModels {
 pub struct SampledWindow {
     /// Encoding of frame 0 and the keyframes (E₀, x̄₀, z₀ for decoding).
     pub encoding: WindowEncoding,
-    /// Raw keyframe latents μ at the keyframe frames, zero elsewhere, `[1, T, P, C]`.
+    /// Raw keyframe latents μ at the keyframe frames, zero elsewhere, `[1, S, P, C]` with S = the network's slots
+    /// (T; 1 for the AnimateAnyMesh reference, which has no keyframes: zero).
     pub keyframe_latents: Tensor<4>,
-    /// Keyframe mask m, `[T]`, 1 = keyframe.
+    /// Keyframe mask m, `[S]`, 1 = keyframe.
     pub mask: Vec<f32>,
-    /// De-standardized sampled latents, `[1, T, P, C]` (the VAE's layout).
+    /// De-standardized sampled latents, `[1, S, P, C]` (the VAE's layout).
     pub latents: Tensor<4>,
 }
 
 /// An RF method's window sampler (docs/method.md §4.6): keyframe latents = posterior mean μ, standardized; ε from the
-/// seed; [`sample_mmdit`] with the mode's input rule ((R3) ours, (R7)–(R8) baseline, (R9) impute-until-τ*);
-/// de-standardize; decode every frame with E₀ of the reference.
+/// seed; [`sample_mmdit`] with the mode's input rule ((R3) ours, (R7)–(R8) baseline, (R9) impute-until-τ*, none for
+/// the AnimateAnyMesh reference of §5.5 on the sequence-wise VAE); de-standardize; decode every frame with E₀ of the
+/// reference.
 pub struct RfSampler {
     models: Arc<LearnedModels>,
     options: SampleOptions,
@@ -521,6 +557,7 @@ impl RfSampler {
             MethodKind::KeyframeRf => (KeyframeConditioning::InputMask, base.tau_star),
             MethodKind::ReplacementRf => (KeyframeConditioning::ReplaceNoised, base.tau_star),
             MethodKind::ImputeUntil { tau_star, .. } => (KeyframeConditioning::ImputeUntil, f64::from(tau_star)),
+            MethodKind::Aam => (KeyframeConditioning::None, base.tau_star),
             other => {
                 return Err(DataError::new(
                     "rf sampler",
@@ -529,6 +566,17 @@ impl RfSampler {
                 ));
             }
         };
+        let sequencewise = models.codec.vae().clip_frames().is_some();
+        if (kind == MethodKind::Aam) != sequencewise {
+            let reason = if sequencewise {
+                "needs an RF trained on a frame-wise VAE; this one is the AnimateAnyMesh reference (an RF on the \
+                 sequence-wise VAE): evaluate it as method `aam`"
+            } else {
+                "needs the AnimateAnyMesh reference, an RF trained on a sequence-wise VAE (configs/rf/aam_*.toml); \
+                 this RF was trained on a frame-wise VAE"
+            };
+            return Err(DataError::new("rf sampler", kind.label(), reason));
+        }
         let options = SampleOptions {
             conditioning,
             tau_star,
@@ -558,19 +606,29 @@ impl RfSampler {
         let m = &self.models;
         let cfg = &m.rf_config;
         let device = m.codec.device().clone();
+        // Latent slots of the network: T frames, or the one trajectory slot of the sequence-wise VAE.
         let t = cfg.frames;
+        let sequencewise = m.codec.vae().clip_frames();
+        let window = sequencewise.unwrap_or(t);
         let mut windows = Vec::with_capacity(requests.len());
         for r in requests {
             let clip = r.clip;
-            if clip.frames != t {
+            if clip.frames != window {
                 return Err(DataError::new(
                     &clip.id,
                     "frames",
-                    format!("the window has {} frames, the RF was built for T = {t}", clip.frames),
+                    format!(
+                        "the window has {} frames, the RF was built for T = {window}",
+                        clip.frames
+                    ),
                 ));
             }
             let keys = keyframe_list(clip, r.keyframes)?;
-            let encoding = m.codec.encode(clip, &encoded_frames(&keys))?;
+            let encoding = match sequencewise {
+                // docs/method.md §5.5: the reference mesh and the caption only; no keyframe latent, no mask.
+                Some(_) => m.codec.encode_reference(clip)?,
+                None => m.codec.encode(clip, &encoded_frames(&keys))?,
+            };
             let c = encoding.z0.dims()[2];
             if c != cfg.channels {
                 return Err(DataError::new(
@@ -582,7 +640,10 @@ impl RfSampler {
                     ),
                 ));
             }
-            let (keyframe_latents, mask) = scatter_keyframes(&encoding, &keys, &device)?;
+            let (keyframe_latents, mask) = match sequencewise {
+                Some(_) => (Tensor::zeros([1, 1, encoding.z0.dims()[1], c], &device), vec![0.0]),
+                None => scatter_keyframes(&encoding, &keys, &device)?,
+            };
             windows.push((encoding, keyframe_latents, mask));
         }
         let Some((first, _, _)) = windows.first() else {

@@ -3,8 +3,8 @@
 //!
 //! Methods: keyframe-conditioned RF (ours, (R3)–(R6)), non-keyframe RF with sampling-time replacement (the
 //! paper's Baseline, (R7)–(R8)), SceneMI-style impute-until-τ* with clean or noisy keyframes ((R9), §5.4), linear
-//! interpolation in vertex and latent space ((L1), §5.2), the static nearest keyframe and the BD-LSTM baseline (§5.3,
-//! latent adaptation).
+//! interpolation in vertex and latent space ((L1), §5.2), the static nearest keyframe, the BD-LSTM baseline (§5.3,
+//! latent adaptation) and the AnimateAnyMesh reference (§5.5: an RF on the sequence-wise VAE, no keyframes).
 
 use std::fmt;
 
@@ -56,7 +56,15 @@ pub enum MethodKind {
     /// completion of the same seed: an estimate of the model's conditional mean, which separates the error of
     /// the learned distribution's centre from the spread of its samples (not a method of the paper).
     KeyframeRfMean { samples: u16 },
+    /// The AnimateAnyMesh reference (docs/method.md §5.5): an RF on the sequence-wise VAE's latents, conditioned on
+    /// the reference mesh (frame 0) and the caption only, sampled with CFG [`AAM_GUIDANCE`]; keyframes enter only
+    /// through the ground-truth replacement every row shares.
+    Aam,
 }
+
+/// Classifier-free guidance weight of the AnimateAnyMesh reference's sampler (its code's default, docs/method.md
+/// §5.5); ours and the Baseline sample with the paper's 1.0.
+pub const AAM_GUIDANCE: f64 = 3.0;
 
 impl MethodKind {
     /// Label used in tables, file names and manifests: `keyframe_rf`, `replacement_rf`, `impute_until_0.98_noisy1`, …
@@ -79,6 +87,7 @@ impl MethodKind {
             MethodKind::StaticNearest => "static_nearest".into(),
             MethodKind::Bdlstm => "bdlstm".into(),
             MethodKind::KeyframeRfMean { samples } => format!("keyframe_rf_mean{samples}"),
+            MethodKind::Aam => "aam".into(),
         }
     }
 
@@ -92,6 +101,7 @@ impl MethodKind {
             "lerp_latent" => MethodKind::LerpLatent,
             "static_nearest" => MethodKind::StaticNearest,
             "bdlstm" => MethodKind::Bdlstm,
+            "aam" => MethodKind::Aam,
             "impute_until" => MethodKind::ImputeUntil {
                 tau_star: 0.98,
                 keyframes: KeyframeNoise::Clean,
@@ -112,7 +122,7 @@ impl MethodKind {
                 let rest = other.strip_prefix("impute_until_").ok_or_else(|| {
                     bad(
                         "unknown method; expected keyframe_rf, keyframe_rf_mean<N>, replacement_rf, lerp, lerp_latent, \
-                         static_nearest, bdlstm or impute_until[_<tau*>[_noisy<level>]]"
+                         static_nearest, bdlstm, aam or impute_until[_<tau*>[_noisy<level>]]"
                             .into(),
                     )
                 })?;
@@ -255,7 +265,8 @@ impl<S: WindowSampler> RfMethod<S> {
             | MethodKind::ReplacementRf
             | MethodKind::ImputeUntil { .. }
             | MethodKind::LerpLatent
-            | MethodKind::Bdlstm => Ok(Self { kind, sampler }),
+            | MethodKind::Bdlstm
+            | MethodKind::Aam => Ok(Self { kind, sampler }),
             other => Err(DataError::new("method", other.label(), "is not a model-based method")),
         }
     }

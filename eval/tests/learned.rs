@@ -625,8 +625,25 @@ fn mismatched_parts_and_bad_windows_are_errors() {
         .expect("text width");
     assert!(e.to_string().contains("text_dim 16"), "{e}");
     let seq = DyMeshVaeConfig::tiny().with_frames(T).init(&device);
-    let seq_codec = Arc::new(MeshCodec::new(AnyMeshVae::Sequencewise(seq), P, PadTo::BatchMax, device).unwrap());
+    let seq_codec =
+        Arc::new(MeshCodec::new(AnyMeshVae::Sequencewise(seq), P, PadTo::BatchMax, device.clone()).unwrap());
     assert!(LatentLerpSampler::new(seq_codec.clone()).is_err());
+    // An RF on the sequence-wise VAE has one trajectory slot and no keyframes (the AnimateAnyMesh reference).
+    let per_frame = MmditConfig {
+        frames: T,
+        channels: C,
+        ..MmditConfig::tiny()
+    };
+    let e = LearnedModels::new(
+        seq_codec.clone(),
+        per_frame.init(&device),
+        per_frame,
+        stats(),
+        Box::new(ByteText),
+    )
+    .err()
+    .expect("slots");
+    assert!(e.to_string().contains("one trajectory slot"), "{e}");
     let e = seq_codec.encode(&gt, &[0, 3]).unwrap_err();
     assert!(e.to_string().contains("whole windows"), "{e}");
 }

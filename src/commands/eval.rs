@@ -208,7 +208,7 @@ pub struct RunArgs {
     /// Output folder for summary.md/.csv, clips.parquet, manifest.json, strips and plots.
     #[arg(long)]
     pub out: PathBuf,
-    /// Methods, comma-separated: keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest, bdlstm,
+    /// Methods, comma-separated: keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest, bdlstm, aam,
     /// impute_until_0.98, impute_until_0.98_noisy1, keyframe_rf_mean8 (mean of 8 samples by ours).
     #[arg(
         long,
@@ -231,6 +231,11 @@ pub struct RunArgs {
     /// BD-LSTM run (`any4d train bdlstm`; method `bdlstm`), completed on the VAE it was trained on.
     #[arg(long)]
     pub bdlstm: Option<PathBuf>,
+    /// AnimateAnyMesh reference run (method `aam`): an RF trained on a sequence-wise VAE (`configs/rf/aam_*.toml`),
+    /// conditioned on the reference mesh and the caption only, sampled with CFG 3 (its code's weight; --guidance does not
+    /// apply to it).
+    #[arg(long)]
+    pub aam: Option<PathBuf>,
     /// Clips in the manifest (docs/method.md §6.1: 100).
     #[arg(long, default_value_t = PAPER_CLIPS)]
     pub clips: usize,
@@ -354,6 +359,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         vae: args.vae.clone(),
         vae_b: args.vae_b.clone(),
         bdlstm: args.bdlstm.clone(),
+        aam: args.aam.clone(),
     };
     let mut opts = TableOptions::new(args.data.clone(), args.out.clone());
     let posterior = match args.posterior {

@@ -213,10 +213,17 @@ impl BdlstmObjective {
     /// Encodes the store's clips with the frozen VAE (on the inference `device`).
     pub fn new(cfg: &BdlstmRunConfig, data: &Path, vae: &LoadedVae, device: &Device) -> Result<Self> {
         let store = open_store(data, cfg, vae)?;
-        let frame_vae = vae.frame_vae()?;
+        vae.frame_vae()?;
         let encode = |split: Split| {
             let indices = store.indices(split);
-            encode_latents(frame_vae, &store, &indices, cfg.train.micro_batch, vae.tokens(), device)
+            encode_latents(
+                &vae.model,
+                &store,
+                &indices,
+                cfg.train.micro_batch,
+                vae.tokens(),
+                device,
+            )
         };
         let (train, valid) = (encode(Split::Train)?, encode(Split::Val)?);
         let train_clips = WholeClips::new(store.whole_clips(&store.indices(Split::Train))?);

@@ -10,7 +10,7 @@ use any4d_eval::learned::{
     BdlstmSampler, KeyPosterior, LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor,
 };
 use any4d_eval::methods::vertex_methods;
-use any4d_eval::methods::{Method, MethodKind, RfMethod, SampleMean};
+use any4d_eval::methods::{AAM_GUIDANCE, Method, MethodKind, RfMethod, SampleMean};
 use any4d_eval::tables::reconstruction::Reconstructor;
 use any4d_model::any_vae::VaeKind;
 use any4d_model::rectified_flow::{ReplaceNoise, SampleOptions, Solver};
@@ -34,6 +34,9 @@ pub struct LearnedRuns {
     pub vae_b: Option<PathBuf>,
     /// BD-LSTM run (`any4d train bdlstm`), completed on its own VAE.
     pub bdlstm: Option<PathBuf>,
+    /// AnimateAnyMesh reference: an RF run on a sequence-wise VAE (`configs/rf/aam_*.toml`), sampled with CFG
+    /// [`AAM_GUIDANCE`] whatever [`SamplingSetup::guidance`] says.
+    pub aam: Option<PathBuf>,
 }
 
 /// How the RF methods sample.
@@ -113,7 +116,9 @@ fn rf_method(kind: MethodKind, run_dir: &Path, sampling: SamplingSetup, device: 
     let codec = codec_of(&vae, sampling.posterior, device)?;
     let label = checkpoint_label(&rf.run, rf.step);
     let rf_config = rf.config.model.clone();
-    let (window, tokens) = (rf_config.frames, codec.tokens());
+    // A generated window: the RF's frames, or the clip length of the sequence-wise VAE (one trajectory slot).
+    let window = codec.vae().clip_frames().unwrap_or(rf_config.frames);
+    let tokens = codec.tokens();
     let text = ScratchTextEncoder {
         tokenizer: rf.tokenizer,
         model: rf.model.text.valid(),
@@ -123,7 +128,12 @@ fn rf_method(kind: MethodKind, run_dir: &Path, sampling: SamplingSetup, device: 
     base.n_grid = sampling.n_grid;
     base.solver = sampling.solver;
     base.replace_noise = sampling.replace_noise;
-    let sampler = RfSampler::for_method(kind, Arc::new(models), base, sampling.guidance)?;
+    let guidance = if kind == MethodKind::Aam {
+        AAM_GUIDANCE
+    } else {
+        sampling.guidance
+    };
+    let sampler = RfSampler::for_method(kind, Arc::new(models), base, guidance)?;
     let method = RfMethod::new(kind, sampler)?;
     Ok(RunMethod {
         method: Box::new(method),
@@ -174,6 +184,10 @@ pub fn build_methods(
             }
             MethodKind::ReplacementRf => {
                 let m = rf_method(kind, need(&runs.baseline_rf, "--baseline-rf", kind)?, sampling, device)?;
+                (m.method, m.checkpoint)
+            }
+            MethodKind::Aam => {
+                let m = rf_method(kind, need(&runs.aam, "--aam", kind)?, sampling, device)?;
                 (m.method, m.checkpoint)
             }
             MethodKind::Bdlstm => {

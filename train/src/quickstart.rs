@@ -187,6 +187,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         vae: Some(vae_run.root().to_path_buf()),
         vae_b: None,
         bdlstm: None,
+        aam: None,
     };
     let kinds = [
         MethodKind::KeyframeRf,
@@ -265,6 +266,7 @@ fn shipped_rows(
         vae: Some(dir.join("vae")),
         vae_b: None,
         bdlstm: None,
+        aam: None,
     };
     let built = build_methods(
         &[MethodKind::KeyframeRf, MethodKind::ReplacementRf],

@@ -51,9 +51,25 @@ impl LoadedVae {
     }
 
     /// Refuses a store whose clips hold fewer FPS tokens than this frame-wise VAE encodes (or a sequence-wise VAE):
-    /// what every model trained on its latents needs.
+    /// what every model trained on its per-frame latents needs.
     pub fn check_store(&self, store: &any4d_data::store::Store) -> Result<()> {
         self.frame_vae()?;
+        self.check_store_any_kind(store)
+    }
+
+    /// Refuses a store whose clips hold fewer FPS tokens than this VAE encodes, or (sequence-wise VAE) whose clips
+    /// are not as long as the trajectories it was built for.
+    pub fn check_store_any_kind(&self, store: &any4d_data::store::Store) -> Result<()> {
+        if let Some(t) = self.model.clip_frames()
+            && t != store.frames()
+        {
+            return Err(TrainError::Setup(format!(
+                "the sequence-wise VAE run {} encodes {t}-frame clips, the store {} holds {}-frame clips",
+                self.run.display(),
+                store.dir().display(),
+                store.frames()
+            )));
+        }
         if self.tokens() > store.p() {
             return Err(TrainError::Setup(format!(
                 "the VAE run {} encodes P = {} FPS tokens, the store {} holds {}: import it with --p {} or more",

@@ -374,7 +374,7 @@ pub struct StoredLatentStats {
 pub fn train_vae(cfg: &VaeRunConfig, opts: &RunOptions) -> Result<(RunFolder, Outcome)> {
     // Fail before claiming a run folder when a backend or the store is unusable.
     let devices = run_devices(&cfg.device, opts.parallel.as_ref())?;
-    check_activations(cfg, &open_store(&opts.data, &cfg.vae)?)?;
+    check_store_fits(cfg, &open_store(&opts.data, &cfg.vae)?)?;
     let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &["rec", "kl"])?;
     let outcome = run_vae(cfg, &run, opts, &devices, None)?;
     Ok((run, outcome))
@@ -387,8 +387,26 @@ pub fn resume_vae(run_dir: &Path, backend: Option<backend::Backend>, opts: &RunO
         &mut c.device
     })?;
     let devices = run_devices(&cfg.device, opts.parallel.as_ref())?;
-    check_activations(&cfg, &open_store(&opts.data, &cfg.vae)?)?;
+    check_store_fits(&cfg, &open_store(&opts.data, &cfg.vae)?)?;
     run_vae(&cfg, &run, opts, &devices, Some(ckpt))
+}
+
+/// Refuses a store this VAE cannot train on before a run folder is claimed: clips of another length than a
+/// sequence-wise VAE's trajectories, or a micro-batch too large for the machine ([`check_activations`]).
+fn check_store_fits(cfg: &VaeRunConfig, store: &Store) -> Result<()> {
+    if let AnyMeshVaeConfig::Sequencewise(m) = &cfg.model
+        && m.frames != store.frames()
+    {
+        return Err(TrainError::Setup(format!(
+            "model.frames = {} but the store {} holds {}-frame clips: the sequence-wise VAE encodes whole clips, set \
+             model.frames = {}",
+            m.frames,
+            store.dir().display(),
+            store.frames(),
+            store.frames()
+        )));
+    }
+    check_activations(cfg, store)
 }
 
 /// Refuses a micro-batch whose activation estimate cannot fit this machine (the host's memory for CPU backends),

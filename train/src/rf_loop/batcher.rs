@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use any4d_data::keyframes::sample_keyframes;
 use any4d_data::store::{Split, Store};
-use any4d_model::frame_vae::FrameVae;
+use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mesh_vae::{self, MeshVae};
 use any4d_model::mmdit::KeyframeConditioning;
@@ -66,7 +66,7 @@ pub struct RfBatcher {
     cfg: RfRunConfig,
     stats: LatentStats,
     tokenizer: Arc<ScratchTokenizer>,
-    vae: FrameVae,
+    vae: AnyMeshVae,
     /// FPS tokens P of the VAE run (`vae.tokens`).
     tokens: usize,
     store: Store,
@@ -101,12 +101,12 @@ impl RfBatcher {
     ) -> Result<Self> {
         let store = open_store(data)?;
         check_compatible(cfg, &store, vae)?;
-        let frame_vae = vae.frame_vae()?.clone();
+        let frozen = vae.model.clone();
         let split = |split: Split| -> Result<SplitLatents> {
             let store_indices = store.indices(split);
             let cached = match cfg.rf.latent_cache {
                 LatentCache::Memory => Some(encode_latents(
-                    &frame_vae,
+                    &frozen,
                     &store,
                     &store_indices,
                     cfg.train.micro_batch,
@@ -122,7 +122,7 @@ impl RfBatcher {
             cfg: cfg.clone(),
             stats: vae.stats,
             tokenizer: Arc::new(tokenizer),
-            vae: frame_vae,
+            vae: frozen,
             tokens: vae.tokens(),
             store,
             train,
@@ -169,8 +169,8 @@ impl RfBatcher {
         &self.valid.store_indices
     }
 
-    /// The frozen frame-wise VAE.
-    pub fn vae(&self) -> &FrameVae {
+    /// The frozen VAE (frame-wise; sequence-wise for the AnimateAnyMesh reference).
+    pub fn vae(&self) -> &AnyMeshVae {
         &self.vae
     }
 
@@ -352,9 +352,11 @@ pub(super) fn open_store(data: &Path) -> Result<Store> {
 /// Activation bound where the device's memory is not known (GPU backends): 1 TiB, beyond any single device.
 pub const MAX_ACTIVATION_BYTES: u128 = 1 << 40;
 
-/// docs/method.md §4.1: the RF slots must match the VAE latents and the store windows.
+/// docs/method.md §4.1: the RF slots must match the VAE latents and the store windows; on a sequence-wise VAE
+/// (the AnimateAnyMesh reference, §5.5) the RF has one trajectory slot and no keyframes.
 pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
-    vae.check_store(store)?;
+    vae.check_store_any_kind(store)?;
+    check_slots(cfg, store, vae)?;
     let c = vae.latent_channels();
     if cfg.model.channels != c {
         return Err(TrainError::Setup(format!(
@@ -380,7 +382,43 @@ pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae
         cfg.model.blocks
     );
     any4d_model::summary::check_activation_estimate(&what, estimate, host.unwrap_or(MAX_ACTIVATION_BYTES))
-        .map_err(TrainError::Setup)?;
+        .map_err(TrainError::Setup)
+}
+
+/// The RF's latent slots against the VAE kind and the store: T frames on a frame-wise VAE; one trajectory slot and
+/// no keyframes on a sequence-wise VAE (the AnimateAnyMesh reference), whose validation samples need windows of 3
+/// frames or more.
+fn check_slots(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
+    let aam_config = cfg.model.frames == 1 && cfg.model.conditioning == KeyframeConditioning::None;
+    if vae.model.clip_frames().is_some() {
+        if !aam_config {
+            return Err(TrainError::Setup(format!(
+                "the VAE run {} is sequence-wise (one trajectory latent per clip): an RF on it is the AnimateAnyMesh \
+                 reference and needs model.frames = 1 and model.conditioning = \"none\" (configs/rf/aam_*.toml), got \
+                 {} and {:?}",
+                vae.run.display(),
+                cfg.model.frames,
+                cfg.model.conditioning
+            )));
+        }
+        if cfg.rf.valid_sample_every > 0 {
+            super::VALID_SAMPLE_KEYFRAMES.check(store.frames()).map_err(|e| {
+                TrainError::Setup(format!(
+                    "rf.valid_sample_every > 0 needs windows of at least 3 frames, the store {} holds {}: {e}",
+                    store.dir().display(),
+                    store.frames()
+                ))
+            })?;
+        }
+        return Ok(());
+    }
+    if aam_config && store.frames() > 1 {
+        return Err(TrainError::Setup(format!(
+            "model.frames = 1 with model.conditioning = \"none\" is the AnimateAnyMesh reference, which needs a \
+             sequence-wise VAE run (configs/vae/dymesh_*.toml); {} is frame-wise",
+            vae.run.display()
+        )));
+    }
     if cfg.model.frames != store.frames() {
         return Err(TrainError::Setup(format!(
             "model.frames = {} but the store {} holds {}-frame clips: set model.frames = {}",

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use any4d_data::keyframes::TrainingKeyframes;
-use any4d_model::mmdit::MmditConfig;
+use any4d_model::mmdit::{KeyframeConditioning, MmditConfig};
 use any4d_model::rectified_flow::{KeyframeLoss, RfLossOptions, TauSampler};
 use any4d_model::text::scratch::ScratchTextConfig;
 use serde::{Deserialize, Serialize};
@@ -165,9 +165,14 @@ impl RfRunConfig {
                     rf.valid_sample_grid
                 )));
             }
-            VALID_SAMPLE_KEYFRAMES
-                .check(cfg.model.frames)
-                .map_err(|e| bad(format!("rf.valid_sample_every > 0 needs model.frames ≥ 3: {e}")))?;
+            // The AnimateAnyMesh reference (one trajectory slot, no keyframes) samples whole store windows: their
+            // length is checked against the store when the run starts.
+            let aam = cfg.model.frames == 1 && cfg.model.conditioning == KeyframeConditioning::None;
+            if !aam {
+                VALID_SAMPLE_KEYFRAMES
+                    .check(cfg.model.frames)
+                    .map_err(|e| bad(format!("rf.valid_sample_every > 0 needs model.frames ≥ 3: {e}")))?;
+            }
         }
         let t = &cfg.text;
         for (name, value) in [

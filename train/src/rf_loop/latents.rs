@@ -1,7 +1,7 @@
 //! Frozen-VAE latents of the clips (docs/method.md §3.4, §4.1): encoded once into host memory or per micro-batch.
 
 use any4d_data::store::Store;
-use any4d_model::frame_vae::FrameVae;
+use any4d_model::any_vae::AnyMeshVae;
 use burn::prelude::{Device, Tensor};
 
 use any4d_model::mesh_vae::MeshVae;
@@ -18,9 +18,10 @@ pub struct ClipLatents {
     pub caption: String,
     /// Shape latent z₀, `[P, C]` row-major.
     pub z0: Vec<f32>,
-    /// Posterior mean μ_f of every frame, `[T, P, C]` row-major.
+    /// Posterior mean μ of every latent slot, `[S, P, C]` row-major: S = T frames (frame-wise VAE) or the one
+    /// trajectory slot of the sequence-wise VAE.
     pub mu: Vec<f32>,
-    /// Posterior log σ²_f, `[T, P, C]` row-major.
+    /// Posterior log σ², `[S, P, C]` row-major.
     pub logvar: Vec<f32>,
 }
 
@@ -29,7 +30,7 @@ pub struct ClipLatents {
 pub struct LatentSet {
     /// One entry per clip, in store order.
     pub clips: Vec<ClipLatents>,
-    /// T.
+    /// Latent slots S per clip: T frames, or 1 for the sequence-wise VAE.
     pub frames: usize,
     /// P.
     pub tokens: usize,
@@ -51,17 +52,17 @@ fn host_f32<const D: usize>(t: Tensor<D>, what: &str) -> Result<Vec<f32>> {
         .map_err(|e| TrainError::Loop(format!("{what}: cannot read tensor data: {e:?}")))
 }
 
-/// Encodes clips `store_indices` of `store` with the frozen frame-wise VAE on `tokens` FPS tokens (the VAE run's
-/// `vae.tokens`), `micro_batch` clips at a time.
+/// Encodes clips `store_indices` of `store` with the frozen VAE on `tokens` FPS tokens (the VAE run's `vae.tokens`),
+/// `micro_batch` clips at a time: one latent slot per frame (frame-wise VAE) or per clip (sequence-wise).
 pub fn encode_latents(
-    vae: &FrameVae,
+    vae: &AnyMeshVae,
     store: &Store,
     store_indices: &[usize],
     micro_batch: usize,
     tokens: usize,
     device: &Device,
 ) -> Result<LatentSet> {
-    let frames = store.frames();
+    let frames = if vae.clip_frames().is_some() { 1 } else { store.frames() };
     let mut clips = Vec::with_capacity(store_indices.len());
     let mut channels = 0;
     for chunk in store_indices.chunks(micro_batch.max(1)) {
@@ -70,7 +71,7 @@ pub fn encode_latents(
         let [b, t, p, c] = enc.mu.dims();
         if (t, p) != (frames, tokens) {
             return Err(TrainError::Setup(format!(
-                "VAE latents are [{b}, {t}, {p}, {c}], expected T = {frames} (the store {}) and P = {tokens}",
+                "VAE latents are [{b}, {t}, {p}, {c}], expected {frames} latent slots (the store {} and the VAE kind) and P = {tokens}",
                 store.dir().display()
             )));
         }

@@ -7,8 +7,7 @@ use std::sync::Arc;
 use any4d_data::batch::PadTo;
 use any4d_data::keyframes::sample_keyframes;
 use any4d_eval::learned::{LearnedModels, MeshCodec, RfSampler};
-use any4d_eval::methods::{KeyframeNoise, MethodKind, RfMethod, complete_and_score};
-use any4d_model::any_vae::AnyMeshVae;
+use any4d_eval::methods::{AAM_GUIDANCE, KeyframeNoise, MethodKind, RfMethod, complete_and_score};
 use any4d_model::mmdit::KeyframeConditioning;
 use any4d_model::rectified_flow::SampleOptions;
 use any4d_model::text::scratch::{ScratchTextModel, ScratchTokenizer};
@@ -67,7 +66,7 @@ impl TextEncoder for TrainingText {
 /// inference `device`) and scores them: keyframes [`VALID_SAMPLE_KEYFRAMES`] from a fixed seed, the eval crate's
 /// [`RfSampler`] on an `rf.valid_sample_grid`-point midpoint grid with CFG weight 1 (docs/method.md §4.6: (R3) for
 /// `input_mask`, the replacement sampler (R7)–(R8) for `replace_noised` and `none`, (R9) with `rf.tau_star` for
-/// `impute_until`), keyframes replaced by the ground truth, then (E1)–(E3) against the clip. Every draw is seeded
+/// `impute_until`; on a sequence-wise VAE the AnimateAnyMesh reference of §5.5 with its CFG weight 3), keyframes replaced by the ground truth, then (E1)–(E3) against the clip. Every draw is seeded
 /// from `train.seed`, so the same network gives the same scores; the training RNG streams are untouched (the loop
 /// reseeds the device before every step). `None` without VAL clips.
 pub fn validation_samples(batcher: &RfBatcher, model: &RfModel, device: &Device) -> Result<Option<ValidSampleScores>> {
@@ -76,14 +75,10 @@ pub fn validation_samples(batcher: &RfBatcher, model: &RfModel, device: &Device)
     if n == 0 {
         return Ok(None);
     }
-    let frames = cfg.model.frames;
+    // Window length: the RF's frames, or the clips of the sequence-wise VAE (the AnimateAnyMesh reference).
+    let frames = batcher.store().frames();
     VALID_SAMPLE_KEYFRAMES.check(frames)?;
-    let codec = MeshCodec::new(
-        AnyMeshVae::Framewise(batcher.vae().clone()),
-        batcher.tokens(),
-        PadTo::BatchMax,
-        device.clone(),
-    )?;
+    let codec = MeshCodec::new(batcher.vae().clone(), batcher.tokens(), PadTo::BatchMax, device.clone())?;
     let text = TrainingText {
         tokenizer: Arc::clone(batcher.tokenizer()),
         model: model.text.clone(),
@@ -97,7 +92,9 @@ pub fn validation_samples(batcher: &RfBatcher, model: &RfModel, device: &Device)
         batcher.stats(),
         Box::new(text),
     )?;
+    let aam = batcher.vae().clip_frames().is_some();
     let kind = match cfg.model.conditioning {
+        _ if aam => MethodKind::Aam,
         KeyframeConditioning::InputMask => MethodKind::KeyframeRf,
         KeyframeConditioning::ReplaceNoised | KeyframeConditioning::None => MethodKind::ReplacementRf,
         KeyframeConditioning::ImputeUntil => MethodKind::ImputeUntil {
@@ -108,7 +105,8 @@ pub fn validation_samples(batcher: &RfBatcher, model: &RfModel, device: &Device)
     let mut options = SampleOptions::paper(cfg.model.conditioning);
     options.n_grid = cfg.rf.valid_sample_grid;
     options.tau_star = cfg.rf.tau_star;
-    let sampler = RfSampler::for_method(kind, Arc::new(models), options, 1.0)?;
+    let guidance = if aam { AAM_GUIDANCE } else { 1.0 };
+    let sampler = RfSampler::for_method(kind, Arc::new(models), options, guidance)?;
     let method = RfMethod::new(kind, sampler)?;
 
     // Seeds of their own (u64::MAX is the validation loss's): fixed keyframes and sampler noise per clip.

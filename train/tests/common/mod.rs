@@ -272,9 +272,24 @@ pub struct VaeFixture {
 
 /// Makes a [`VaeFixture`]; callers keep it in a `OnceLock` so a test process trains the VAE once.
 pub fn vae_fixture(store_seed: u64) -> VaeFixture {
+    vae_fixture_with(store_seed, tiny_vae(6))
+}
+
+/// configs/vae/dymesh_tiny.toml (the sequence-wise VAE of the AnimateAnyMesh reference) for the 4-frame store,
+/// `steps` steps of 4 clips.
+pub fn tiny_dymesh_vae(steps: u64) -> VaeRunConfig {
+    let frames: any4d_train::config::Override = "model.frames=4".parse().expect("override");
+    let mut cfg = VaeRunConfig::load(&root().join("configs/vae/dymesh_tiny.toml"), &[frames])
+        .expect("configs/vae/dymesh_tiny.toml");
+    cfg.train.duration = Duration::Steps(steps);
+    cfg.train.batch_size = 4;
+    cfg
+}
+
+/// A [`VaeFixture`] whose 6-step VAE run has the config `cfg` (its micro-batch, checkpoints and validation set here).
+pub fn vae_fixture_with(store_seed: u64, mut cfg: VaeRunConfig) -> VaeFixture {
     let dir = tempfile::tempdir().expect("temp dir");
     let store = synth_store(dir.path(), store_seed);
-    let mut cfg = tiny_vae(6);
     cfg.train.micro_batch = 4;
     cfg.train.checkpoint_every = 6;
     cfg.train.valid_every = 6;
