@@ -1,7 +1,8 @@
 //! Reducing a trained run folder to what sampling needs (`any4d model pack`): the resolved config, the newest
 //! checkpoint's sampling parameters (the average of docs/method.md §4.8 when the run keeps one) as `model.bpk`,
-//! its `state.json`, and the run's side files (latent statistics of a VAE; tokenizer and VAE record of an RF). No
-//! optimiser state: a packed folder loads everywhere a run folder does (`--vae`, `--rf`, `--baseline-rf`) but
+//! its `state.json`, and the run's side files (latent statistics of a VAE; tokenizer and VAE record of an RF; VAE
+//! record of a BD-LSTM). No optimiser state: a packed folder loads everywhere a run folder does (`--vae`, `--rf`,
+//! `--baseline-rf`, `--aam`, `--bdlstm`) but
 //! cannot resume. Parameters may be stored in half precision; loading casts them back to the model's precision
 //! (`checkpoint::load_model`).
 
@@ -14,10 +15,11 @@ use burn::module::{Module, ModuleMapper, Param};
 use burn::prelude::{Device, Tensor};
 use burn::tensor::DType;
 
+use crate::bdlstm_loop::load_bdlstm_run;
 use crate::checkpoint::{MODEL_FILE, STATE_FILE, step_dir_name};
 use crate::error::{Result, TrainError, io_err, run_err};
 use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE};
-use crate::runs::{VAE_RUN_FILE, VaeRunRecord, load_rf_run, load_vae_run, read_vae_record};
+use crate::runs::{VAE_RUN_FILE, VaeRunRecord, load_rf_run, load_vae_run, newest_checkpoint, read_vae_record};
 use crate::vae_loop::LATENT_STATS_FILE;
 
 /// Storage precision of packed parameters.
@@ -32,7 +34,7 @@ pub enum Precision {
 /// What [`pack_run`] wrote.
 #[derive(Debug)]
 pub struct Packed {
-    /// "VAE" or "RF".
+    /// "VAE", "RF" or "BD-LSTM".
     pub kind: &'static str,
     /// The checkpoint step packed.
     pub step: u64,
@@ -78,13 +80,19 @@ pub fn pack_run(
     if out.exists() {
         return Err(run_err(out, "exists; pack writes a new folder (remove it first)"));
     }
-    let is_rf = run.join(VAE_RUN_FILE).is_file();
-    if !is_rf && vae_at.is_some() {
+    // RF and BD-LSTM runs record the VAE they were trained on; a BD-LSTM config has a [bdlstm] table.
+    let on_vae = run.join(VAE_RUN_FILE).is_file();
+    if !on_vae && vae_at.is_some() {
         return Err(run_err(
             run,
-            "a VAE run (no `vae_run.json`); `--vae-at` applies to RF runs only",
+            "a VAE run (no `vae_run.json`); `--vae-at` applies to RF and BD-LSTM runs only",
         ));
     }
+    let is_bdlstm = on_vae && {
+        let config = run.join(CONFIG_FILE);
+        let text = fs::read_to_string(&config).map_err(io_err("read", &config))?;
+        text.parse::<toml::Table>().is_ok_and(|t| t.contains_key("bdlstm"))
+    };
     let name = out
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -93,20 +101,19 @@ pub fn pack_run(
     if tmp.exists() {
         fs::remove_dir_all(&tmp).map_err(io_err("remove stale temporary folder", &tmp))?;
     }
-    let packed = if is_rf {
+    let packed = if is_bdlstm {
+        let bd = load_bdlstm_run(run, device)?;
+        let (ckpt, _) = newest_checkpoint(&bd.run)?;
+        let ckpt_out = write_common(&bd.run, &ckpt, bd.step, &tmp)?;
+        write_vae_record(&bd.run, &tmp, vae_at)?;
+        let averaged = ckpt.join(crate::checkpoint::EMA_FILE).is_file();
+        save_params(bd.model, &ckpt_out.join(MODEL_FILE), precision)?;
+        finish("BD-LSTM", bd.step, averaged, &ckpt_out)?
+    } else if on_vae {
         let rf = load_rf_run(run, device)?;
         let ckpt_out = write_common(&rf.run, &rf.checkpoint, rf.step, &tmp)?;
         copy(&rf.run, &tmp, TOKENIZER_FILE)?;
-        let mut record = read_vae_record(&rf.run)?;
-        if let Some(at) = vae_at {
-            record = VaeRunRecord {
-                run: at.to_path_buf(),
-                step: record.step,
-            };
-        }
-        let json =
-            serde_json::to_vec_pretty(&record).map_err(|e| run_err(&tmp, format!("serialise {VAE_RUN_FILE}: {e}")))?;
-        fs::write(tmp.join(VAE_RUN_FILE), json).map_err(io_err("write", tmp.join(VAE_RUN_FILE)))?;
+        write_vae_record(&rf.run, &tmp, vae_at)?;
         let averaged = rf.checkpoint.join(crate::checkpoint::EMA_FILE).is_file();
         save_params(rf.model, &ckpt_out.join(MODEL_FILE), precision)?;
         finish("RF", rf.step, averaged, &ckpt_out)?
@@ -124,6 +131,20 @@ pub fn pack_run(
     };
     fs::rename(&tmp, out).map_err(io_err("rename packed folder into place", out))?;
     Ok(packed)
+}
+
+/// Copies the run's `vae_run.json` into `tmp`, its folder replaced by `vae_at` when given (the step stays).
+fn write_vae_record(run: &Path, tmp: &Path, vae_at: Option<&Path>) -> Result<()> {
+    let mut record = read_vae_record(run)?;
+    if let Some(at) = vae_at {
+        record = VaeRunRecord {
+            run: at.to_path_buf(),
+            step: record.step,
+        };
+    }
+    let json =
+        serde_json::to_vec_pretty(&record).map_err(|e| run_err(tmp, format!("serialise {VAE_RUN_FILE}: {e}")))?;
+    fs::write(tmp.join(VAE_RUN_FILE), json).map_err(io_err("write", tmp.join(VAE_RUN_FILE)))
 }
 
 /// Creates `tmp/checkpoints/step_N/` with the checkpoint's `state.json`, and copies the run's config.

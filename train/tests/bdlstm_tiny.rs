@@ -15,6 +15,7 @@ use any4d_train::bdlstm_loop::{
 use any4d_train::config::{Duration, Override, RunConfig};
 use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods};
 use any4d_train::loop_common::{Objective, Outcome, RunOptions, StopFlag, train};
+use any4d_train::pack::{Precision as PackPrecision, pack_run};
 use any4d_train::progress::ProgressMode;
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, VALID_FILE, read_table};
 use any4d_train::runs::load_vae_run;
@@ -131,6 +132,18 @@ fn tiny_bdlstm_lowers_its_loss_and_its_run_loads() {
     // An RF or VAE folder is not a BD-LSTM run.
     let err = load_bdlstm_run(&fixture().vae_run, &dev).err().unwrap().to_string();
     assert!(err.contains("not a BD-LSTM run"), "{err}");
+    // `model pack` keeps a BD-LSTM run a BD-LSTM run: it loads with the same parameters and completes the same.
+    let out = tempfile::tempdir().unwrap();
+    let packed = pack_run(run.root(), &out.path().join("bd"), PackPrecision::Full, None, &dev).unwrap();
+    assert_eq!((packed.kind, packed.step), ("BD-LSTM", steps));
+    let reloaded = load_bdlstm_run(&out.path().join("bd"), &dev).unwrap();
+    assert_eq!(params(&reloaded.model), params(&loaded.model));
+    let runs = LearnedRuns {
+        bdlstm: Some(out.path().join("bd")),
+        ..LearnedRuns::default()
+    };
+    let built = build_methods(&[MethodKind::Bdlstm], &runs, SamplingSetup::default(), &dev).unwrap();
+    assert_eq!(a, built.methods[0].complete(&visible, &keys, "", 7).unwrap());
 }
 
 #[test]
