@@ -45,6 +45,18 @@ impl KeyframeConditioning {
     }
 }
 
+/// What the network's output is (docs/method.md §4.9, `model.prediction`): the velocity of (R4), as in the paper, or
+/// the clean latents Ẑ, turned into the velocity (Ẑ − X_τ) / (1 − τ) before (R5) and (R6).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Prediction {
+    /// v_θ directly (the paper).
+    #[default]
+    Velocity,
+    /// The clean trajectory latents (x-prediction; not in the paper).
+    Data,
+}
+
 /// Size of the MMDiT: the `[model]` table of `configs/rf/*.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -64,6 +76,10 @@ pub struct MmditConfig {
     /// How keyframes are given to the network (`kf_mode` in run folders written before the rename).
     #[serde(alias = "kf_mode")]
     pub conditioning: KeyframeConditioning,
+    /// What the output is: velocity (the paper) or clean latents (docs/method.md §4.9). Run folders written before
+    /// the key existed predict velocity.
+    #[serde(default)]
+    pub prediction: Prediction,
 }
 
 impl MmditConfig {
@@ -77,6 +93,7 @@ impl MmditConfig {
             channels: 12,
             text_dim,
             conditioning,
+            prediction: Prediction::Velocity,
         }
     }
 
@@ -90,6 +107,7 @@ impl MmditConfig {
             channels: 3,
             text_dim: 8,
             conditioning: KeyframeConditioning::InputMask,
+            prediction: Prediction::Velocity,
         }
     }
 
@@ -187,6 +205,7 @@ impl MmditConfig {
             output_proj: lin(w, self.out_channels(), LinearInit::Zero),
             in_channels: self.in_channels(),
             text_dim: self.text_dim,
+            prediction: self.prediction,
         }
     }
 }
@@ -554,6 +573,8 @@ pub struct Mmdit {
     output_proj: Linear,
     in_channels: usize,
     text_dim: usize,
+    #[module(skip)]
+    prediction: Prediction,
 }
 
 impl Mmdit {
@@ -601,6 +622,11 @@ impl Mmdit {
     /// Input channels this network was built for.
     pub fn in_channels(&self) -> usize {
         self.in_channels
+    }
+
+    /// What [`Mmdit::forward`] outputs: velocities or clean latents (docs/method.md §4.9).
+    pub fn prediction(&self) -> Prediction {
+        self.prediction
     }
 }
 

@@ -10,7 +10,9 @@ use burn::prelude::*;
 use burn::tensor::Distribution;
 use serde::{Deserialize, Serialize};
 
-use crate::mmdit::{KeyframeConditioning, Mmdit, assemble_input, build_input, replace_keyframes, split_output};
+use crate::mmdit::{
+    KeyframeConditioning, Mmdit, Prediction, assemble_input, build_input, replace_keyframes, split_output,
+};
 
 // ---------------------------------------------------------------------------------------------------------------
 // Training: interpolant, target, τ sampling, loss
@@ -32,6 +34,34 @@ pub fn interpolant(eps: Tensor<4>, x1: Tensor<4>, tau: Tensor<1>) -> Tensor<4> {
 /// - eps, x1: `[B, P, T, C]`; output `[B, P, T, C]`
 pub fn target_velocity(eps: Tensor<4>, x1: Tensor<4>) -> Tensor<4> {
     x1 - eps // (R2)
+}
+
+/// Smallest 1 − τ in the training velocity of a data-predicting network (docs/method.md §4.9): keeps
+/// (Ẑ − X_τ)/(1 − τ) and its loss bounded as τ → 1 (training draws τ up to 1). Sampling never evaluates at τ = 1 and
+/// divides by the exact 1 − τ, so that the last step lands on Ẑ.
+pub const DATA_PREDICTION_MIN_GAP: f64 = 0.05;
+
+/// The velocity that a network output stands for (docs/method.md §4.9): the output itself for
+/// [`Prediction::Velocity`]; (Ẑ − X_τ) / max(1 − τ, `min_gap`) for [`Prediction::Data`], with X_τ the interpolant
+/// (R1) (in sampling: the ODE state), not the network input with keyframes written in.
+///
+/// # Shapes
+/// - output, x_tau: `[B, P, T, C]`; tau: `[B]`; returns `[B, P, T, C]`
+pub fn output_velocity(
+    prediction: Prediction,
+    output: Tensor<4>,
+    x_tau: Tensor<4>,
+    tau: Tensor<1>,
+    min_gap: f64,
+) -> Tensor<4> {
+    match prediction {
+        Prediction::Velocity => output,
+        Prediction::Data => {
+            let [b] = tau.dims();
+            let gap = tau.neg().add_scalar(1.0).clamp_min(min_gap).reshape([b, 1, 1, 1]);
+            (output - x_tau) / gap
+        }
+    }
 }
 
 /// Distribution of the training time τ (docs/method.md §4.5 step 4, §8 X7).
@@ -144,6 +174,7 @@ pub fn rf_training_loss(
 ) -> Tensor<1> {
     let [_, _, frames, _] = batch.z.dims();
     let x_tau = interpolant(eps.clone(), batch.z.clone(), tau.clone()); // (R1)
+    let x_state = x_tau.clone();
     let mask = match opts.conditioning {
         KeyframeConditioning::InputMask => batch.mask.clone(),
         KeyframeConditioning::ImputeUntil => impute_mask(batch.mask.clone(), tau.clone(), opts.tau_star),
@@ -163,10 +194,11 @@ pub fn rf_training_loss(
             opts.conditioning,
         ), // (R3)
     };
-    let v = split_output(
-        model.forward(input, batch.text.clone(), batch.keep_txt.clone(), tau),
+    let out = split_output(
+        model.forward(input, batch.text.clone(), batch.keep_txt.clone(), tau.clone()),
         frames,
     ); // (R4)
+    let v = output_velocity(model.prediction(), out, x_state, tau, DATA_PREDICTION_MIN_GAP);
     rf_loss(
         v,
         target_velocity(eps, batch.z.clone()),
@@ -285,7 +317,28 @@ pub fn sampler_input(cond: &Conditioning, x: Tensor<4>, eps: &Tensor<4>, tau: f6
 ///
 /// # Panics
 /// If `opts.n_grid < 2`.
-pub fn sample<F>(mut velocity: F, cond: &Conditioning, eps: Tensor<4>, opts: &SampleOptions) -> Tensor<4>
+pub fn sample<F>(velocity: F, cond: &Conditioning, eps: Tensor<4>, opts: &SampleOptions) -> Tensor<4>
+where
+    F: FnMut(Tensor<3>, Tensor<1>) -> Tensor<3>,
+{
+    sample_outputs(velocity, Prediction::Velocity, cond, eps, opts)
+}
+
+/// [`sample`] for a closure whose output is `prediction` (velocities or clean latents, docs/method.md §4.9),
+/// turned into the velocity of (R6) at every evaluation by [`output_velocity`] with the current ODE state.
+///
+/// # Shapes
+/// - eps: `[B, P, T, C]` initial noise; output `[B, P, T, C]`
+///
+/// # Panics
+/// If `opts.n_grid < 2`.
+pub fn sample_outputs<F>(
+    mut network: F,
+    prediction: Prediction,
+    cond: &Conditioning,
+    eps: Tensor<4>,
+    opts: &SampleOptions,
+) -> Tensor<4>
 where
     F: FnMut(Tensor<3>, Tensor<1>) -> Tensor<3>,
 {
@@ -297,9 +350,11 @@ where
     let [b, _, frames, _] = eps.dims();
     let device = eps.device();
     let mut eval = |x: Tensor<4>, tau: f64| -> Tensor<4> {
-        let input = sampler_input(cond, x, &eps, tau, opts);
+        let input = sampler_input(cond, x.clone(), &eps, tau, opts);
         let tau_b = Tensor::<1>::full([b], tau, &device);
-        split_output(velocity(input, tau_b), frames)
+        let out = split_output(network(input, tau_b.clone()), frames);
+        // Evaluations are at τ < 1 (grid points and midpoints before the end): the exact 1 − τ.
+        output_velocity(prediction, out, x, tau_b, f64::MIN_POSITIVE)
     };
     let steps = opts.n_grid - 1;
     let dt = 1.0 / steps as f64;
@@ -373,7 +428,13 @@ pub fn sample_mmdit(
     guidance: f64,
     opts: &SampleOptions,
 ) -> Tensor<4> {
-    sample(mmdit_velocity(model, text, keep, guidance), cond, eps, opts)
+    sample_outputs(
+        mmdit_velocity(model, text, keep, guidance),
+        model.prediction(),
+        cond,
+        eps,
+        opts,
+    )
 }
 
 /// RNG stream of the sampler's noise (distinct from the keyframe-noise stream of the evaluation).

@@ -5,11 +5,13 @@
 use std::sync::Mutex;
 
 use any4d_model::mmdit::{
-    KeyframeConditioning, Mmdit, MmditConfig, TIME_FREQS, build_input, merge_slots, split_output, timestep_sinusoid,
+    KeyframeConditioning, Mmdit, MmditConfig, Prediction, TIME_FREQS, build_input, merge_slots, split_output,
+    timestep_sinusoid,
 };
 use any4d_model::rectified_flow::{
-    Conditioning, KeyframeLoss, ReplaceNoise, RfBatch, RfLossOptions, SampleOptions, Solver, TauSampler, cfg_combine,
-    interpolant, mmdit_velocity, rf_loss, rf_training_loss, sample, target_velocity,
+    Conditioning, DATA_PREDICTION_MIN_GAP, KeyframeLoss, ReplaceNoise, RfBatch, RfLossOptions, SampleOptions, Solver,
+    TauSampler, cfg_combine, interpolant, mmdit_velocity, output_velocity, rf_loss, rf_training_loss, sample,
+    sample_outputs, target_velocity,
 };
 use any4d_model::summary::param_report;
 use burn::module::{Module, ModuleVisitor, Param};
@@ -100,6 +102,65 @@ fn oracle_velocity_maps_noise_to_data_euler_and_midpoint() {
         let err = max_abs_diff(out, x1.clone());
         assert!(err < 1e-5, "{solver:?}: max error {err}");
     }
+}
+
+/// docs/method.md §4.9: a network that outputs the clean latents Z* moves the state straight towards them and lands
+/// on them exactly, on any grid and with either solver (the sampler divides by the exact 1 − τ).
+#[test]
+fn a_data_predicting_oracle_lands_on_its_prediction_on_every_grid() {
+    let _g = lock();
+    let d = dev();
+    let (b, p, t, c) = (2, 5, 4, 3);
+    let eps = normal([b, p, t, c], &d);
+    let x1 = normal([b, p, t, c], &d);
+    let cond = Conditioning {
+        z0: normal([b, p, c], &d),
+        z_key: x1.zeros_like(),
+        mask: Tensor::zeros([b, t], &d),
+    };
+    for n_grid in [2, 16, 64] {
+        for solver in [Solver::Euler, Solver::Midpoint] {
+            let opts = SampleOptions {
+                n_grid,
+                solver,
+                ..SampleOptions::paper(KeyframeConditioning::None)
+            };
+            let oracle = merge_slots(x1.clone());
+            let out = sample_outputs(
+                |_input, _tau| oracle.clone(),
+                Prediction::Data,
+                &cond,
+                eps.clone(),
+                &opts,
+            );
+            let err = max_abs_diff(out, x1.clone());
+            assert!(err < 1e-4, "{solver:?}, {n_grid} points: max error {err}");
+        }
+    }
+}
+
+/// docs/method.md §4.9: the velocity of a data prediction is (Ẑ − X_τ) / (1 − τ), with 1 − τ floored at
+/// `min_gap`; a velocity prediction passes through.
+#[test]
+fn data_predictions_become_velocities_with_a_floored_gap() {
+    let _g = lock();
+    let d = dev();
+    let z = normal([2, 3, 4, 2], &d);
+    let x = normal([2, 3, 4, 2], &d);
+    let tau = Tensor::<1>::from_data(TensorData::new(vec![0.25f32, 0.99], [2]), &d);
+    let v = output_velocity(
+        Prediction::Data,
+        z.clone(),
+        x.clone(),
+        tau.clone(),
+        DATA_PREDICTION_MIN_GAP,
+    );
+    let want_0 = (z.clone().narrow(0, 0, 1) - x.clone().narrow(0, 0, 1)).div_scalar(0.75);
+    let want_1 = (z.clone().narrow(0, 1, 1) - x.clone().narrow(0, 1, 1)).div_scalar(DATA_PREDICTION_MIN_GAP);
+    assert!(max_abs_diff(v.clone().narrow(0, 0, 1), want_0) < 1e-5);
+    assert!(max_abs_diff(v.narrow(0, 1, 1), want_1) < 1e-4);
+    let same = output_velocity(Prediction::Velocity, z.clone(), x, tau, DATA_PREDICTION_MIN_GAP);
+    assert_eq!(max_abs_diff(same, z), 0.0);
 }
 
 // ----------------------------------------------------------------------------------------------------------------
@@ -523,6 +584,56 @@ fn tiny_rf_overfits_one_batch() {
     }
     let (first, last) = (losses[0], *losses.last().unwrap());
     assert!(last * 10.0 <= first, "loss {first} → {last} did not fall 10×");
+}
+
+/// docs/method.md §4.9: a data-predicting network's loss is (R5) on the velocity (R10) its output implies, with the
+/// un-replaced interpolant and 1 − τ floored at 0.05 (τ = 1 is drawn here); a velocity network's output is used as
+/// it is.
+#[test]
+fn a_data_predicting_network_is_trained_on_its_implied_velocity() {
+    let _g = lock();
+    let d = dev();
+    let opts = RfLossOptions {
+        conditioning: KeyframeConditioning::InputMask,
+        keyframe_loss: KeyframeLoss::All,
+        tau_star: 0.98,
+    };
+    for prediction in [Prediction::Velocity, Prediction::Data] {
+        let cfg = MmditConfig {
+            prediction,
+            ..MmditConfig::tiny()
+        };
+        let model = trained_one_step(&cfg, &d);
+        assert_eq!(model.prediction(), prediction);
+        let batch = tiny_batch(&cfg, 2, 5, 3, &d);
+        let eps = normal(batch.z.dims(), &d);
+        let tau = Tensor::<1>::from_floats([0.4, 1.0], &d);
+        let loss = values(rf_training_loss(&model, &batch, eps.clone(), tau.clone(), &opts))[0];
+        let x_tau = interpolant(eps.clone(), batch.z.clone(), tau.clone());
+        let input = build_input(
+            batch.z0.clone(),
+            x_tau.clone(),
+            batch.mask.clone(),
+            batch.z_key.clone(),
+            KeyframeConditioning::InputMask,
+        );
+        let out = split_output(
+            model.forward(input, batch.text.clone(), batch.keep_txt.clone(), tau.clone()),
+            cfg.frames,
+        );
+        let v = match prediction {
+            Prediction::Velocity => out,
+            Prediction::Data => {
+                let gap = Tensor::<1>::from_floats([0.6, DATA_PREDICTION_MIN_GAP as f32], &d).reshape([2, 1, 1, 1]);
+                (out - x_tau) / gap
+            }
+        };
+        let want = values((v - target_velocity(eps, batch.z.clone())).square().mean())[0];
+        assert!(
+            (loss - want).abs() <= 1e-5 * want.abs().max(1.0),
+            "{prediction:?}: {loss} vs {want}"
+        );
+    }
 }
 
 // ----------------------------------------------------------------------------------------------------------------
