@@ -65,17 +65,19 @@ pub fn output_velocity(
 }
 
 /// Distribution of the training time τ (docs/method.md §4.5 step 4, §8 X7).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TauSampler {
     /// τ ~ U(0, 1) (paper).
     Uniform,
     /// τ = 1 − 1/(tan(πu/2) + 1), u ~ U(0, 1) (SD3 "cosmap", AAM code).
     Cosmap,
+    /// τ = sigmoid(n), n ~ N(mean, std²) (SD3's logit-normal; a negative mean favours the noisy end, τ near 0).
+    LogitNormal { mean: f64, std: f64 },
 }
 
 impl TauSampler {
-    /// Maps uniform draws u ∈ [0, 1) to τ.
+    /// Maps uniform draws u ∈ (0, 1) to τ (the logit-normal through the normal quantile of u).
     ///
     /// # Shapes
     /// - u, output: `[B]`
@@ -87,12 +89,91 @@ impl TauSampler {
                 let (s, c) = (half_pi_u.clone().sin(), half_pi_u.cos());
                 s.clone() / (s + c) // = 1 − 1/(tan(πu/2) + 1), without the pole of tan at u = 1
             }
+            TauSampler::LogitNormal { mean, std } => {
+                let device = u.device();
+                let [b] = u.dims();
+                let us = u.into_data().convert::<f64>().try_to_vec::<f64>().unwrap_or_default();
+                let n: Vec<f32> = us.iter().map(|&p| (mean + std * normal_quantile(p)) as f32).collect();
+                burn::tensor::activation::sigmoid(Tensor::from_data(TensorData::new(n, [b]), &device))
+            }
         }
     }
 
     /// Draws B times from the device's random stream (seed it with `device.seed`).
     pub fn sample(self, batch: usize, device: &Device) -> Tensor<1> {
-        self.map(Tensor::random([batch], Distribution::Uniform(0.0, 1.0), device))
+        match self {
+            TauSampler::LogitNormal { mean, std } => {
+                burn::tensor::activation::sigmoid(Tensor::random([batch], Distribution::Normal(mean, std), device))
+            }
+            _ => self.map(Tensor::random([batch], Distribution::Uniform(0.0, 1.0), device)),
+        }
+    }
+
+    /// Checks the parameters; the error names the field.
+    pub fn validate(self) -> Result<(), String> {
+        match self {
+            TauSampler::LogitNormal { mean, std } if !(mean.is_finite() && std.is_finite() && std > 0.0) => {
+                Err(format!(
+                    "rf.tau_sampler.logit_normal needs a finite mean and a positive finite std, got {mean} and {std}"
+                ))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+/// The standard normal quantile Φ⁻¹(p) for p ∈ (0, 1) (Acklam's rational approximation, relative error < 1.2e-9);
+/// ±∞ at the ends.
+pub fn normal_quantile(p: f64) -> f64 {
+    const A: [f64; 6] = [
+        -3.969683028665376e1,
+        2.209460984245205e2,
+        -2.759285104469687e2,
+        1.383577518672690e2,
+        -3.066479806614716e1,
+        2.506628277459239,
+    ];
+    const B: [f64; 5] = [
+        -5.447609879822406e1,
+        1.615858368580409e2,
+        -1.556989798598866e2,
+        6.680131188771972e1,
+        -1.328068155288572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784894002430293e-3,
+        -3.223964580411365e-1,
+        -2.400758277161838,
+        -2.549732539343734,
+        4.374664141464968,
+        2.938163982698783,
+    ];
+    const D: [f64; 4] = [
+        7.784695709041462e-3,
+        3.224671290700398e-1,
+        2.445134137142996,
+        3.754408661907416,
+    ];
+    if p <= 0.0 {
+        return f64::NEG_INFINITY;
+    }
+    if p >= 1.0 {
+        return f64::INFINITY;
+    }
+    let tail = |q: f64| {
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    };
+    const P_LOW: f64 = 0.02425;
+    if p < P_LOW {
+        tail((-2.0 * p.ln()).sqrt())
+    } else if p > 1.0 - P_LOW {
+        -tail((-2.0 * (1.0 - p).ln()).sqrt())
+    } else {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
     }
 }
 

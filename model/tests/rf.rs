@@ -10,8 +10,8 @@ use any4d_model::mmdit::{
 };
 use any4d_model::rectified_flow::{
     Conditioning, DATA_PREDICTION_MIN_GAP, KeyframeLoss, ReplaceNoise, RfBatch, RfLossOptions, SampleOptions, Solver,
-    TauSampler, cfg_combine, interpolant, mmdit_velocity, output_velocity, rf_loss, rf_training_loss, sample,
-    sample_outputs, target_velocity,
+    TauSampler, cfg_combine, interpolant, mmdit_velocity, normal_quantile, output_velocity, rf_loss, rf_training_loss,
+    sample, sample_outputs, target_velocity,
 };
 use any4d_model::summary::param_report;
 use burn::module::{Module, ModuleVisitor, Param};
@@ -668,6 +668,54 @@ fn cosmap_is_symmetric_and_maps_the_ends() {
     assert!(v[0].abs() < 1e-7 && (v[4] - 1.0).abs() < 1e-6 && (v[2] - 0.5).abs() < 1e-6);
     assert!((v[1] + v[3] - 1.0).abs() < 1e-6, "cosmap(u) + cosmap(1 − u) = 1");
     assert_eq!(values(TauSampler::Uniform.map(u.clone())), values(u));
+}
+
+/// The logit-normal τ sampler (SD3): the normal quantile at known points, τ = sigmoid(mean) at u = 1/2, draws in
+/// (0, 1) whose logits have the configured mean and spread, and bad parameters refused.
+#[test]
+fn logit_normal_tau_follows_its_mean_and_spread() {
+    let _g = lock();
+    for (p, z) in [
+        (0.5, 0.0),
+        (0.975, 1.959_963_985),
+        (0.001, -3.090_232_306),
+        (0.9999, 3.719_016_485),
+    ] {
+        assert!(
+            (normal_quantile(p) - z).abs() < 1e-6,
+            "Φ⁻¹({p}) = {} not {z}",
+            normal_quantile(p)
+        );
+    }
+    let sampler = TauSampler::LogitNormal { mean: -0.8, std: 0.8 };
+    let d = dev();
+    let mid = values(sampler.map(Tensor::from_floats([0.5, 0.975], &d)));
+    let sigmoid = |x: f64| 1.0 / (1.0 + (-x).exp());
+    assert!((f64::from(mid[0]) - sigmoid(-0.8)).abs() < 1e-6);
+    assert!((f64::from(mid[1]) - sigmoid(-0.8 + 0.8 * 1.959_963_985)).abs() < 1e-6);
+    d.seed(3);
+    let taus = values(sampler.sample(4000, &d));
+    assert!(taus.iter().all(|&t| t > 0.0 && t < 1.0));
+    let logits: Vec<f64> = taus
+        .iter()
+        .map(|&t| (f64::from(t) / (1.0 - f64::from(t))).ln())
+        .collect();
+    let mean = logits.iter().sum::<f64>() / logits.len() as f64;
+    let sd = (logits.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / logits.len() as f64).sqrt();
+    assert!(
+        (mean + 0.8).abs() < 0.05 && (sd - 0.8).abs() < 0.05,
+        "logit mean {mean}, std {sd}"
+    );
+    assert!(TauSampler::LogitNormal { mean: 0.0, std: 0.0 }.validate().is_err());
+    assert!(
+        TauSampler::LogitNormal {
+            mean: f64::NAN,
+            std: 1.0
+        }
+        .validate()
+        .is_err()
+    );
+    assert!(sampler.validate().is_ok() && TauSampler::Uniform.validate().is_ok());
 }
 
 #[test]

@@ -195,6 +195,28 @@ fn set_overrides_apply_after_extends_and_reject_unknown_keys() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("rf.k_max"), "{err}");
+    // The logit-normal τ sampler and the data-predicting network are keys like any other; bad values are refused.
+    let sets: Vec<Override> = [
+        "rf.tau_sampler={ logit_normal = { mean = -0.8, std = 0.8 } }",
+        "model.prediction=data",
+    ]
+    .iter()
+    .map(|s| s.parse().unwrap())
+    .collect();
+    let cfg = RfRunConfig::load(&tiny, &sets).unwrap();
+    assert_eq!(
+        format!("{:?} {:?}", cfg.rf.tau_sampler, cfg.model.prediction),
+        "LogitNormal { mean: -0.8, std: 0.8 } Data"
+    );
+    let bad = "rf.tau_sampler={ logit_normal = { mean = 0.0, std = -1.0 } }";
+    let err = RfRunConfig::load(&tiny, &[bad.parse().unwrap()])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("rf.tau_sampler") && err.contains("positive"), "{err}");
+    let err = RfRunConfig::load(&tiny, &["model.prediction=noise".parse().unwrap()])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("model.prediction") || err.contains("noise"), "{err}");
 }
 
 #[test]

@@ -124,6 +124,7 @@ impl RfRunConfig {
         cfg.train.validate(file)?;
         cfg.optim.validate(file)?;
         let rf = &cfg.rf;
+        rf.tau_sampler.validate().map_err(bad)?;
         if !(0.0..=1.0).contains(&rf.text_dropout) {
             return Err(bad(format!("rf.text_dropout {} is outside [0, 1]", rf.text_dropout)));
         }
