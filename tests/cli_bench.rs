@@ -147,3 +147,58 @@ fn complete_benchmark_prints_one_row_per_vertex_count() {
     let out = any4d(&["bench", "complete", "--rf", p(&rf), "--reps", "0"]);
     assert!(!out.status.success() && text(&out).1.contains("--reps"));
 }
+
+/// `scripts/gpu_check.sh --dry-run` runs the GPU check's whole sequence on the CPU at tiny sizes: every check gets a
+/// numeric row in one CSV (networks, training throughput and peak fraction, P-Table 4 per size, the small preset),
+/// so the script is ready for the one short call a lent GPU allows. `bench sample` refuses configs that do not fit.
+#[test]
+fn the_gpu_check_script_runs_dry_on_the_cpu_and_writes_one_numeric_row_per_check() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("check");
+    let status = std::process::Command::new("bash")
+        .arg(preset("scripts/gpu_check.sh"))
+        .arg("--dry-run")
+        .arg(&out)
+        .env("ANY4D_BIN", env!("CARGO_BIN_EXE_any4d"))
+        .output()
+        .expect("bash runs the script");
+    let (stdout, stderr) = text(&status);
+    assert!(status.status.success(), "{stdout}\n{stderr}");
+    let csv = std::fs::read_to_string(out.join("gpu_check.csv")).unwrap();
+    let mut checks = Vec::new();
+    for line in csv.lines().skip(1) {
+        let fields: Vec<&str> = line.splitn(6, ',').collect();
+        assert_eq!(fields.len(), 6, "{line}");
+        if fields[0] != "device" {
+            let value = fields[3].trim_end_matches('%');
+            assert!(value.parse::<f64>().is_ok_and(|v| v >= 0.0), "not a number: {line}");
+        }
+        checks.push(fields[0].to_string());
+    }
+    for want in [
+        "model: RF forward+backward",
+        "model: frame-wise VAE encode+decode",
+        "train_paper: steps/s",
+        "train_paper: fraction of peak",
+        "table4: 16 frames 512 vertices",
+        "table4: 31 frames 256 vertices",
+        "train_small: steps/s",
+    ] {
+        assert!(checks.iter().any(|c| c == want), "no `{want}` row in\n{csv}");
+    }
+
+    let vae = preset("configs/vae/dymesh_tiny.toml");
+    let bad = any4d(&[
+        "bench",
+        "sample",
+        "--vae-config",
+        p(&vae),
+        "--rf-config",
+        p(&preset("configs/rf/tiny.toml")),
+        "--out",
+        p(&dir.path().join("t4")),
+    ]);
+    let (stdout, stderr) = text(&bad);
+    assert!(!bad.status.success());
+    assert!(stderr.contains("frame-wise"), "{stdout}\n{stderr}");
+}

@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use any4d_model::any_vae::AnyMeshVaeConfig;
 use any4d_model::bench::{BenchSizes, ModelTimings, StepTiming, time_networks};
 use any4d_model::summary::{format_report, param_report};
+use any4d_train::backend::Backend;
 use any4d_train::config::RunConfig;
 use any4d_train::pack::{Precision, pack_run};
 use anyhow::{Context, bail};
@@ -79,13 +80,6 @@ impl BenchSize {
     }
 }
 
-/// CPU backend of the benchmark.
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum CpuBackend {
-    Flex,
-    Ndarray,
-}
-
 #[derive(Args, Debug)]
 pub struct BenchArgs {
     /// Network size.
@@ -97,9 +91,9 @@ pub struct BenchArgs {
     /// Timed steps (after one warm-up step).
     #[arg(long, default_value_t = 3)]
     pub iters: usize,
-    /// CPU backend.
-    #[arg(long, value_enum, default_value = "flex")]
-    pub backend: CpuBackend,
+    /// Backend (a GPU one needs a binary built with its cargo feature; `--threads` applies to CPU backends).
+    #[arg(long, value_parser = super::enum_parser(&Backend::ALL), default_value = "flex")]
+    pub backend: Backend,
     /// CPU threads for our timings (a rayon pool of this size: burn-flex's gemm and kernels and burn-ndarray
     /// run on the current rayon pool) and for the PyTorch reference (torch.set_num_threads). Default: all cores.
     #[arg(long)]
@@ -190,12 +184,7 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
     let sz = args.size.sizes();
-    // burn 0.22 deprecates ndarray; the design card keeps it as the second CPU backend.
-    #[allow(deprecated)]
-    let device = match args.backend {
-        CpuBackend::Flex => Device::flex(),
-        CpuBackend::Ndarray => Device::ndarray(),
-    };
+    let device = any4d_train::backend::device(args.backend, any4d_train::backend::Precision::F32)?;
     if cfg!(debug_assertions) {
         println!(
             "note: debug build of our crates (dependencies are optimised); `cargo run --release -- bench model` \
@@ -377,7 +366,7 @@ mod tests {
             size: BenchSize::Tiny,
             batch: 2,
             iters: 1,
-            backend: CpuBackend::Flex,
+            backend: Backend::Flex,
             threads: Some(3),
             torch_reference: None,
             script: script.to_path_buf(),

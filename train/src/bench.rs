@@ -249,3 +249,80 @@ mod tests {
         assert!(err.contains("other.toml") && err.contains("neither an RF"), "{err}");
     }
 }
+
+/// Ours — the keyframe RF with its frame-wise VAE and scratch caption encoder — at the sizes of the run configs `rf`
+/// and `vae`, with freshly initialised weights (seeded): what timing P-Table 4 needs on a machine that has no trained
+/// run (the work per clip does not depend on the weights). Latent statistics are the identity; the sampler is the
+/// paper's midpoint solver on an `n_grid`-point grid (`any4d bench sample`).
+pub fn untrained_keyframe_method(
+    rf: &RfRunConfig,
+    vae: &VaeRunConfig,
+    n_grid: usize,
+    device: &Device,
+) -> Result<Box<dyn any4d_eval::methods::Method>> {
+    use std::sync::Arc;
+
+    use any4d_data::batch::PadTo;
+    use any4d_eval::learned::{LearnedModels, MeshCodec, RfSampler};
+    use any4d_eval::methods::{MethodKind, RfMethod};
+    use any4d_model::any_vae::{AnyMeshVae, AnyMeshVaeConfig};
+    use any4d_model::latent_stats::LatentStats;
+    use any4d_model::mmdit::KeyframeConditioning;
+    use any4d_model::rectified_flow::SampleOptions;
+    use any4d_model::text::scratch::{ScratchTextEncoder, ScratchTokenizer};
+
+    let setup = |reason: String| TrainError::Setup(format!("bench sample: {reason}"));
+    let AnyMeshVaeConfig::Framewise(vae_model) = &vae.model else {
+        return Err(setup(
+            "the VAE config must be frame-wise (vae.kind = \"framewise\")".into(),
+        ));
+    };
+    if rf.model.conditioning != KeyframeConditioning::InputMask {
+        return Err(setup(format!(
+            "times ours: the RF config needs model.conditioning = \"input_mask\", got {:?}",
+            rf.model.conditioning
+        )));
+    }
+    if rf.model.channels != vae_model.body.latent_channels {
+        return Err(setup(format!(
+            "model.channels = {} of the RF config differs from the VAE config's latent_channels = {}",
+            rf.model.channels, vae_model.body.latent_channels
+        )));
+    }
+    if n_grid < 2 {
+        return Err(setup(format!("--n-grid {n_grid}: needs at least 2 grid points")));
+    }
+    device.seed(rf.train.seed);
+    let captions = ["a waving sheet", "a small sphere spins", "a dog walks slowly"].map(String::from);
+    let tokenizer = ScratchTokenizer::train(&captions, rf.text.vocab_size)?;
+    let network = rf.model_config(tokenizer.vocab_size()).init(device);
+    let text = ScratchTextEncoder {
+        tokenizer,
+        model: network.text,
+    };
+    let codec = MeshCodec::new(
+        AnyMeshVae::Framewise(vae_model.init(device)),
+        vae.vae.tokens,
+        PadTo::BatchMax,
+        device.clone(),
+    )?;
+    let identity = LatentStats {
+        shape_mean: 0.0,
+        shape_std: 1.0,
+        motion_mean: 0.0,
+        motion_std: 1.0,
+    };
+    let models = LearnedModels::new(
+        Arc::new(codec),
+        network.mmdit,
+        rf.model.clone(),
+        identity,
+        Box::new(text),
+    )?;
+    let options = SampleOptions {
+        n_grid,
+        ..SampleOptions::paper(KeyframeConditioning::InputMask)
+    };
+    let sampler = RfSampler::for_method(MethodKind::KeyframeRf, Arc::new(models), options, 1.0)?;
+    Ok(Box::new(RfMethod::new(MethodKind::KeyframeRf, sampler)?))
+}

@@ -1,0 +1,164 @@
+#!/usr/bin/env bash
+# The GPU check in one call (README "Benchmarks"): on a machine with an NVIDIA GPU, times ours at the paper's size on
+# a GPU backend and writes one table as CSV. Build the binary where cargo can fetch crates, then run it there:
+#
+#   cargo build --release --features vulkan        # or --features cuda (needs the CUDA driver and NVRTC there)
+#   scripts/gpu_check.sh OUT                        # ANY4D_BIN=path/to/any4d if not target/release/any4d
+#   scripts/gpu_check.sh --dry-run OUT              # the same sequence on the CPU at tiny sizes (tests use this)
+#
+# Steps, each under its own time limit (about 8 minutes in all on an H100-class GPU):
+#   1. the GPU's name and memory (nvidia-smi);
+#   2. `bench model --size paper`: RF forward+backward and VAE encode+decode per clip;
+#   3. `bench train` of configs/rf/paper.toml: steps/s, model TFLOP/s and the fraction of the GPU's peak
+#      (ANY4D_PEAK_TFLOPS, default 66.9: the H100/H200 SXM FP32 peak without tensor cores; state which peak);
+#      with ANY4D_GPU_BACKEND=cuda also in bf16 against ANY4D_PEAK_BF16_TFLOPS (default 989, dense);
+#   4. `bench sample`: P-Table 4, encode → 63-step midpoint sampling → decode, 16 and 31 frames, 512–4096 vertices
+#      (freshly initialised networks: the work does not depend on the weights);
+#   5. `bench train` of configs/rf/small.toml for about two minutes: the small preset's steps/s.
+# Output: OUT/gpu_check.csv (check, backend, precision, value, unit, command) and one log per step in OUT/.
+# A step that fails or runs out of time gets a row with value "failed" or "timeout" and the rest still run; the
+# exit status is non-zero if any step failed.
+set -uo pipefail
+
+dry=0
+if [[ "${1:-}" == "--dry-run" ]]; then
+    dry=1
+    shift
+fi
+out=${1:?usage: scripts/gpu_check.sh [--dry-run] OUT}
+root=$(cd "$(dirname "$0")/.." && pwd)
+bin=${ANY4D_BIN:-$root/target/release/any4d}
+if [[ ! -x "$bin" ]]; then
+    echo "gpu_check: no any4d binary at $bin (build it, or set ANY4D_BIN)" >&2
+    exit 2
+fi
+mkdir -p "$out" || exit 2
+csv="$out/gpu_check.csv"
+echo "check,backend,precision,value,unit,command" >"$csv"
+
+if ((dry)); then
+    backend=flex
+    size=tiny
+    rf_paper=$root/configs/rf/tiny.toml
+    vae_paper=$root/configs/vae/tiny.toml
+    rf_small=$root/configs/rf/tiny.toml
+    vertices=256,512
+    grid=4
+    reps=1
+    train_steps=3
+    small_steps=3
+    limit=120
+else
+    backend=${ANY4D_GPU_BACKEND:-vulkan}
+    size=paper
+    rf_paper=$root/configs/rf/paper.toml
+    vae_paper=$root/configs/vae/paper.toml
+    rf_small=$root/configs/rf/small.toml
+    vertices=512,1024,2048,4096
+    grid=64
+    reps=3
+    train_steps=20
+    small_steps=${ANY4D_SMALL_STEPS:-2000}
+    limit=150
+fi
+peak=${ANY4D_PEAK_TFLOPS:-66.9}
+peak_bf16=${ANY4D_PEAK_BF16_TFLOPS:-989}
+status=0
+
+row() { # check precision value unit command
+    printf '%s,%s,%s,%s,%s,"%s"\n' "$1" "$backend" "$2" "$3" "$4" "$5" >>"$csv"
+}
+
+# Runs a step with a time limit; its output goes to OUT/NAME.log. Returns its exit status (124 = timeout).
+run_step() { # name command...
+    local name=$1
+    shift
+    echo "== $name: $*" >&2
+    timeout "$limit" "$@" >"$out/$name.log" 2>&1
+    local rc=$?
+    if ((rc != 0)); then
+        status=1
+        echo "   $name: exit $rc (see $out/$name.log)" >&2
+    fi
+    return $rc
+}
+
+failed_row() { # check precision rc command
+    local what=failed
+    (($3 == 124)) && what=timeout
+    row "$1" "$2" "$what" "" "$4"
+}
+
+# 1. The device.
+if ((dry)); then
+    row device "" "cpu (dry run)" "" "none"
+elif command -v nvidia-smi >/dev/null; then
+    gpu=$(nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | head -n 1 | tr ',' ';')
+    row device "" "$gpu" "name; memory; driver" "nvidia-smi"
+else
+    row device "" "unknown (no nvidia-smi)" "" "nvidia-smi"
+fi
+
+# 2. Networks per clip.
+cmd=("$bin" bench model --size "$size" --backend "$backend" --iters "$reps")
+if run_step bench_model "${cmd[@]}"; then
+    for net in "RF forward+backward" "frame-wise VAE encode+decode" "sequence-wise DyMeshVAE encode+decode"; do
+        ms=$(grep -F "bench model: $net" "$out/bench_model.log" | sed -E 's/.* ([0-9.]+) ms\/clip$/\1/')
+        row "model: $net" f32 "${ms:-parse-error}" "ms/clip" "${cmd[*]}"
+    done
+else
+    failed_row "model: networks" f32 $? "${cmd[*]}"
+fi
+
+# 3. Paper-size training step: steps/s, TFLOP/s, fraction of the peak.
+train_row() { # name precision peak config steps
+    local name=$1 precision=$2 cpeak=$3 config=$4 steps=$5
+    local c=("$bin" bench train --config "$config" --backends "$backend" --steps "$steps" --peak-tflops "$cpeak")
+    [[ "$precision" == bf16 ]] && c+=(--precision bf16)
+    if run_step "$name" "${c[@]}"; then
+        # The result row: backend micro_batch median_s steps/s samples/s GFLOP/step GFLOP/s of_peak
+        local line
+        line=$(grep -E "^$backend[[:space:]]" "$out/$name.log" | tail -n 1)
+        read -r _ _ _ sps _ _ gflops frac <<<"$line"
+        row "$name: steps/s" "$precision" "${sps:-parse-error}" "steps/s" "${c[*]}"
+        row "$name: model FLOP/s" "$precision" "${gflops:-parse-error}" "GFLOP/s" "${c[*]}"
+        row "$name: fraction of peak" "$precision" "${frac:-parse-error}" "of $cpeak TFLOP/s" "${c[*]}"
+    else
+        failed_row "$name" "$precision" $? "${c[*]}"
+    fi
+}
+train_row train_paper f32 "$peak" "$rf_paper" "$train_steps"
+if [[ "$backend" == cuda ]]; then
+    train_row train_paper_bf16 bf16 "$peak_bf16" "$rf_paper" "$train_steps"
+fi
+
+# 4. P-Table 4 timing.
+cmd=("$bin" bench sample --rf-config "$rf_paper" --vae-config "$vae_paper" --backend "$backend"
+    --vertices "$vertices" --frames 16,31 --reps "$reps" --n-grid "$grid" --out "$out/table4")
+if run_step table4 "${cmd[@]}"; then
+    # summary.csv: one line per method × frames, a column v<N> per vertex count.
+    python3 - "$out/table4/summary.csv" "$backend" "${cmd[*]}" >>"$csv" <<'EOF' || status=1
+import csv, sys
+path, backend, command = sys.argv[1:]
+with open(path) as f:
+    rows = [r for r in csv.reader(f) if r and not r[0].startswith("#")]
+header, body = rows[0], rows[1:]
+frames_col = header.index("frames")
+printed = 0
+for r in body:
+    for h, v in zip(header, r):
+        if h.startswith("v") and h[1:].isdigit():  # v512: seconds per clip at 512 vertices
+            print(f'table4: {r[frames_col]} frames {h[1:]} vertices,{backend},f32,{float(v):.4f},s/clip,"{command}"')
+            printed += 1
+sys.exit(0 if printed else f"no timing columns in {path}")
+EOF
+else
+    failed_row "table4" f32 $? "${cmd[*]}"
+fi
+
+# 5. The small preset's training throughput (about two minutes on the GPU).
+train_row train_small f32 "$peak" "$rf_small" "$small_steps"
+
+column -s, -t <"$csv" || cat "$csv"
+echo "written to $csv"
+exit $status
