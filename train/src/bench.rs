@@ -208,48 +208,6 @@ pub fn time_vae_steps(
     })
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::config::RunConfig;
-
-    fn root() -> &'static Path {
-        Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
-    }
-
-    #[test]
-    fn rf_steps_run_and_are_timed() {
-        let RunConfig::Rf(cfg) = RunConfig::load(&root().join("configs/rf/tiny.toml"), &[]).expect("loads") else {
-            panic!("configs/rf/tiny.toml is not detected as an RF preset");
-        };
-        let shape = RfShape {
-            batch: 2,
-            tokens: 8,
-            text_len: cfg.text.max_len,
-        };
-        let secs = time_rf_steps(&cfg, shape, 2, &Device::flex()).expect("steps run");
-        assert_eq!(secs.len(), 2);
-        assert!(secs.iter().all(|&s| s > 0.0), "{secs:?}");
-        let flops = rf_step_flops(&cfg, shape);
-        assert_eq!(flops.step, 2.0 * (flops.mmdit_per_clip + flops.text_per_clip) as f64);
-    }
-
-    #[test]
-    fn presets_are_told_apart_and_others_are_refused() {
-        assert!(matches!(
-            RunConfig::load(&root().join("configs/vae/tiny.toml"), &[]),
-            Ok(RunConfig::Vae(_))
-        ));
-        let tmp = tempfile::tempdir().expect("temp dir");
-        let other = tmp.path().join("other.toml");
-        std::fs::write(&other, "[train]\nseed = 1\n").expect("write");
-        let err = RunConfig::load(&other, &[])
-            .expect_err("neither RF nor VAE")
-            .to_string();
-        assert!(err.contains("other.toml") && err.contains("neither an RF"), "{err}");
-    }
-}
-
 /// Ours — the keyframe RF with its frame-wise VAE and scratch caption encoder — at the sizes of the run configs `rf`
 /// and `vae`, with freshly initialised weights (seeded): what timing P-Table 4 needs on a machine that has no trained
 /// run (the work per clip does not depend on the weights). Latent statistics are the identity; the sampler is the
@@ -325,4 +283,46 @@ pub fn untrained_keyframe_method(
     };
     let sampler = RfSampler::for_method(MethodKind::KeyframeRf, Arc::new(models), options, 1.0)?;
     Ok(Box::new(RfMethod::new(MethodKind::KeyframeRf, sampler)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::RunConfig;
+
+    fn root() -> &'static Path {
+        Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+    }
+
+    #[test]
+    fn rf_steps_run_and_are_timed() {
+        let RunConfig::Rf(cfg) = RunConfig::load(&root().join("configs/rf/tiny.toml"), &[]).expect("loads") else {
+            panic!("configs/rf/tiny.toml is not detected as an RF preset");
+        };
+        let shape = RfShape {
+            batch: 2,
+            tokens: 8,
+            text_len: cfg.text.max_len,
+        };
+        let secs = time_rf_steps(&cfg, shape, 2, &Device::flex()).expect("steps run");
+        assert_eq!(secs.len(), 2);
+        assert!(secs.iter().all(|&s| s > 0.0), "{secs:?}");
+        let flops = rf_step_flops(&cfg, shape);
+        assert_eq!(flops.step, 2.0 * (flops.mmdit_per_clip + flops.text_per_clip) as f64);
+    }
+
+    #[test]
+    fn presets_are_told_apart_and_others_are_refused() {
+        assert!(matches!(
+            RunConfig::load(&root().join("configs/vae/tiny.toml"), &[]),
+            Ok(RunConfig::Vae(_))
+        ));
+        let tmp = tempfile::tempdir().expect("temp dir");
+        let other = tmp.path().join("other.toml");
+        std::fs::write(&other, "[train]\nseed = 1\n").expect("write");
+        let err = RunConfig::load(&other, &[])
+            .expect_err("neither RF nor VAE")
+            .to_string();
+        assert!(err.contains("other.toml") && err.contains("neither an RF"), "{err}");
+    }
 }
