@@ -111,7 +111,17 @@ fn complete_a_clip_in_user_coordinates_with_exact_keyframes() {
     assert!(ok, "{log}");
     let s0 = read_clip(&dir.path().join("many_s0.glb")).unwrap();
     let s1 = read_clip(&dir.path().join("many_s1.glb")).unwrap();
-    assert_eq!(s0.vertices, got.vertices, "sample 0 = the single sample of seed 42");
+    // The two samples share network calls (a batch of 2): sample 0 is the single sample up to float rounding.
+    let diff = s0
+        .vertices
+        .iter()
+        .zip(&got.vertices)
+        .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
+        .fold(0.0f32, f32::max);
+    assert!(
+        diff < 1e-3,
+        "sample 0 = the single sample of seed 42, up to rounding: {diff}"
+    );
     assert_ne!(s1.vertices, s0.vertices, "sample 1 has its own noise");
 }
 

@@ -15,14 +15,14 @@ use std::path::{Path, PathBuf};
 use any4d_data::formats::{self, obj};
 use any4d_data::preprocess::normalize;
 use any4d_data::{Clip, DataError};
-use any4d_eval::methods::Method;
+use any4d_eval::methods::{Method, Request};
 use any4d_eval::rollout::{OverlapSource, RolloutSpec};
 use any4d_eval::tables::long_horizon::generate_windows;
 
 use crate::error::{Result, TrainError};
 
 /// Seeds of sample k are `seed + k · SAMPLE_SEED_STRIDE` (window w of a rollout adds w), so sample 0 of
-/// `--samples N` is the single sample of the same seed.
+/// `--samples N` is the single sample of the same seed (up to float rounding: samples of one window share network calls).
 pub const SAMPLE_SEED_STRIDE: u64 = 1_000_000;
 
 /// The keyframes of one completion in the user's coordinates: meshes of one topology at frame indices.
@@ -283,12 +283,32 @@ pub fn complete(
     };
     let key_frames = keys.frames();
     let captions = [opts.caption.clone()];
+    let seed_of = |k: usize| opts.seed.wrapping_add(k as u64 * SAMPLE_SEED_STRIDE);
+    // One window: the samples go through the network together, SAMPLE_BATCH at a time (each keeps its own noise, so
+    // sample k is what it would be alone, up to float rounding). Longer clips roll out sample by sample.
+    let mut batched: Vec<Vec<[f32; 3]>> = Vec::new();
+    if opts.frames == window {
+        let seeds: Vec<u64> = (0..opts.samples).map(seed_of).collect();
+        for chunk in seeds.chunks(SAMPLE_BATCH) {
+            let requests: Vec<Request<'_>> = chunk
+                .iter()
+                .map(|&seed| Request {
+                    clip: &normalised,
+                    keyframes: &key_frames,
+                    seed,
+                })
+                .collect();
+            batched.extend(method.complete_batch(&requests, &opts.caption)?);
+        }
+    }
     let mut out = Vec::with_capacity(opts.samples.min(64));
     for k in 0..opts.samples {
-        let seed = opts.seed.wrapping_add(k as u64 * SAMPLE_SEED_STRIDE);
-        let r = generate_windows(method, &normalised, &key_frames, &captions, seed, spec)?;
+        let vertices = match batched.get_mut(k) {
+            Some(v) => std::mem::take(v),
+            None => generate_windows(method, &normalised, &key_frames, &captions, seed_of(k), spec)?.vertices,
+        };
         let mut clip = Clip {
-            vertices: r.vertices,
+            vertices,
             ..normalised.clone()
         };
         norm.invert(&mut clip);
@@ -311,6 +331,9 @@ pub fn complete(
     }
     Ok(out)
 }
+
+/// Samples of one window that `complete` sends through the network together.
+pub const SAMPLE_BATCH: usize = 8;
 
 /// Where sample `k` of `samples` goes: `out` itself for one sample, else `<stem>_s<k>.<ext>` (an OBJ folder:
 /// `<folder>_s<k>`).
