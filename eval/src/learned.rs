@@ -570,7 +570,7 @@ impl RfSampler {
         if (kind == MethodKind::Aam) != sequencewise {
             let reason = if sequencewise {
                 "needs an RF trained on a frame-wise VAE; this one is the AnimateAnyMesh reference (an RF on the \
-                 sequence-wise VAE): evaluate it as method `aam`"
+                 sequence-wise VAE that takes no keyframes): it runs only as method `aam` of `eval run`"
             } else {
                 "needs the AnimateAnyMesh reference, an RF trained on a sequence-wise VAE (configs/rf/aam_*.toml); \
                  this RF was trained on a frame-wise VAE"
@@ -617,10 +617,16 @@ impl RfSampler {
                 return Err(DataError::new(
                     &clip.id,
                     "frames",
-                    format!(
-                        "the window has {} frames, the RF was built for T = {window}",
-                        clip.frames
-                    ),
+                    match sequencewise {
+                        Some(_) => format!(
+                            "the window has {} frames, the sequence-wise VAE encodes windows of T = {window}",
+                            clip.frames
+                        ),
+                        None => format!(
+                            "the window has {} frames, the RF was built for T = {window}",
+                            clip.frames
+                        ),
+                    },
                 ));
             }
             let keys = keyframe_list(clip, r.keyframes)?;

@@ -119,6 +119,10 @@ pub fn time_rf_step(
         let target = Tensor::<3>::random([batch, tokens, cfg.out_channels()], normal, &ad);
         let tau = Tensor::<1>::random([batch], Distribution::Uniform(0.0, 1.0), &ad);
         let keep = Tensor::<1>::ones([batch], &ad);
+        // The inputs exist before the clock starts (GPU backends build them lazily).
+        if let Err(e) = ad.sync() {
+            panic!("device sync failed: {e:?}");
+        }
         let start = std::time::Instant::now();
         let loss = (model.forward(input, text, keep, tau) - target).square().mean();
         let grads = loss.backward();

@@ -38,7 +38,7 @@ pub fn target_velocity(eps: Tensor<4>, x1: Tensor<4>) -> Tensor<4> {
 
 /// Smallest 1 − τ in the training velocity of a data-predicting network (docs/method.md §4.9): keeps
 /// (Ẑ − X_τ)/(1 − τ) and its loss bounded as τ → 1 (training draws τ up to 1). Sampling never evaluates at τ = 1 and
-/// divides by the exact 1 − τ, so that the last step lands on Ẑ.
+/// divides by the exact 1 − τ (a scalar, in f64), so that the last step lands on Ẑ.
 pub const DATA_PREDICTION_MIN_GAP: f64 = 0.05;
 
 /// The velocity that a network output stands for (docs/method.md §4.9): the output itself for
@@ -92,7 +92,11 @@ impl TauSampler {
             TauSampler::LogitNormal { mean, std } => {
                 let device = u.device();
                 let [b] = u.dims();
-                let us = u.into_data().convert::<f64>().try_to_vec::<f64>().unwrap_or_default();
+                let us = u
+                    .into_data()
+                    .convert::<f64>()
+                    .try_to_vec::<f64>()
+                    .expect("a tensor converted to f64 reads back as f64");
                 let n: Vec<f32> = us.iter().map(|&p| (mean + std * normal_quantile(p)) as f32).collect();
                 burn::tensor::activation::sigmoid(Tensor::from_data(TensorData::new(n, [b]), &device))
             }
@@ -433,9 +437,13 @@ where
     let mut eval = |x: Tensor<4>, tau: f64| -> Tensor<4> {
         let input = sampler_input(cond, x.clone(), &eps, tau, opts);
         let tau_b = Tensor::<1>::full([b], tau, &device);
-        let out = split_output(network(input, tau_b.clone()), frames);
-        // Evaluations are at τ < 1 (grid points and midpoints before the end): the exact 1 − τ.
-        output_velocity(prediction, out, x, tau_b, f64::MIN_POSITIVE)
+        let out = split_output(network(input, tau_b), frames);
+        match prediction {
+            Prediction::Velocity => out,
+            // (R10) with the exact 1 − τ, in f64 (evaluations are at τ < 1: grid points and midpoints before the end),
+            // so the last step lands on Ẑ in any tensor precision.
+            Prediction::Data => (out - x).mul_scalar(1.0 / (1.0 - tau)),
+        }
     };
     let steps = opts.n_grid - 1;
     let dt = 1.0 / steps as f64;

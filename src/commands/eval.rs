@@ -400,8 +400,17 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
             format!("{:?}", args.backend)
         } else {
             format!(
-                "{:?}; sampler {:?} on a {}-point grid, guidance {}, keyframe latents: posterior {:?}",
-                args.backend, args.solver, args.n_grid, args.guidance, args.posterior
+                "{:?}; sampler {:?} on a {}-point grid, guidance {}{}, keyframe latents: posterior {:?}",
+                args.backend,
+                args.solver,
+                args.n_grid,
+                args.guidance,
+                if kinds.contains(&MethodKind::Aam) {
+                    format!(" (aam: {})", any4d_eval::methods::AAM_GUIDANCE)
+                } else {
+                    String::new()
+                },
+                args.posterior
             )
         },
         ..TableHeader::default()

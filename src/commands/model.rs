@@ -23,14 +23,15 @@ pub enum ModelCmd {
     /// Parameter counts per submodule of the network in a run config's `[model]` table.
     Summary(SummaryArgs),
     /// Reduce a trained run folder to what sampling needs (config, the newest checkpoint's sampling parameters,
-    /// side files; no optimiser state), optionally in half precision. The result loads with `--vae`, `--rf` and
-    /// `--baseline-rf` like the run, but cannot resume.
+    /// side files; no optimiser state), optionally in half precision. The result loads with `--vae`, `--rf`,
+    /// `--baseline-rf`, `--aam` and `--bdlstm` like the run, but cannot resume.
     Pack(PackArgs),
 }
 
 #[derive(Args, Debug)]
 pub struct PackArgs {
-    /// The trained run folder (VAE or RF).
+    /// The trained run folder (VAE, RF or BD-LSTM; a BD-LSTM run needs its recorded VAE run in place, which sizes
+    /// its codec).
     #[arg(long)]
     pub run: PathBuf,
     /// The new folder to write (must not exist).
@@ -39,7 +40,7 @@ pub struct PackArgs {
     /// Store the parameters in half precision (half the size; loading casts back to f32).
     #[arg(long)]
     pub half: bool,
-    /// RF runs: the VAE folder to record in `vae_run.json` instead of the run's (relative paths are resolved
+    /// RF and BD-LSTM runs: the VAE folder to record in `vae_run.json` instead of the run's (relative paths are resolved
     /// against the packed folder, e.g. `../vae` for a VAE packed beside it).
     #[arg(long)]
     pub vae_at: Option<PathBuf>,

@@ -216,7 +216,7 @@ fn set_overrides_apply_after_extends_and_reject_unknown_keys() {
     let err = RfRunConfig::load(&tiny, &["model.prediction=noise".parse().unwrap()])
         .unwrap_err()
         .to_string();
-    assert!(err.contains("model.prediction") || err.contains("noise"), "{err}");
+    assert!(err.contains("model.prediction") && err.contains("noise"), "{err}");
 }
 
 #[test]
