@@ -436,3 +436,96 @@ fn the_split_option_draws_items_from_that_split_only() {
     assert_eq!(EvalSplit::parse("all"), Ok(EvalSplit::All));
     assert!(EvalSplit::parse("test").unwrap_err().contains("val, train or all"));
 }
+
+/// A method that records the captions it is given (and returns its input).
+struct CaptionLog(std::sync::Mutex<Vec<String>>);
+
+impl any4d_eval::methods::Method for CaptionLog {
+    fn kind(&self) -> any4d_eval::methods::MethodKind {
+        any4d_eval::methods::MethodKind::KeyframeRf
+    }
+
+    fn complete(
+        &self,
+        clip: &any4d_data::Clip,
+        _keyframes: &[usize],
+        caption: &str,
+        _seed: u64,
+    ) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
+        self.0.lock().unwrap().push(caption.to_string());
+        Ok(clip.vertices.clone())
+    }
+}
+
+/// `eval run --captions none`: every method gets the empty caption (the unconditional input) instead of the clip's,
+/// and the table header says so; by default each clip's own caption arrives.
+#[test]
+fn the_caption_ablation_withholds_every_caption_and_says_so() {
+    use std::sync::Arc;
+
+    use any4d_data::store::write_synth_with;
+    use any4d_data::synth::SynthConfig;
+    use any4d_eval::methods::Method;
+    use any4d_eval::tables::short_horizon::ShortHorizon;
+    use any4d_eval::tables::{CaptionMode, Items, Protocol, TableOptions, run_protocol};
+
+    /// Shares one log between the table (which owns its methods) and the test.
+    struct Shared(Arc<CaptionLog>);
+    impl Method for Shared {
+        fn kind(&self) -> any4d_eval::methods::MethodKind {
+            self.0.kind()
+        }
+        fn complete(
+            &self,
+            clip: &any4d_data::Clip,
+            keyframes: &[usize],
+            caption: &str,
+            seed: u64,
+        ) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
+            self.0.complete(clip, keyframes, caption, seed)
+        }
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("store");
+    let cfg = SynthConfig {
+        clips: 20,
+        seed: 3,
+        frames: 16,
+        min_vertices: 512,
+        max_vertices: 768,
+    };
+    write_synth_with(&cfg, &store, 16, None).unwrap();
+    let table1 = Protocol::ShortHorizon(ShortHorizon {
+        items: Items {
+            clips: 2,
+            ..Items::default()
+        },
+        ..ShortHorizon::default()
+    });
+    for mode in [CaptionMode::Clip, CaptionMode::Empty] {
+        let log = Arc::new(CaptionLog(std::sync::Mutex::new(Vec::new())));
+        let mut opts = TableOptions::new(store.clone(), dir.path().join(format!("{mode:?}")));
+        opts.methods = vec![Box::new(Shared(Arc::clone(&log)))];
+        opts.export_items = 0;
+        opts.progress = false;
+        opts.captions = mode;
+        let report = run_protocol(&table1, &opts).unwrap();
+        let seen = log.0.lock().unwrap().clone();
+        assert_eq!(seen.len(), 2 * 4, "{mode:?}: one call per clip and K_x");
+        match mode {
+            CaptionMode::Clip => {
+                assert!(seen.iter().all(|c| !c.is_empty()), "{seen:?}");
+                assert!(!report.markdown.contains("withheld"));
+            }
+            CaptionMode::Empty => {
+                assert!(seen.iter().all(String::is_empty), "{seen:?}");
+                assert!(
+                    report.markdown.contains("every caption withheld"),
+                    "{}",
+                    report.markdown
+                );
+            }
+        }
+    }
+}

@@ -17,7 +17,7 @@ use any4d_eval::tables::reconstruction::Reconstruction;
 use any4d_eval::tables::short_horizon::ShortHorizon;
 use any4d_eval::tables::summary::TableHeader;
 use any4d_eval::tables::timing::{PAPER_REPS, Timing};
-use any4d_eval::tables::{Items, PAPER_CLIPS, Protocol, TableOptions, render_results, run_protocol};
+use any4d_eval::tables::{CaptionMode, Items, PAPER_CLIPS, Protocol, TableOptions, render_results, run_protocol};
 use any4d_model::rectified_flow::{ReplaceNoise, Solver};
 use any4d_train::backend::{self, Backend, Precision};
 use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods, build_reconstructors};
@@ -287,6 +287,10 @@ pub struct RunArgs {
     /// Compute backend.
     #[arg(long, value_parser = enum_parser(&Backend::ALL), default_value = "flex")]
     pub backend: Backend,
+    /// Captions given to the methods: each clip's own (the paper's protocol) or none (every caption empty, the
+    /// unconditional input: what the text adds).
+    #[arg(long, value_enum, default_value_t = CaptionArg::Clip)]
+    pub captions: CaptionArg,
     /// Hide the progress bar.
     #[arg(long)]
     pub no_progress: bool,
@@ -392,6 +396,10 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
     opts.export_items = args.export;
     opts.progress = !args.no_progress;
     opts.split = args.split;
+    opts.captions = match args.captions {
+        CaptionArg::Clip => CaptionMode::Clip,
+        CaptionArg::None => CaptionMode::Empty,
+    };
     let uses_rf = kinds.iter().any(|k| k.needs_model());
     opts.header = TableHeader {
         text_encoder: if uses_rf { "scratch".into() } else { "none".into() },
@@ -428,6 +436,15 @@ fn render(args: RenderArgs) -> anyhow::Result<ExitCode> {
         println!("{}", f.display());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `eval run --captions`.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum CaptionArg {
+    /// Each clip's caption.
+    Clip,
+    /// No caption for any clip.
+    None,
 }
 
 /// `any4d bench sample`: P-Table 4 on freshly initialised networks.

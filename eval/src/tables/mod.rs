@@ -104,6 +104,18 @@ pub struct TableOptions {
     pub progress: bool,
     /// The store's clips the items are drawn from (validation by default).
     pub split: EvalSplit,
+    /// The captions the methods are given: each clip's own, or none (the caption ablation).
+    pub captions: CaptionMode,
+}
+
+/// Which caption a method gets with each clip (`eval run --captions`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum CaptionMode {
+    /// The clip's caption (the paper's protocol).
+    #[default]
+    Clip,
+    /// The empty caption for every clip: the unconditional input, to measure what the text adds.
+    Empty,
 }
 
 impl TableOptions {
@@ -118,6 +130,7 @@ impl TableOptions {
             header: TableHeader::default(),
             progress: true,
             split: EvalSplit::Val,
+            captions: CaptionMode::Clip,
         }
     }
 
@@ -179,12 +192,16 @@ pub fn evaluate(
     overlap_source: OverlapSource,
     keep_items: usize,
     show_progress: bool,
+    caption_mode: CaptionMode,
 ) -> Result<(Vec<ClipRecord>, Vec<Prediction>)> {
     let bar = progress_bar(show_progress, manifest.clips.len(), "evaluating")?;
     let mut records = Vec::new();
     let mut kept = Vec::new();
     for (i, item) in manifest.clips.iter().enumerate() {
-        let (gt, captions) = source.item(item, manifest.frames)?;
+        let (gt, mut captions) = source.item(item, manifest.frames)?;
+        if caption_mode == CaptionMode::Empty {
+            captions.iter_mut().for_each(String::clear);
+        }
         // Every (keyframe set, seed) of the clip, in this order; one batched call per method on a short horizon.
         let asks: Vec<(&[usize], u64, u64)> = item
             .keyframes
@@ -245,6 +262,10 @@ pub(crate) fn header_for(opts: &TableOptions, manifest_path: &Path) -> TableHead
     if h.text_encoder.is_empty() {
         h.text_encoder = "none (no method reads text)".into();
     }
+    if opts.captions == CaptionMode::Empty {
+        h.text_encoder
+            .push_str("; every caption withheld (empty: the unconditional input)");
+    }
     for m in &opts.methods {
         h.checkpoints.entry(m.kind().label()).or_insert_with(|| "none".into());
     }
@@ -295,6 +316,7 @@ pub(crate) fn run_completion(
         overlap_source,
         opts.export_items,
         opts.progress,
+        opts.captions,
     )?;
     let parquet = opts.out.join("clips.parquet");
     write_clip_parquet(&records, &parquet)?;
