@@ -20,7 +20,7 @@ pub enum BenchCmd {
     Complete(super::complete::BenchArgs),
     /// P-Table 4 timing (encode → midpoint sampling → decode, 16 and 31 frames) of ours at a config's size with
     /// freshly initialised weights, on any backend: no trained run needed.
-    Sample(super::eval::SampleBenchArgs),
+    Sample(super::timing::SampleBenchArgs),
 }
 
 pub fn exec(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
@@ -30,6 +30,6 @@ pub fn exec(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
         BenchCmd::Train(args) => super::train::bench(args),
         BenchCmd::Metrics(args) => super::eval::bench(args),
         BenchCmd::Complete(args) => super::complete::bench(args),
-        BenchCmd::Sample(args) => super::eval::bench_sample(args),
+        BenchCmd::Sample(args) => super::timing::bench_sample(args),
     }
 }
