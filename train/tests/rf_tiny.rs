@@ -243,7 +243,7 @@ fn packed_runs_load_with_their_parameters_in_full_and_half_precision() {
     )
     .unwrap_err()
     .to_string();
-    assert!(err.contains("RF runs only"), "{err}");
+    assert!(err.contains("RF and BD-LSTM runs only"), "{err}");
     assert!(!bad.exists());
 }
 
