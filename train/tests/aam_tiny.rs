@@ -14,13 +14,12 @@ use any4d_eval::methods::{MethodKind, hide_non_keyframes};
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::Duration;
 use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods};
-use any4d_train::loop_common::{Outcome, RunOptions, StopFlag};
-use any4d_train::progress::ProgressMode;
+use any4d_train::loop_common::Outcome;
 use any4d_train::rf_loop::{LatentDraw, RfRunConfig, RfRunOptions, train_rf};
 use any4d_train::run_folder::{METRICS_FILE, SAMPLES_FILE, read_table};
 use any4d_train::vae_loop::train_vae;
 use burn::prelude::Device;
-use common::{VaeFixture, root, serial, synth_store, tiny_dymesh_vae, vae_fixture, vae_fixture_with};
+use common::{VaeFixture, root, run_options, serial, synth_store, tiny_dymesh_vae, vae_fixture, vae_fixture_with};
 
 /// The 4-frame store (seed 1) and a 6-step sequence-wise VAE run on it.
 fn dymesh() -> &'static VaeFixture {
@@ -56,14 +55,7 @@ fn aam_tiny(steps: u64) -> RfRunConfig {
 
 fn opts(f: &VaeFixture, name: &str) -> RfRunOptions {
     RfRunOptions {
-        run: RunOptions {
-            data: f.store.clone(),
-            runs_dir: f.dir.join("runs"),
-            name: name.into(),
-            progress: ProgressMode::Quiet,
-            stop: StopFlag::new(),
-            parallel: None,
-        },
+        run: run_options(&f.store, &f.dir, name),
         vae_run: Some(f.vae_run.clone()),
     }
 }
@@ -225,14 +217,7 @@ fn a_sequence_wise_vae_refuses_clips_of_another_length() {
     if let any4d_model::any_vae::AnyMeshVaeConfig::Sequencewise(m) = &mut cfg.model {
         m.frames = 16;
     }
-    let opts = RunOptions {
-        data: store,
-        runs_dir: dir.path().join("runs"),
-        name: "long".into(),
-        progress: ProgressMode::Quiet,
-        stop: StopFlag::new(),
-        parallel: None,
-    };
+    let opts = run_options(&store, dir.path(), "long");
     let e = train_vae(&cfg, &opts).err().unwrap().to_string();
     assert!(e.contains("model.frames = 16") && e.contains("4-frame clips"), "{e}");
     assert!(!dir.path().join("runs").join("long-1").exists());

@@ -14,29 +14,17 @@ use any4d_train::bdlstm_loop::{
 };
 use any4d_train::config::{Duration, Override, RunConfig};
 use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods};
-use any4d_train::loop_common::{Objective, Outcome, RunOptions, StopFlag, train};
+use any4d_train::loop_common::{Objective, Outcome, train};
 use any4d_train::pack::{Precision as PackPrecision, pack_run};
-use any4d_train::progress::ProgressMode;
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, VALID_FILE, read_table};
 use any4d_train::runs::load_vae_run;
 use burn::prelude::Device;
-use common::{VaeFixture, params, quiet_setup, root, serial, vae_fixture};
+use common::{VaeFixture, params, quiet_setup, root, run_options, serial, vae_fixture};
 
 /// The shared store and tiny VAE run (seed 4), made once per test process.
 fn fixture() -> &'static VaeFixture {
     static FIXTURE: OnceLock<VaeFixture> = OnceLock::new();
     FIXTURE.get_or_init(|| vae_fixture(4))
-}
-
-fn run_options(store: &std::path::Path, dir: &std::path::Path, name: &str) -> RunOptions {
-    RunOptions {
-        data: store.to_path_buf(),
-        runs_dir: dir.join("runs"),
-        name: name.into(),
-        progress: ProgressMode::Quiet,
-        stop: StopFlag::new(),
-        parallel: None,
-    }
 }
 
 fn opts(name: &str) -> BdlstmRunOptions {

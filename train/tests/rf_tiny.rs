@@ -16,10 +16,9 @@ use any4d_model::mmdit::KeyframeConditioning;
 use any4d_model::text::scratch::ScratchTokenizer;
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::Duration;
-use any4d_train::loop_common::{Objective, Outcome, RunOptions, StopFlag, train};
+use any4d_train::loop_common::{Objective, Outcome, train};
 use any4d_train::multi_device::{Parallel, Strategy};
 use any4d_train::pack::{Precision as PackPrecision, pack_run};
-use any4d_train::progress::ProgressMode;
 use any4d_train::rf_loop::{
     LatentCache, LatentDraw, RF_TERMS, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS, Subset, TextDropout,
     resume_rf, train_rf, training_mask,
@@ -27,7 +26,7 @@ use any4d_train::rf_loop::{
 use any4d_train::run_folder::{LOG_FILE, METRICS_FILE, RunFolder, SAMPLES_FILE, VALID_FILE, read_table};
 use any4d_train::runs::{LoadedVae, VAE_RUN_FILE, load_rf_run, load_vae_run};
 use burn::prelude::{Device, Tensor};
-use common::{VaeFixture, copy_dir, params, quiet_setup, root, serial, vae_fixture};
+use common::{VaeFixture, copy_dir, params, quiet_setup, root, run_options, serial, vae_fixture};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -64,14 +63,7 @@ fn sampling_rf(steps: u64, every: u64) -> RfRunConfig {
 fn rf_opts(name: &str) -> RfRunOptions {
     let f = fixture();
     RfRunOptions {
-        run: RunOptions {
-            data: f.store.clone(),
-            runs_dir: f.dir.join("runs"),
-            name: name.into(),
-            progress: ProgressMode::Quiet,
-            stop: StopFlag::new(),
-            parallel: None,
-        },
+        run: run_options(&f.store, &f.dir, name),
         vae_run: Some(f.vae_run.clone()),
     }
 }

@@ -75,6 +75,18 @@ pub fn tiny_vae(steps: u64) -> VaeRunConfig {
     cfg
 }
 
+/// Options of a quiet one-device run named `name` on `store`, its run folders under `dir/runs`.
+pub fn run_options(store: &Path, dir: &Path, name: &str) -> any4d_train::loop_common::RunOptions {
+    any4d_train::loop_common::RunOptions {
+        data: store.to_path_buf(),
+        runs_dir: dir.join("runs"),
+        name: name.into(),
+        progress: ProgressMode::Quiet,
+        stop: StopFlag::new(),
+        parallel: None,
+    }
+}
+
 /// A [`LoopSetup`] on `device` that prints nothing, is never asked to stop, and resumes from `resume` when given.
 pub fn quiet_setup<'a>(
     run: &'a RunFolder,
@@ -293,14 +305,7 @@ pub fn vae_fixture_with(store_seed: u64, mut cfg: VaeRunConfig) -> VaeFixture {
     cfg.train.micro_batch = 4;
     cfg.train.checkpoint_every = 6;
     cfg.train.valid_every = 6;
-    let opts = any4d_train::loop_common::RunOptions {
-        data: store.clone(),
-        runs_dir: dir.path().join("runs"),
-        name: "vae".into(),
-        progress: ProgressMode::Quiet,
-        stop: StopFlag::new(),
-        parallel: None,
-    };
+    let opts = run_options(&store, dir.path(), "vae");
     let (run, outcome) = any4d_train::vae_loop::train_vae(&cfg, &opts).expect("tiny VAE run");
     assert!(
         matches!(outcome, any4d_train::loop_common::Outcome::Finished { .. }),
