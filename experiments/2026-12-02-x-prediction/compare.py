@@ -43,8 +43,11 @@ def main(out, pairs):
     def value(row, k, col="rmse_mean"):
         for r in rows:
             if r["row"] == row and r["k_extra"] == str(k):
-                return float(r[col])
+                return float(r[col]) if r[col] != "" else None  # one seed: no interval
         return None
+
+    def fmt(x, digits):
+        return "" if x is None else f"{x:.{digits}f}"
 
     ks = sorted({int(r["k_extra"]) for r in rows})
     with open(os.path.join(out, "ratios.csv"), "w", newline="") as f:
@@ -57,7 +60,7 @@ def main(out, pairs):
                     v,
                     k,
                     f"{rmse:.4f}",
-                    f"{value(v, k, 'rmse_ci95'):.4f}",
+                    fmt(value(v, k, "rmse_ci95"), 4),
                     f"{rmse / value('lerp', k):.4f}",
                     f"{rmse / value(variants[0], k):.4f}",
                     f"{value(v, k, 'jerk_ratio_mean'):.2f}",
@@ -65,8 +68,8 @@ def main(out, pairs):
                 ])
     fig, ax = plt.subplots(figsize=(6, 4))
     for name in variants + [r for r in ("lerp", "replacement_rf") if value(r, 0) is not None]:
-        ax.errorbar(ks, [value(name, k) for k in ks], yerr=[value(name, k, "rmse_ci95") for k in ks],
-                    marker="o", capsize=3, label=name)
+        ci = [value(name, k, "rmse_ci95") or 0.0 for k in ks]
+        ax.errorbar(ks, [value(name, k) for k in ks], yerr=ci, marker="o", capsize=3, label=name)
     ax.set_xlabel("extra keyframes K_x")
     ax.set_ylabel("RMSE ×100 (non-keyframes)")
     ax.set_xticks(ks)
