@@ -28,6 +28,7 @@ fn user_clip(frames: usize) -> Clip {
         frames,
         min_vertices: 300,
         max_vertices: 700,
+        body: None,
     };
     let mut clip = generate_one(&cfg, 0).unwrap();
     for p in &mut clip.vertices {

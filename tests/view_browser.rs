@@ -61,6 +61,7 @@ fn the_view_page_plays_in_headless_chromium() {
         frames: 16,
         min_vertices: 300,
         max_vertices: 700,
+        body: None,
     };
     let gt = generate_one(&cfg, 0).unwrap();
     let mut pred = gt.clone();

@@ -17,7 +17,7 @@ use any4d_data::inspect;
 use any4d_data::preprocess::{self, VertexFilter};
 use any4d_data::render::{RenderOptions, render_contact_sheet};
 use any4d_data::store::{self, DEFAULT_P, ImportOptions, Store, Weld};
-use any4d_data::synth::SynthConfig;
+use any4d_data::synth::{ShapeFamily, SynthConfig};
 
 use crate::reference::{PythonReference, Skipped};
 
@@ -127,6 +127,17 @@ pub struct SynthArgs {
     /// Frames between window starts.
     #[arg(long, default_value_t = 1)]
     pub stride: usize,
+    /// Every clip animates one and the same rest mesh of this shape family (blob, tube, humanoid, quadruped, sheet,
+    /// worm, helix): a single-topology store, what `train bdlstm --variant acap` needs.
+    #[arg(long, value_parser = parse_body)]
+    pub body: Option<ShapeFamily>,
+}
+
+fn parse_body(name: &str) -> Result<ShapeFamily, String> {
+    ShapeFamily::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = ShapeFamily::ALL.iter().map(|f| f.name()).collect();
+        format!("unknown shape family {name:?}; one of {}", names.join(", "))
+    })
 }
 
 /// Output format of `inspect`.
@@ -290,6 +301,7 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
         frames: a.frames,
         min_vertices: a.min_vertices.unwrap_or(default.min_vertices),
         max_vertices: a.max_vertices.unwrap_or(default.max_vertices),
+        body: a.body,
     };
     cfg.validate()?;
     let bar = progress_bar("synth");

@@ -137,6 +137,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         frames: 16,
         min_vertices: 512,
         max_vertices: opts.max_vertices,
+        body: None,
     };
     let report = write_synth(&synth, &data)?;
     stage(format!(

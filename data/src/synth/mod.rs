@@ -60,6 +60,11 @@ impl ShapeFamily {
         }
     }
 
+    /// The family named `name` (as in clip ids), if any.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|f| f.name() == name)
+    }
+
     /// Noun used in captions.
     fn noun(self) -> &'static str {
         match self {
@@ -131,7 +136,13 @@ pub struct SynthConfig {
     pub min_vertices: usize,
     /// Largest vertex count (inclusive).
     pub max_vertices: usize,
+    /// `Some(family)`: every clip animates one and the same rest mesh of this family (one topology, drawn from
+    /// stream [`ONE_BODY_STREAM`] of the seed; what the faithful BD-LSTM trains on); only the motions differ.
+    pub body: Option<ShapeFamily>,
 }
+
+/// Stream of the seed that draws the shared rest mesh of [`SynthConfig::body`] (no clip index reaches it).
+pub const ONE_BODY_STREAM: u64 = u64::MAX;
 
 impl Default for SynthConfig {
     fn default() -> Self {
@@ -141,6 +152,7 @@ impl Default for SynthConfig {
             frames: 16,
             min_vertices: 512,
             max_vertices: 4096,
+            body: None,
         }
     }
 }
@@ -205,10 +217,26 @@ pub fn generate_one(cfg: &SynthConfig, index: usize) -> Result<Clip> {
     let mut r = rng(cfg.seed, index as u64);
     let shape = ShapeFamily::ALL[r.random_range(0..ShapeFamily::ALL.len())];
     let motion = MotionFamily::ALL[r.random_range(0..MotionFamily::ALL.len())];
-    build(cfg, index, shape, motion, &mut r)
+    match cfg.body {
+        None => build(cfg, index, shape, motion, &mut r),
+        Some(family) => {
+            cfg.validate()?;
+            let body = shared_body(cfg, family)?;
+            animate(cfg, index, family, &body, motion, &mut r)
+        }
+    }
 }
 
-/// Clip `index` with the families forced; equals [`generate_one`] when they match the drawn ones.
+/// The one rest mesh of a [`SynthConfig::body`] dataset.
+fn shared_body(cfg: &SynthConfig, family: ShapeFamily) -> Result<shapes::Body> {
+    let mut r = rng(cfg.seed, ONE_BODY_STREAM);
+    let target = r.random_range(cfg.min_vertices..=cfg.max_vertices);
+    shapes::build(family, target, cfg.min_vertices, cfg.max_vertices, &mut r)
+        .map_err(|e| e.at(&format!("synth:{}:body", cfg.seed)))
+}
+
+/// Clip `index` with the families forced (its own rest mesh, whatever `cfg.body` says); equals [`generate_one`]
+/// when they match the drawn ones and `cfg.body` is `None`.
 pub fn generate_with(cfg: &SynthConfig, index: usize, shape: ShapeFamily, motion: MotionFamily) -> Result<Clip> {
     let mut r = rng(cfg.seed, index as u64);
     let _families: (usize, usize) = (
@@ -244,13 +272,26 @@ fn build(
     let source = format!("synth:{}:{index}", cfg.seed);
     let target = r.random_range(cfg.min_vertices..=cfg.max_vertices);
     let body = shapes::build(shape, target, cfg.min_vertices, cfg.max_vertices, r).map_err(|e| e.at(&source))?;
-    let geo = motions::Geometry::of(&body);
-    let (drawn, phrase) = motions::draw(motion, &body, &geo, r);
+    animate(cfg, index, shape, &body, motion, r)
+}
+
+/// Clip `index`: `body` posed by a `motion` drawn from `r`, with its id and caption.
+fn animate(
+    cfg: &SynthConfig,
+    index: usize,
+    shape: ShapeFamily,
+    body: &shapes::Body,
+    motion: MotionFamily,
+    r: &mut crate::rng::DataRng,
+) -> Result<Clip> {
+    let source = format!("synth:{}:{index}", cfg.seed);
+    let geo = motions::Geometry::of(body);
+    let (drawn, phrase) = motions::draw(motion, body, &geo, r);
     let n = body.pos.len();
     let mut vertices = vec![[0.0f32; 3]; cfg.frames * n];
     for (f, frame) in vertices.chunks_exact_mut(n).enumerate() {
         let tau = f as f32 / (cfg.frames - 1) as f32;
-        motions::pose(&drawn, &body, &geo, tau, frame);
+        motions::pose(&drawn, body, &geo, tau, frame);
     }
     let id = format!(
         "synth-{}-{}-{}-{index}_offset0_0-{}",
@@ -267,7 +308,7 @@ fn build(
         "a"
     };
     let caption = format!("{article} {} {phrase}", words.join(" "));
-    Clip::new(id, vertices, cfg.frames, n, body.faces, caption, source)
+    Clip::new(id, vertices, cfg.frames, n, body.faces.clone(), caption, source)
 }
 
 #[cfg(test)]

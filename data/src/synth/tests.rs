@@ -276,3 +276,30 @@ fn synth_speed() {
         verts / clips.len()
     );
 }
+
+#[test]
+fn one_body_clips_share_their_rest_mesh_and_differ_in_motion() {
+    let c = SynthConfig {
+        clips: 6,
+        seed: 9,
+        min_vertices: 256,
+        max_vertices: 600,
+        body: Some(ShapeFamily::Humanoid),
+        ..SynthConfig::default()
+    };
+    let clips = generate(&c).unwrap();
+    let first = &clips[0];
+    for clip in &clips {
+        assert_eq!(families(&clip.id).unwrap().0, ShapeFamily::Humanoid, "{}", clip.id);
+        assert_eq!(clip.n_vertices, first.n_vertices, "{}", clip.id);
+        assert_eq!(clip.faces, first.faces, "{}", clip.id);
+    }
+    let motions: std::collections::HashSet<_> = clips.iter().map(|c| families(&c.id).unwrap().1).collect();
+    assert!(motions.len() > 1, "six clips drew one motion family: {motions:?}");
+    // Without the option the same seed gives several shapes.
+    let free = generate(&SynthConfig { body: None, ..c }).unwrap();
+    let shapes: std::collections::HashSet<_> = free.iter().map(|c| families(&c.id).unwrap().0).collect();
+    assert!(shapes.len() > 1);
+    assert_eq!(ShapeFamily::from_name("quadruped"), Some(ShapeFamily::Quadruped));
+    assert_eq!(ShapeFamily::from_name("dragon"), None);
+}

@@ -62,6 +62,7 @@ pub fn synth_store(dir: &Path, seed: u64) -> PathBuf {
         frames: 4,
         min_vertices: 256,
         max_vertices: 512,
+        body: None,
     };
     write_synth_with(&synth, &store, 32, None).expect("synthetic store");
     store
