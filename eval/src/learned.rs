@@ -335,7 +335,7 @@ fn real_rows(x: Tensor<4>, n_real: usize, id: &str) -> Result<Vec<[f32; 3]>> {
 }
 
 /// Sorted, deduplicated keyframes, each inside the window.
-fn keyframe_list(clip: &Clip, keyframes: &[usize]) -> Result<Vec<usize>> {
+pub(crate) fn keyframe_list(clip: &Clip, keyframes: &[usize]) -> Result<Vec<usize>> {
     let mut keys = keyframes.to_vec();
     keys.sort_unstable();
     keys.dedup();
@@ -344,6 +344,23 @@ fn keyframe_list(clip: &Clip, keyframes: &[usize]) -> Result<Vec<usize>> {
             &clip.id,
             "keyframes",
             format!("frame {f} is outside the window of {} frames", clip.frames),
+        ));
+    }
+    Ok(keys)
+}
+
+/// [`keyframe_list`] for a method that completes between keyframes: frames 0 and T − 1 must be among them.
+pub(crate) fn end_keyframes(clip: &Clip, keyframes: &[usize]) -> Result<Vec<usize>> {
+    let keys = keyframe_list(clip, keyframes)?;
+    let t = clip.frames;
+    if keys.first() != Some(&0) || keys.last() != Some(&(t - 1)) {
+        return Err(DataError::new(
+            &clip.id,
+            "keyframes",
+            format!(
+                "BD-LSTM completes between keyframes: frames 0 and {} must be keyframes, got {keys:?}",
+                t - 1
+            ),
         ));
     }
     Ok(keys)
@@ -889,18 +906,8 @@ impl BdlstmSampler {
 
 impl WindowSampler for BdlstmSampler {
     fn sample(&self, clip: &Clip, keyframes: &[usize], _caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
-        let keys = keyframe_list(clip, keyframes)?;
+        let keys = end_keyframes(clip, keyframes)?;
         let t = clip.frames;
-        if keys.first() != Some(&0) || keys.last() != Some(&(t - 1)) {
-            return Err(DataError::new(
-                &clip.id,
-                "keyframes",
-                format!(
-                    "BD-LSTM completes between keyframes: frames 0 and {} must be keyframes, got {keys:?}",
-                    t - 1
-                ),
-            ));
-        }
         let enc = self.codec.encode(clip, &encoded_frames(&keys))?;
         let (z, _) = scatter_keyframes(&enc, &keys, self.codec.device())?;
         let z = self.stats.standardize_motion(z);

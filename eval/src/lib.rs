@@ -1,6 +1,7 @@
 //! Evaluation (docs/method.md §5–§7): metrics as pure functions, baselines, the long-horizon rollout, paper tables,
 //! and the HTML clip viewer ([`view`]).
 
+pub mod acap_bdlstm;
 pub mod baselines;
 pub mod bench;
 pub mod learned;

@@ -52,6 +52,9 @@ pub enum MethodKind {
     /// The BD-LSTM baseline, latent adaptation (docs/method.md §5.3): both chains per keyframe segment and the
     /// merge rule.
     Bdlstm,
+    /// The BD-LSTM baseline as published (docs/method.md §5.3, ACAP variant): chains on per-vertex ACAP features of
+    /// one fixed topology, positions by sparse least squares.
+    BdlstmAcap,
     /// The per-vertex mean of `samples` completions by ours (`keyframe_rf`), sample 0 being the single
     /// completion of the same seed: an estimate of the model's conditional mean, which separates the error of
     /// the learned distribution's centre from the spread of its samples (not a method of the paper).
@@ -86,6 +89,7 @@ impl MethodKind {
             MethodKind::LerpLatent => "lerp_latent".into(),
             MethodKind::StaticNearest => "static_nearest".into(),
             MethodKind::Bdlstm => "bdlstm".into(),
+            MethodKind::BdlstmAcap => "bdlstm_acap".into(),
             MethodKind::KeyframeRfMean { samples } => format!("keyframe_rf_mean{samples}"),
             MethodKind::Aam => "aam".into(),
         }
@@ -101,6 +105,7 @@ impl MethodKind {
             "lerp_latent" => MethodKind::LerpLatent,
             "static_nearest" => MethodKind::StaticNearest,
             "bdlstm" => MethodKind::Bdlstm,
+            "bdlstm_acap" => MethodKind::BdlstmAcap,
             "aam" => MethodKind::Aam,
             "impute_until" => MethodKind::ImputeUntil {
                 tau_star: 0.98,
@@ -122,7 +127,7 @@ impl MethodKind {
                 let rest = other.strip_prefix("impute_until_").ok_or_else(|| {
                     bad(
                         "unknown method; expected keyframe_rf, keyframe_rf_mean<N>, replacement_rf, lerp, lerp_latent, \
-                         static_nearest, bdlstm, aam or impute_until[_<tau*>[_noisy<level>]]"
+                         static_nearest, bdlstm, bdlstm_acap, aam or impute_until[_<tau*>[_noisy<level>]]"
                             .into(),
                     )
                 })?;
@@ -266,6 +271,7 @@ impl<S: WindowSampler> RfMethod<S> {
             | MethodKind::ImputeUntil { .. }
             | MethodKind::LerpLatent
             | MethodKind::Bdlstm
+            | MethodKind::BdlstmAcap
             | MethodKind::Aam => Ok(Self { kind, sampler }),
             other => Err(DataError::new("method", other.label(), "is not a model-based method")),
         }

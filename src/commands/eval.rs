@@ -208,7 +208,7 @@ pub struct RunArgs {
     /// Output folder for summary.md/.csv, clips.parquet, manifest.json, strips and plots.
     #[arg(long)]
     pub out: PathBuf,
-    /// Methods, comma-separated: keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest, bdlstm, aam,
+    /// Methods, comma-separated: keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest, bdlstm, bdlstm_acap, aam,
     /// impute_until_0.98, impute_until_0.98_noisy1, keyframe_rf_mean8 (mean of 8 samples by ours).
     #[arg(
         long,
@@ -231,6 +231,10 @@ pub struct RunArgs {
     /// BD-LSTM run (`any4d train bdlstm`; method `bdlstm`), completed on the VAE it was trained on.
     #[arg(long)]
     pub bdlstm: Option<PathBuf>,
+    /// BD-LSTM run of the ACAP variant (`any4d train bdlstm --variant acap`; method `bdlstm_acap`): only for clips
+    /// of the one topology it was trained on.
+    #[arg(long)]
+    pub bdlstm_acap: Option<PathBuf>,
     /// AnimateAnyMesh reference run (method `aam`): an RF trained on a sequence-wise VAE (`configs/rf/aam_*.toml`),
     /// conditioned on the reference mesh and the caption only, sampled with CFG 3 (its code's weight; --guidance does not
     /// apply to it).
@@ -363,6 +367,7 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         vae: args.vae.clone(),
         vae_b: args.vae_b.clone(),
         bdlstm: args.bdlstm.clone(),
+        bdlstm_acap: args.bdlstm_acap.clone(),
         aam: args.aam.clone(),
     };
     let mut opts = TableOptions::new(args.data.clone(), args.out.clone());

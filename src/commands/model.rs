@@ -9,6 +9,7 @@ use any4d_model::any_vae::AnyMeshVaeConfig;
 use any4d_model::bench::{BenchSizes, ModelTimings, StepTiming, time_networks};
 use any4d_model::summary::{format_report, param_report};
 use any4d_train::backend::Backend;
+use any4d_train::bdlstm_loop::BdlstmVariant;
 use any4d_train::config::RunConfig;
 use any4d_train::pack::{Precision, pack_run};
 use anyhow::{Context, bail};
@@ -121,6 +122,8 @@ pub fn exec(cmd: ModelCmd) -> anyhow::Result<ExitCode> {
 /// The VAE latent size a BD-LSTM summary assumes: the paper's frame-wise VAE (P = 512, C = 12).
 const BDLSTM_SUMMARY_P: usize = 512;
 const BDLSTM_SUMMARY_C: usize = 12;
+/// The vertex count an ACAP BD-LSTM summary assumes.
+const BDLSTM_SUMMARY_N: usize = 1024;
 
 fn summary(path: &Path, overrides: &ConfigArgs) -> anyhow::Result<ExitCode> {
     let device = Device::flex();
@@ -134,6 +137,14 @@ fn summary(path: &Path, overrides: &ConfigArgs) -> anyhow::Result<ExitCode> {
                 cfg.model.out_channels()
             ),
             param_report(&cfg.model.init(&device)),
+        ),
+        RunConfig::Bdlstm(cfg) if cfg.model.variant == BdlstmVariant::Acap => (
+            format!(
+                "{}: BD-LSTM (ACAP features, mesh convolutions), codec sized for N = {BDLSTM_SUMMARY_N} vertices \
+                 (a run takes N from its store's topology)",
+                path.display()
+            ),
+            param_report(&cfg.init_acap(BDLSTM_SUMMARY_N, &device)),
         ),
         RunConfig::Bdlstm(cfg) => (
             format!(

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use any4d_data::store::DEFAULT_P;
 use any4d_model::bench::median;
 use any4d_train::backend::{self, Backend, Precision};
-use any4d_train::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, resume_bdlstm, train_bdlstm};
+use any4d_train::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, BdlstmVariant, resume_bdlstm, train_bdlstm};
 use any4d_train::bench::{RfShape, rf_step_flops, time_rf_steps, time_vae_steps};
 use any4d_train::config::{Override, RunConfig};
 use any4d_train::loop_common::{Outcome, RunOptions};
@@ -27,9 +27,10 @@ pub enum TrainCmd {
     Vae(VaeArgs),
     /// Train the keyframe rectified flow on a frozen VAE (docs/method.md §4).
     Rf(RfArgs),
-    /// Train the BD-LSTM baseline (latent adaptation, docs/method.md §5.3) on a frozen VAE:
-    /// `--config configs/bdlstm/<preset>.toml --vae RUN --data STORE`.
-    Bdlstm(RfArgs),
+    /// Train the BD-LSTM baseline (docs/method.md §5.3): the latent adaptation on a frozen VAE
+    /// (`--config configs/bdlstm/<preset>.toml --vae RUN --data STORE`), or the original on ACAP features of a
+    /// single-topology store (`--variant acap --config configs/bdlstm/<preset>.toml --data STORE`).
+    Bdlstm(BdlstmArgs),
 }
 
 #[derive(Args, Debug)]
@@ -44,6 +45,20 @@ pub struct RfArgs {
     /// run's own).
     #[arg(long, required_unless_present = "resume")]
     vae: Option<PathBuf>,
+    #[command(flatten)]
+    common: RunArgs,
+}
+
+#[derive(Args, Debug)]
+pub struct BdlstmArgs {
+    /// The frozen VAE run folder of the latent variant (with `--resume`: optional, must be the run's own); the
+    /// ACAP variant takes none.
+    #[arg(long)]
+    vae: Option<PathBuf>,
+    /// Frame representation, overriding the config's `model.variant`: `latent` (VAE trajectory latents) or `acap`
+    /// (per-vertex ACAP features with mesh convolutions; one fixed topology). A resumed run keeps its own.
+    #[arg(long, value_parser = ["latent", "acap"], conflicts_with = "resume")]
+    variant: Option<String>,
     #[command(flatten)]
     common: RunArgs,
 }
@@ -147,7 +162,13 @@ fn rf(RfArgs { vae, common: args }: RfArgs) -> anyhow::Result<ExitCode> {
     Ok(report(&outcome))
 }
 
-fn bdlstm(RfArgs { vae, common: args }: RfArgs) -> anyhow::Result<ExitCode> {
+fn bdlstm(
+    BdlstmArgs {
+        vae,
+        variant,
+        common: args,
+    }: BdlstmArgs,
+) -> anyhow::Result<ExitCode> {
     let opts = BdlstmRunOptions {
         run: args.options("bdlstm")?,
         vae_run: vae,
@@ -157,6 +178,11 @@ fn bdlstm(RfArgs { vae, common: args }: RfArgs) -> anyhow::Result<ExitCode> {
         None => {
             let mut cfg = BdlstmRunConfig::load(args.config()?, &args.overrides.set)?;
             cfg.device.backend = args.backend.unwrap_or(cfg.device.backend);
+            match variant.as_deref() {
+                Some("acap") => cfg.model.variant = BdlstmVariant::Acap,
+                Some(_) => cfg.model.variant = BdlstmVariant::Latent,
+                None => {}
+            }
             started(train_bdlstm(&cfg, &opts)?)
         }
     };

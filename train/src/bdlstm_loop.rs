@@ -5,13 +5,15 @@
 
 use std::path::{Path, PathBuf};
 
+use any4d_data::acap::{ACAP_CHANNELS, ScalingGranularity};
 use any4d_data::store::{Split, Store};
 use any4d_model::bdlstm::{
-    BdLstm, BdLstmConfig, BdLstmLossConfig, LatentCodec, LatentCodecConfig, MergeConfig, bdlstm_loss, l2_penalty,
+    BdLstm, BdLstmConfig, BdLstmLossConfig, FrameCodec, LatentCodec, LatentCodecConfig, MergeConfig, MeshConvCodec,
+    MeshConvCodecConfig, bdlstm_loss, l2_penalty,
 };
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mesh_vae::Posterior;
-use burn::prelude::{Device, Tensor, TensorData};
+use burn::prelude::{Device, Module, Tensor, TensorData};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -30,11 +32,36 @@ use crate::runs::{self, LoadedVae, VaeRunRecord};
 /// Loss terms of a BD-LSTM run (`metrics.csv` columns before `loss`).
 pub const BDLSTM_TERMS: [&str; 4] = ["recon", "bidir", "kl", "l2"];
 
-/// The `[model]` table: the codec and recurrent sizes (P and C come from the VAE run).
+/// What one frame of a BD-LSTM chain is (docs/method.md §5.3).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BdlstmVariant {
+    /// The frozen frame-wise VAE's standardised trajectory latents (our adaptation; any store).
+    #[default]
+    Latent,
+    /// Per-vertex ACAP features with mesh convolutions (the original; one fixed topology).
+    Acap,
+}
+
+fn default_conv_layers() -> usize {
+    3
+}
+
+fn default_acap_scaling() -> ScalingGranularity {
+    ScalingGranularity::PerVertexChannel
+}
+
+/// The `[model]` table: the codec and recurrent sizes (P and C come from the VAE run, N from the store).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BdlstmModelSection {
-    /// Per-token width after the codec's first layer (docs/method.md §5.3: 16).
+    /// Frame representation: `"latent"` (default) or `"acap"` (`any4d train bdlstm --variant acap`).
+    #[serde(default)]
+    pub variant: BdlstmVariant,
+    /// Mesh convolutions of the ACAP codec's encoder, mirrored by its decoder (3); unused by the latent variant.
+    #[serde(default = "default_conv_layers")]
+    pub conv_layers: usize,
+    /// Per-token width after the latent codec's first layer (docs/method.md §5.3: 16); unused by the ACAP variant.
     pub token_width: usize,
     /// Latent width Z: encoder output, LSTM input and hidden width (128).
     pub latent: usize,
@@ -67,6 +94,10 @@ pub struct BdlstmSection {
     pub merge_threshold: f64,
     /// Merge rule: tries per segment, the first with the nominal initial states (8).
     pub merge_tries: usize,
+    /// ACAP variant: the ranges that scale the features to [−0.95, 0.95], `"per_vertex_channel"` (default: every
+    /// feature dimension of the fixed topology, as the original) or `"per_channel"`.
+    #[serde(default = "default_acap_scaling")]
+    pub acap_scaling: ScalingGranularity,
 }
 
 /// A whole `configs/bdlstm/*.toml` run config.
@@ -100,6 +131,7 @@ impl BdlstmRunConfig {
             ("model.token_width", m.token_width),
             ("model.latent", m.latent),
             ("model.layers", m.layers),
+            ("model.conv_layers", m.conv_layers),
             ("bdlstm.merge_tries", b.merge_tries),
         ] {
             if value == 0 {
@@ -111,8 +143,10 @@ impl BdlstmRunConfig {
                 return Err(bad(format!("{name} = {value} is more than 65536")));
             }
         }
-        if m.layers > 64 {
-            return Err(bad(format!("model.layers = {} is more than 64", m.layers)));
+        for (name, value) in [("model.layers", m.layers), ("model.conv_layers", m.conv_layers)] {
+            if value > 64 {
+                return Err(bad(format!("{name} = {value} is more than 64")));
+            }
         }
         for (name, value) in [
             ("model.initial_state", m.initial_state),
@@ -166,6 +200,21 @@ impl BdlstmRunConfig {
             .with_tokens(tokens)
             .with_channels(channels)
             .with_token_width(m.token_width)
+            .with_latent(m.latent)
+            .init(device);
+        BdLstmConfig::new()
+            .with_layers(m.layers)
+            .with_initial_state(m.initial_state)
+            .with_retry_noise(m.retry_noise)
+            .init(codec, device)
+    }
+
+    /// The ACAP variant's network for a fixed topology of `vertices` vertices on `device`.
+    pub fn init_acap(&self, vertices: usize, device: &Device) -> BdLstm<MeshConvCodec> {
+        let m = &self.model;
+        let codec = MeshConvCodecConfig::new(vertices)
+            .with_channels(ACAP_CHANNELS)
+            .with_conv_layers(m.conv_layers)
             .with_latent(m.latent)
             .init(device);
         BdLstmConfig::new()
@@ -280,17 +329,50 @@ impl BdlstmObjective {
     }
 
     fn losses(&self, model: &BdLstm<LatentCodec>, window: Tensor<4>, posterior: Posterior) -> Losses {
-        let [b, ..] = window.dims();
-        let device = window.device();
-        let init = model.initial_states(b, &device);
-        let out = model.forward(window.clone(), &init, &(), posterior);
-        let l2 = l2_penalty(model, &device);
-        let loss = bdlstm_loss(&out, window, l2, &self.cfg.loss_config());
-        Losses {
-            total: loss.total,
-            terms: vec![loss.recon, loss.bidir, loss.kl, loss.l2],
+        chain_losses(model, window, &(), posterior, &self.cfg.loss_config())
+    }
+}
+
+/// (B3) and its terms of both chains over `window` (`[B, n, K, C]`), from the nominal initial states.
+pub(crate) fn chain_losses<C: Module + FrameCodec + burn::module::ModuleDisplay>(
+    model: &BdLstm<C>,
+    window: Tensor<4>,
+    ctx: &C::Context,
+    posterior: Posterior,
+    cfg: &BdLstmLossConfig,
+) -> Losses {
+    let [b, ..] = window.dims();
+    let device = window.device();
+    let init = model.initial_states(b, &device);
+    let out = model.forward(window.clone(), &init, ctx, posterior);
+    let l2 = l2_penalty(model, &device);
+    let loss = bdlstm_loss(&out, window, l2, cfg);
+    Losses {
+        total: loss.total,
+        terms: vec![loss.recon, loss.bidir, loss.kl, loss.l2],
+    }
+}
+
+/// Validation of a BD-LSTM objective: the losses of `n` VAL clips taken `micro_batch` at a time (each chunk's
+/// losses from `losses`, given its positions), averaged with the chunk sizes as weights; terms then total.
+pub(crate) fn validate_chunks(
+    n: usize,
+    micro_batch: usize,
+    mut losses: impl FnMut(&[usize]) -> Result<Losses>,
+) -> Result<Option<Vec<f64>>> {
+    if n == 0 {
+        return Ok(None);
+    }
+    let mut sums = [0.0f64; BDLSTM_TERMS.len() + 1];
+    let positions: Vec<usize> = (0..n).collect();
+    for chunk in positions.chunks(micro_batch) {
+        let l = losses(chunk)?;
+        let w = chunk.len() as f64 / n as f64;
+        for (s, v) in sums.iter_mut().zip(l.terms.into_iter().chain([l.total])) {
+            *s += w * loop_common::scalar(v);
         }
     }
+    Ok(Some(sums.to_vec()))
 }
 
 impl Objective for BdlstmObjective {
@@ -317,25 +399,14 @@ impl Objective for BdlstmObjective {
 
     /// (B3) and its terms on every VAL clip's whole window (posterior means, nominal initial states).
     fn validate(&self, model: &Self::Model, device: &Device, _step: u64) -> Result<Option<Vec<f64>>> {
-        let n = self.valid.clips.len();
-        if n == 0 {
-            return Ok(None);
-        }
         let seed = loop_common::step_seed(self.cfg.train.seed, u64::MAX);
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         device.seed(seed);
-        let mut sums = [0.0f64; BDLSTM_TERMS.len() + 1];
-        let positions: Vec<usize> = (0..n).collect();
-        for chunk in positions.chunks(self.cfg.train.micro_batch) {
+        validate_chunks(self.valid.clips.len(), self.cfg.train.micro_batch, |chunk| {
             let starts = vec![0; chunk.len()];
             let window = self.window(&self.valid, chunk, &starts, self.valid.frames, &mut rng, device);
-            let l = self.losses(model, window, Posterior::Mean);
-            let w = chunk.len() as f64 / n as f64;
-            for (s, v) in sums.iter_mut().zip(l.terms.into_iter().chain([l.total])) {
-                *s += w * loop_common::scalar(v);
-            }
-        }
-        Ok(Some(sums.to_vec()))
+            Ok(self.losses(model, window, Posterior::Mean))
+        })
     }
 }
 
@@ -364,15 +435,18 @@ pub struct BdlstmRunOptions {
 
 /// Starts a new BD-LSTM run with `cfg` on the frozen VAE of `opts.vae_run`.
 pub fn train_bdlstm(cfg: &BdlstmRunConfig, opts: &BdlstmRunOptions) -> Result<(RunFolder, Outcome)> {
-    let vae_dir = opts
-        .vae_run
-        .as_deref()
-        .ok_or_else(|| TrainError::Setup("a new BD-LSTM run needs the VAE run folder (--vae RUN)".into()))?;
     if opts.run.parallel.is_some() {
         return Err(TrainError::Setup(
             "BD-LSTM runs train on one device (no --devices)".into(),
         ));
     }
+    if cfg.model.variant == BdlstmVariant::Acap {
+        return crate::bdlstm_acap::train_acap(cfg, opts);
+    }
+    let vae_dir = opts
+        .vae_run
+        .as_deref()
+        .ok_or_else(|| TrainError::Setup("a new BD-LSTM run needs the VAE run folder (--vae RUN)".into()))?;
     let devices = run_devices(&cfg.device, None)?;
     let vae = runs::load_vae_run(vae_dir, &devices[0])?;
     open_store(&opts.run.data, cfg, &vae)?;
@@ -387,6 +461,9 @@ pub fn resume_bdlstm(run_dir: &Path, backend: Option<backend::Backend>, opts: &B
     let (run, cfg, ckpt) = open_for_resume(run_dir, BdlstmRunConfig::parse, backend, |c: &mut BdlstmRunConfig| {
         &mut c.device
     })?;
+    if cfg.model.variant == BdlstmVariant::Acap {
+        return crate::bdlstm_acap::resume_acap(&cfg, &run, ckpt, opts);
+    }
     let record = runs::recorded_vae(run_dir, opts.vae_run.as_deref())?;
     let devices = run_devices(&cfg.device, None)?;
     let vae = record.load(&devices[0])?;
@@ -445,17 +522,13 @@ pub struct LoadedBdlstm {
 /// Loads a BD-LSTM run onto `device`: `config.toml`, `vae_run.json` (the VAE's P and C size the codec) and the
 /// newest checkpoint.
 pub fn load_bdlstm_run(run_dir: &Path, device: &Device) -> Result<LoadedBdlstm> {
-    let run = std::fs::canonicalize(run_dir).map_err(io_err("open run folder", run_dir))?;
-    let config_path = run.join(CONFIG_FILE);
-    let text = std::fs::read_to_string(&config_path).map_err(io_err("read", &config_path))?;
-    let is_bdlstm = text.parse::<toml::Table>().map_or(true, |t| t.contains_key("bdlstm"));
-    if !is_bdlstm {
+    let (run, config) = read_bdlstm_config(run_dir)?;
+    if config.model.variant == BdlstmVariant::Acap {
         return Err(run_err(
             &run,
-            "not a BD-LSTM run folder (its config has no [bdlstm] table)",
+            "is a BD-LSTM run of the ACAP variant: give it as `--bdlstm-acap RUN` (method `bdlstm_acap`)",
         ));
     }
-    let config = BdlstmRunConfig::parse(&text, &config_path)?;
     let vae = runs::read_vae_record(&run)?.load(device)?;
     let (ckpt, step) = runs::newest_checkpoint(&run)?;
     let model = config.init(vae.tokens(), vae.latent_channels(), device);
@@ -467,4 +540,19 @@ pub fn load_bdlstm_run(run_dir: &Path, device: &Device) -> Result<LoadedBdlstm> 
         run,
         step,
     })
+}
+
+/// The canonical run folder and resolved config of the BD-LSTM run in `run_dir` (either variant).
+pub(crate) fn read_bdlstm_config(run_dir: &Path) -> Result<(PathBuf, BdlstmRunConfig)> {
+    let run = std::fs::canonicalize(run_dir).map_err(io_err("open run folder", run_dir))?;
+    let config_path = run.join(CONFIG_FILE);
+    let text = std::fs::read_to_string(&config_path).map_err(io_err("read", &config_path))?;
+    let is_bdlstm = text.parse::<toml::Table>().map_or(true, |t| t.contains_key("bdlstm"));
+    if !is_bdlstm {
+        return Err(run_err(
+            &run,
+            "not a BD-LSTM run folder (its config has no [bdlstm] table)",
+        ));
+    }
+    Ok((run, BdlstmRunConfig::parse(&text, &config_path)?))
 }

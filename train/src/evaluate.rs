@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use any4d_data::batch::PadTo;
+use any4d_eval::acap_bdlstm::{AcapBdlstmSampler, AcapSpace};
 use any4d_eval::learned::{
     BdlstmSampler, KeyPosterior, LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor,
 };
@@ -17,6 +18,7 @@ use any4d_model::rectified_flow::{ReplaceNoise, SampleOptions, Solver};
 use any4d_model::text::scratch::ScratchTextEncoder;
 use burn::prelude::{Device, Module};
 
+use crate::bdlstm_acap::load_acap_bdlstm_run;
 use crate::bdlstm_loop::load_bdlstm_run;
 use crate::error::{Result, TrainError};
 use crate::runs::{LoadedVae, load_rf_run, load_vae_run};
@@ -34,6 +36,8 @@ pub struct LearnedRuns {
     pub vae_b: Option<PathBuf>,
     /// BD-LSTM run (`any4d train bdlstm`), completed on its own VAE.
     pub bdlstm: Option<PathBuf>,
+    /// BD-LSTM run of the ACAP variant (`any4d train bdlstm --variant acap`), on its store's one topology.
+    pub bdlstm_acap: Option<PathBuf>,
     /// AnimateAnyMesh reference: an RF run on a sequence-wise VAE (`configs/rf/aam_*.toml`), sampled with CFG
     /// [`AAM_GUIDANCE`] whatever [`SamplingSetup::guidance`] says.
     pub aam: Option<PathBuf>,
@@ -195,6 +199,21 @@ pub fn build_methods(
                 let codec = codec_of(&run.vae, sampling.posterior, device)?;
                 let merge = run.config.merge_config();
                 let sampler = BdlstmSampler::new(codec, run.model.valid(), run.vae.stats, merge)?;
+                (
+                    Box::new(RfMethod::new(kind, sampler)?) as Box<dyn Method>,
+                    checkpoint_label(&run.run, run.step),
+                )
+            }
+            MethodKind::BdlstmAcap => {
+                let run = load_acap_bdlstm_run(need(&runs.bdlstm_acap, "--bdlstm-acap", kind)?, device)?;
+                let space = AcapSpace {
+                    topology: run.record.topology()?,
+                    reference: run.record.reference_clip.clone(),
+                    faces: run.record.faces.clone(),
+                    scaling: run.record.scaling.clone(),
+                };
+                let merge = run.config.merge_config();
+                let sampler = AcapBdlstmSampler::new(run.model.valid(), space, merge, device)?;
                 (
                     Box::new(RfMethod::new(kind, sampler)?) as Box<dyn Method>,
                     checkpoint_label(&run.run, run.step),

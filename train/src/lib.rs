@@ -7,6 +7,7 @@
 //! (run folders → evaluation methods), [`complete`] (a trained model on a user's meshes), [`quickstart`], [`bench`] (`any4d bench train`).
 
 pub mod backend;
+pub mod bdlstm_acap;
 pub mod bdlstm_loop;
 pub mod bench;
 pub mod checkpoint;

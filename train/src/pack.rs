@@ -15,6 +15,7 @@ use burn::module::{Module, ModuleMapper, Param};
 use burn::prelude::{Device, Tensor};
 use burn::tensor::DType;
 
+use crate::bdlstm_acap::{ACAP_FILE, load_acap_bdlstm_run};
 use crate::bdlstm_loop::load_bdlstm_run;
 use crate::checkpoint::{MODEL_FILE, STATE_FILE, step_dir_name};
 use crate::error::{Result, TrainError, io_err, run_err};
@@ -82,10 +83,12 @@ pub fn pack_run(
     }
     // RF and BD-LSTM runs record the VAE they were trained on; a BD-LSTM config has a [bdlstm] table.
     let on_vae = run.join(VAE_RUN_FILE).is_file();
+    // An ACAP BD-LSTM run records its reference mesh and feature scaling instead of a VAE.
+    let is_acap = run.join(ACAP_FILE).is_file();
     if !on_vae && vae_at.is_some() {
         return Err(run_err(
             run,
-            "a VAE run (no `vae_run.json`); `--vae-at` applies to RF and BD-LSTM runs only",
+            "a VAE or ACAP BD-LSTM run (no `vae_run.json`); `--vae-at` applies to RF and latent BD-LSTM runs only",
         ));
     }
     let is_bdlstm = on_vae && {
@@ -101,7 +104,15 @@ pub fn pack_run(
     if tmp.exists() {
         fs::remove_dir_all(&tmp).map_err(io_err("remove stale temporary folder", &tmp))?;
     }
-    let packed = if is_bdlstm {
+    let packed = if is_acap {
+        let bd = load_acap_bdlstm_run(run, device)?;
+        let (ckpt, _) = newest_checkpoint(&bd.run)?;
+        let ckpt_out = write_common(&bd.run, &ckpt, bd.step, &tmp)?;
+        copy(&bd.run, &tmp, ACAP_FILE)?;
+        let averaged = ckpt.join(crate::checkpoint::EMA_FILE).is_file();
+        save_params(bd.model, &ckpt_out.join(MODEL_FILE), precision)?;
+        finish("BD-LSTM (ACAP)", bd.step, averaged, &ckpt_out)?
+    } else if is_bdlstm {
         let bd = load_bdlstm_run(run, device)?;
         let (ckpt, _) = newest_checkpoint(&bd.run)?;
         let ckpt_out = write_common(&bd.run, &ckpt, bd.step, &tmp)?;

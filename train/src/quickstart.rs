@@ -188,6 +188,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         vae: Some(vae_run.root().to_path_buf()),
         vae_b: None,
         bdlstm: None,
+        bdlstm_acap: None,
         aam: None,
     };
     let kinds = [
@@ -267,6 +268,7 @@ fn shipped_rows(
         vae: Some(dir.join("vae")),
         vae_b: None,
         bdlstm: None,
+        bdlstm_acap: None,
         aam: None,
     };
     let built = build_methods(

@@ -60,6 +60,25 @@ pub const DEGENERATE_AREA: f64 = 1e-12;
 /// Relative weight λ_i / (tr A_i / 3) of the pull towards the ring's best rotation.
 pub const TIKHONOV: f64 = 1e-6;
 
+/// Clear error unless `clip` has the fixed topology of `n` vertices and `faces` that the clip `name` has (what the
+/// ACAP features of one reference mesh need).
+pub fn check_topology(name: &str, n: usize, faces: &[[u32; 3]], clip: &crate::Clip) -> Result<()> {
+    if clip.n_vertices != n || clip.faces != faces {
+        return Err(DataError::new(
+            &clip.id,
+            "faces",
+            format!(
+                "ACAP features need one fixed topology: this clip has {} vertices and {} triangles, {name} has {n} \
+                 and {} (a single-topology store: `any4d data synth --body FAMILY`)",
+                clip.n_vertices,
+                clip.faces.len(),
+                faces.len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The features of one frame: `[N]` rows of [`ACAP_CHANNELS`] values.
 pub type AcapFrame = Vec<[f32; ACAP_CHANNELS]>;
 

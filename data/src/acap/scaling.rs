@@ -13,6 +13,7 @@ pub const MIN_HALF_RANGE: f32 = 1e-6;
 
 /// Which minima and maxima the scaling uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum ScalingGranularity {
     /// One range per channel, over all vertices and frames (9 ranges).
     PerChannel,
