@@ -1,4 +1,4 @@
-//! `any4d bench train` and `any4d bench complete` run as a user would: the built binary, its exit code and its output.
+//! `any4d bench train`, `bench complete` and `bench acap` run as a user would: the built binary, its exit code and its output.
 
 use std::path::{Path, PathBuf};
 
@@ -201,4 +201,35 @@ fn the_gpu_check_script_runs_dry_on_the_cpu_and_writes_one_numeric_row_per_check
     let (stdout, stderr) = text(&bad);
     assert!(!bad.status.success());
     assert!(stderr.contains("frame-wise"), "{stdout}\n{stderr}");
+}
+
+#[test]
+fn acap_benchmark_prints_our_rows_and_refuses_bad_sizes() {
+    // A missing interpreter skips the reference and says so; our rows still print.
+    let out = any4d(&[
+        "bench",
+        "acap",
+        "--vertices",
+        "512",
+        "--frames",
+        "4",
+        "--repeat",
+        "1",
+        "--python",
+        "/nonexistent/python3",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    for row in ["| ours, 1 thread |", "reference skipped"] {
+        assert!(stdout.contains(row), "{row} missing from {stdout}");
+    }
+    let ours = stdout.lines().find(|l| l.starts_with("| ours, 1 thread")).unwrap();
+    let total: f64 = ours.split('|').nth(4).unwrap().trim().parse().unwrap();
+    assert!(total > 0.0, "{ours}");
+    for (flag, value, needle) in [("--vertices", "100", "vertices"), ("--repeat", "0", "--repeat")] {
+        let out = any4d(&["bench", "acap", flag, value]);
+        let (stdout, stderr) = text(&out);
+        assert!(!out.status.success(), "{flag} {value}: {stdout}");
+        assert!(stderr.contains(needle), "{flag} {value}: {stderr}");
+    }
 }

@@ -2,9 +2,14 @@
 //! `any4d_model::bench`, `any4d_train::bench`, `any4d_eval::bench`); its arguments and report live with its
 //! subcommand group here, and its Python reference runs through `crate::reference`.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::Subcommand;
+use any4d_data::bench::acap::{bench_clip, time_acap};
+use anyhow::{Context, bail};
+use clap::{Args, Subcommand};
+
+use crate::reference::{PythonReference, Skipped};
 
 #[derive(Subcommand, Debug)]
 pub enum BenchCmd {
@@ -21,6 +26,100 @@ pub enum BenchCmd {
     /// P-Table 4 timing (encode → midpoint sampling → decode, 16 and 31 frames) of ours at a config's size with
     /// freshly initialised weights, on any backend: no trained run needed.
     Sample(super::timing::SampleBenchArgs),
+    /// ACAP features + reconstruction of one clip (the faithful BD-LSTM's per-clip work) against the numpy/scipy
+    /// reference.
+    Acap(AcapBenchArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct AcapBenchArgs {
+    /// Vertices of the clip (a twisting tube; within ±128 of this).
+    #[arg(long, default_value_t = 4096)]
+    pub vertices: usize,
+    /// Frames of the clip.
+    #[arg(long, default_value_t = 16)]
+    pub frames: usize,
+    /// Timed runs; the fastest is reported, as the reference does.
+    #[arg(long, default_value_t = 3)]
+    pub repeat: usize,
+    /// The numpy/scipy reference script.
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/acap_reference.py"))]
+    pub script: PathBuf,
+    /// Python interpreter for the reference.
+    #[arg(long, default_value = "python3")]
+    pub python: PathBuf,
+}
+
+/// What the reference prints.
+#[derive(serde::Deserialize)]
+struct AcapReference {
+    vertices: usize,
+    features_s: f64,
+    reconstruction_s: f64,
+    total_s: f64,
+}
+
+/// `any4d bench acap`: ours on one thread and on the whole pool, then the reference on one core, same clip.
+fn bench_acap(args: AcapBenchArgs) -> anyhow::Result<ExitCode> {
+    if args.repeat == 0 {
+        bail!("--repeat must be at least 1");
+    }
+    let clip = bench_clip(args.vertices, args.frames)?;
+    let threads = rayon::current_num_threads();
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let t1 = one.install(|| time_acap(&clip, args.repeat))?;
+    let tn = time_acap(&clip, args.repeat)?;
+    println!(
+        "acap bench: {} ({} frames × {} vertices), features + ring-moment reconstruction of every frame, best of {}",
+        clip.id, clip.frames, clip.n_vertices, args.repeat
+    );
+    println!("| implementation | features s | reconstruction s | total s |");
+    println!("|---|---|---|---|");
+    let row = |name: &str, f: f64, r: f64, t: f64| println!("| {name} | {f:.4} | {r:.4} | {t:.4} |");
+    row("ours, 1 thread", t1.features_s, t1.reconstruction_s, t1.total_s());
+    row(
+        &format!("ours, {threads} threads"),
+        tn.features_s,
+        tn.reconstruction_s,
+        tn.total_s(),
+    );
+    let file = tempfile::NamedTempFile::new().context("creating the clip file of the reference")?;
+    let frames: Vec<&[[f32; 3]]> = (0..clip.frames).map(|f| clip.frame(f)).collect();
+    std::fs::write(
+        file.path(),
+        serde_json::json!({ "faces": clip.faces, "frames": frames }).to_string(),
+    )
+    .context("writing the clip file of the reference")?;
+    let reference = PythonReference {
+        python: &args.python,
+        script: &args.script,
+        args: vec![
+            "--bench".into(),
+            file.path().display().to_string(),
+            "--repeat".into(),
+            args.repeat.to_string(),
+        ],
+        threads: 1,
+    };
+    match reference.json::<AcapReference>()? {
+        Ok(r) => {
+            if r.vertices != clip.n_vertices {
+                bail!(
+                    "the reference read {} vertices, the clip has {}",
+                    r.vertices,
+                    clip.n_vertices
+                );
+            }
+            row("numpy+scipy, 1 core", r.features_s, r.reconstruction_s, r.total_s);
+            println!(
+                "speed-up over the reference: {:.2}× (1 thread), {:.2}× ({threads} threads)",
+                r.total_s / t1.total_s(),
+                r.total_s / tn.total_s()
+            );
+        }
+        Err(Skipped(why)) => println!("reference skipped: {why}"),
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 pub fn exec(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
@@ -31,5 +130,6 @@ pub fn exec(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
         BenchCmd::Metrics(args) => super::eval::bench(args),
         BenchCmd::Complete(args) => super::complete::bench(args),
         BenchCmd::Sample(args) => super::timing::bench_sample(args),
+        BenchCmd::Acap(args) => bench_acap(args),
     }
 }

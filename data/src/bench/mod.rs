@@ -3,6 +3,7 @@
 //! (`scripts/bench_data_reference.py`) reads too; the FPS checksum lets the two implementations be compared.
 //! [`readers`] times every reader on the same clips written in its format.
 
+pub mod acap;
 pub mod readers;
 
 use std::path::{Path, PathBuf};
