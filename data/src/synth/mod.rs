@@ -232,7 +232,7 @@ fn shared_body(cfg: &SynthConfig, family: ShapeFamily) -> Result<shapes::Body> {
     let mut r = rng(cfg.seed, ONE_BODY_STREAM);
     let target = r.random_range(cfg.min_vertices..=cfg.max_vertices);
     shapes::build(family, target, cfg.min_vertices, cfg.max_vertices, &mut r)
-        .map_err(|e| e.at(&format!("synth:{}:body", cfg.seed)))
+        .map_err(|e| e.at(format!("synth:{}:body", cfg.seed)))
 }
 
 /// Clip `index` with the families forced (its own rest mesh, whatever `cfg.body` says); equals [`generate_one`]
