@@ -264,6 +264,9 @@ fn method_labels_round_trip() {
         MethodKind::LerpLatent,
         MethodKind::StaticNearest,
         MethodKind::Bdlstm,
+        MethodKind::BdlstmAcap,
+        MethodKind::Aam,
+        MethodKind::KeyframeRfMean { samples: 8 },
         MethodKind::ImputeUntil {
             tau_star: 0.98,
             keyframes: KeyframeNoise::Clean,
