@@ -266,3 +266,102 @@ fn size_limits_are_named_in_refusals_and_adjustable_within_their_ceilings() {
     let out = any4d(&["data", "inspect", p(&obj)]);
     assert!(out.status.success(), "{:?}", text(&out));
 }
+
+#[test]
+fn a_one_body_store_trains_the_acap_bdlstm_from_the_command_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = tmp.path().join("one");
+    let synth = |body: &str| {
+        any4d(&[
+            "data",
+            "synth",
+            "--out",
+            p(&store),
+            "--clips",
+            "12",
+            "--seed",
+            "2",
+            "--frames",
+            "16",
+            "--min-vertices",
+            "256",
+            "--max-vertices",
+            "512",
+            "--p",
+            "16",
+            "--body",
+            body,
+        ])
+    };
+    let out = synth("dragon");
+    let (_, stderr) = text(&out);
+    assert!(!out.status.success() && stderr.contains("humanoid"), "{stderr}");
+    let out = synth("worm");
+    assert!(out.status.success(), "{:?}", text(&out));
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/bdlstm/acap_tiny.toml");
+    let runs = tmp.path().join("runs");
+    let train = |extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "bdlstm",
+            "--data",
+            p(&store),
+            "--runs-dir",
+            p(&runs),
+            "--set",
+            "train.duration={ steps = 2 }",
+        ];
+        args.extend_from_slice(extra);
+        any4d(&args)
+    };
+    // The latent preset needs a VAE; --variant acap on the same preset trains without one.
+    let latent = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/bdlstm/tiny.toml");
+    let out = train(&["--config", p(&latent)]);
+    assert!(
+        !out.status.success() && text(&out).1.contains("--vae"),
+        "{:?}",
+        text(&out)
+    );
+    let out = train(&["--config", p(&latent), "--variant", "acap"]);
+    assert!(out.status.success(), "{:?}", text(&out));
+    let out = train(&["--config", p(&config)]);
+    assert!(out.status.success(), "{:?}", text(&out));
+    let run = runs.join("bdlstm-2");
+    assert!(run.join("acap.json").is_file());
+    let out = any4d(&[
+        "train",
+        "bdlstm",
+        "--data",
+        p(&store),
+        "--resume",
+        p(&run),
+        "--variant",
+        "latent",
+    ]);
+    assert!(
+        !out.status.success() && text(&out).1.contains("--variant"),
+        "{:?}",
+        text(&out)
+    );
+    // The row on the store it was trained on.
+    let eval = tmp.path().join("eval");
+    let out = any4d(&[
+        "eval",
+        "run",
+        "--protocol",
+        "table1",
+        "--data",
+        p(&store),
+        "--methods",
+        "bdlstm_acap,lerp",
+        "--bdlstm-acap",
+        p(&run),
+        "--clips",
+        "1",
+        "--out",
+        p(&eval),
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stdout.contains("| bdlstm_acap | random | 0 |"), "{stdout}");
+}

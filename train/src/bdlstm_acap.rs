@@ -6,9 +6,9 @@
 
 use std::path::{Path, PathBuf};
 
-use any4d_data::acap::{ACAP_CHANNELS, AcapFrame, AcapScaling, AcapTopology, check_topology};
+use any4d_data::Clip;
+use any4d_data::acap::{ACAP_CHANNELS, AcapFrame, AcapScaling, AcapTopology, ScalingGranularity, check_topology};
 use any4d_data::store::{Split, Store};
-use any4d_data::{Clip, DataError};
 use any4d_model::bdlstm::{BdLstm, MeshConvCodec, MeshGraph};
 use any4d_model::mesh_vae::Posterior;
 use burn::prelude::{Device, Tensor, TensorData};
@@ -48,6 +48,12 @@ impl AcapRecord {
         Ok(AcapTopology::new(&self.reference_clip, &self.reference, &self.faces)?)
     }
 
+    /// [`AcapRecord::topology`] of the record read from the run in `run`, errors naming the run.
+    pub fn topology_of_run(&self, run: &Path) -> Result<AcapTopology> {
+        self.topology()
+            .map_err(|e| run_err(run, format!("the reference mesh of `{ACAP_FILE}`: {e}")))
+    }
+
     /// Writes `acap.json` into `run`.
     pub fn write(&self, run: &RunFolder) -> Result<()> {
         let json = serde_json::to_vec(self).map_err(|e| run_err(run.root(), format!("serialise {ACAP_FILE}: {e}")))?;
@@ -66,20 +72,31 @@ impl AcapRecord {
         let text = std::fs::read_to_string(&path).map_err(io_err("read", &path))?;
         let record: AcapRecord =
             serde_json::from_str(&text).map_err(|e| run_err(run_dir, format!("bad `{ACAP_FILE}`: {e}")))?;
+        let bad = |reason: String| run_err(run_dir, format!("bad `{ACAP_FILE}`: {reason}"));
         let n = record.reference.len();
         let rows = record.scaling.mid.len();
-        if record.scaling.half.len() != rows || (rows != 1 && rows != n) {
-            return Err(run_err(
-                run_dir,
-                format!("bad `{ACAP_FILE}`: {rows} scaling rows for a reference of {n} vertices"),
-            ));
+        let want = match record.scaling.granularity {
+            ScalingGranularity::PerChannel => 1,
+            ScalingGranularity::PerVertexChannel => n,
+        };
+        if n == 0 {
+            return Err(bad("the reference mesh has no vertices".into()));
+        }
+        if rows != want || record.scaling.half.len() != rows {
+            return Err(bad(format!(
+                "{rows} / {} scaling rows (mid / half), {want} expected for {:?} ranges of a {n}-vertex reference",
+                record.scaling.half.len(),
+                record.scaling.granularity
+            )));
+        }
+        let finite = |rows: &[[f32; ACAP_CHANNELS]]| rows.iter().flatten().all(|v| v.is_finite());
+        if !finite(&record.scaling.mid) || !record.scaling.half.iter().flatten().all(|&h| h.is_finite() && h > 0.0) {
+            return Err(bad("scaling values must be finite, half-widths positive".into()));
+        }
+        if let Some(f) = record.faces.iter().find(|f| f.iter().any(|&v| v as usize >= n)) {
+            return Err(bad(format!("triangle {f:?} indexes past the {n} reference vertices")));
         }
         Ok(record)
-    }
-
-    /// Clear error unless `clip` has the recorded topology (same vertex count and triangles).
-    pub fn check_clip(&self, clip: &Clip) -> std::result::Result<(), DataError> {
-        check_topology(&self.reference_clip, self.reference.len(), &self.faces, clip)
     }
 }
 

@@ -433,7 +433,8 @@ pub struct BdlstmRunOptions {
     pub vae_run: Option<PathBuf>,
 }
 
-/// Starts a new BD-LSTM run with `cfg` on the frozen VAE of `opts.vae_run`.
+/// Starts a new BD-LSTM run with `cfg`: on the frozen VAE of `opts.vae_run` (latent variant) or on the ACAP features
+/// of the store (`model.variant = "acap"`, no VAE).
 pub fn train_bdlstm(cfg: &BdlstmRunConfig, opts: &BdlstmRunOptions) -> Result<(RunFolder, Outcome)> {
     if opts.run.parallel.is_some() {
         return Err(TrainError::Setup(

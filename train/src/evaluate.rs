@@ -207,7 +207,7 @@ pub fn build_methods(
             MethodKind::BdlstmAcap => {
                 let run = load_acap_bdlstm_run(need(&runs.bdlstm_acap, "--bdlstm-acap", kind)?, device)?;
                 let space = AcapSpace {
-                    topology: run.record.topology()?,
+                    topology: run.record.topology_of_run(&run.run)?,
                     reference: run.record.reference_clip.clone(),
                     faces: run.record.faces.clone(),
                     scaling: run.record.scaling.clone(),

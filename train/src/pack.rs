@@ -16,7 +16,7 @@ use burn::prelude::{Device, Tensor};
 use burn::tensor::DType;
 
 use crate::bdlstm_acap::{ACAP_FILE, load_acap_bdlstm_run};
-use crate::bdlstm_loop::load_bdlstm_run;
+use crate::bdlstm_loop::{BdlstmVariant, load_bdlstm_run, read_bdlstm_config};
 use crate::checkpoint::{MODEL_FILE, STATE_FILE, step_dir_name};
 use crate::error::{Result, TrainError, io_err, run_err};
 use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE};
@@ -67,7 +67,7 @@ pub fn save_params<M: Module>(model: M, path: &Path, precision: Precision) -> Re
     })
 }
 
-/// Packs the run folder `run` (a VAE or an RF run) into the new folder `out`. `vae_at`, for an RF run, replaces the
+/// Packs the run folder `run` (a VAE, RF or BD-LSTM run of either variant) into the new folder `out`. `vae_at`, for an RF run, replaces the
 /// recorded VAE folder in `vae_run.json` (e.g. `../vae` when the VAE is packed beside it); the step stays the
 /// recorded one. `out` must not exist; it is written under a temporary name and renamed into place, so an
 /// interrupted pack leaves no half folder.
@@ -84,7 +84,7 @@ pub fn pack_run(
     // RF and BD-LSTM runs record the VAE they were trained on; a BD-LSTM config has a [bdlstm] table.
     let on_vae = run.join(VAE_RUN_FILE).is_file();
     // An ACAP BD-LSTM run records its reference mesh and feature scaling instead of a VAE.
-    let is_acap = run.join(ACAP_FILE).is_file();
+    let is_acap = !on_vae && read_bdlstm_config(run).is_ok_and(|(_, c)| c.model.variant == BdlstmVariant::Acap);
     if !on_vae && vae_at.is_some() {
         return Err(run_err(
             run,

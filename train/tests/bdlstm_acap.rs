@@ -14,6 +14,7 @@ use any4d_data::synth::{ShapeFamily, SynthConfig};
 use any4d_eval::methods::{MethodKind, hide_non_keyframes};
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::bdlstm_acap::{ACAP_FILE, AcapObjective, AcapRecord, load_acap_bdlstm_run};
+use any4d_train::bdlstm_loop::resume_bdlstm;
 use any4d_train::bdlstm_loop::{
     BDLSTM_TERMS, BdlstmRunConfig, BdlstmRunOptions, BdlstmVariant, load_bdlstm_run, train_bdlstm,
 };
@@ -219,4 +220,37 @@ fn acap_setups_that_cannot_work_are_refused_before_a_run_folder_exists() {
         let field = key.rsplit('.').next().unwrap();
         assert!(err.contains(field), "{key} = {value}: {err}");
     }
+}
+
+#[test]
+fn acap_resume_reuses_the_recorded_reference_and_equals_straight_training() {
+    let _g = serial();
+    let f = fixture();
+    let mut cfg = tiny(4);
+    cfg.train.checkpoint_every = 2;
+    let (straight, _) = train_bdlstm(&cfg, &opts(&f.store, "straight")).unwrap();
+    // The same run stopped after 2 steps and resumed to 4.
+    let mut first = cfg.clone();
+    first.train.duration = Duration::Steps(2);
+    let (split, _) = train_bdlstm(&first, &opts(&f.store, "split")).unwrap();
+    let config = split.path(CONFIG_FILE);
+    std::fs::write(&config, cfg.to_toml().unwrap()).unwrap();
+    let outcome = resume_bdlstm(split.root(), None, &opts(&f.store, "unused")).unwrap();
+    assert!(matches!(outcome, Outcome::Finished { steps: 4, .. }), "{outcome:?}");
+    let dev = cpu();
+    let (a, b) = (
+        load_acap_bdlstm_run(straight.root(), &dev).unwrap(),
+        load_acap_bdlstm_run(split.root(), &dev).unwrap(),
+    );
+    assert_eq!(a.record, b.record);
+    assert_eq!(
+        params(&a.model),
+        params(&b.model),
+        "resumed ACAP BD-LSTM differs from straight training"
+    );
+    // --vae does not apply to a resumed ACAP run either.
+    let mut with_vae = opts(&f.store, "unused");
+    with_vae.vae_run = Some(f.dir.path().join("some-vae"));
+    let err = resume_bdlstm(split.root(), None, &with_vae).err().unwrap().to_string();
+    assert!(err.contains("drop --vae"), "{err}");
 }

@@ -7,6 +7,7 @@ use std::time::Instant;
 use crate::acap::{AcapTopology, Reconstruction};
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
+use crate::limits::MAX_SYNTH_VERTICES;
 use crate::synth::{MotionFamily, ShapeFamily, SynthConfig, generate_with};
 
 /// Best-of-K seconds of the two stages (the reference reports the best of K too).
@@ -28,13 +29,14 @@ impl AcapTiming {
 /// A twisting tube of about `vertices` vertices (within ±128) and `frames` frames: the benchmark clip.
 ///
 /// # Errors
-/// Sizes the generator refuses (fewer than 384 vertices, more than its limits, fewer than 2 frames).
+/// Fewer than 384 or more than the generator's limit less 128 vertices, or frames the generator refuses.
 pub fn bench_clip(vertices: usize, frames: usize) -> Result<Clip> {
-    if vertices < 384 {
+    let most = MAX_SYNTH_VERTICES - 128;
+    if !(384..=most).contains(&vertices) {
         return Err(DataError::new(
             "acap bench",
-            "vertices",
-            format!("needs at least 384 vertices, got {vertices}"),
+            "--vertices",
+            format!("needs 384..={most} vertices, got {vertices}"),
         ));
     }
     let cfg = SynthConfig {

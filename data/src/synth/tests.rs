@@ -278,7 +278,7 @@ fn synth_speed() {
 }
 
 #[test]
-fn one_body_clips_share_their_rest_mesh_and_differ_in_motion() {
+fn one_body_clips_share_one_topology_across_seeds_and_differ_in_motion() {
     let c = SynthConfig {
         clips: 6,
         seed: 9,
@@ -288,8 +288,15 @@ fn one_body_clips_share_their_rest_mesh_and_differ_in_motion() {
         ..SynthConfig::default()
     };
     let clips = generate(&c).unwrap();
+    // Another seed and clip count: the same rest mesh (a store may hold several synth runs).
+    let other = generate(&SynthConfig {
+        seed: 10,
+        clips: 2,
+        ..c.clone()
+    })
+    .unwrap();
     let first = &clips[0];
-    for clip in &clips {
+    for clip in clips.iter().chain(&other) {
         assert_eq!(families(&clip.id).unwrap().0, ShapeFamily::Humanoid, "{}", clip.id);
         assert_eq!(clip.n_vertices, first.n_vertices, "{}", clip.id);
         assert_eq!(clip.faces, first.faces, "{}", clip.id);
