@@ -6,12 +6,13 @@
 #   scripts/real_corpus.sh OUT            (ANY4D=path/to/any4d to use a built binary; default: cargo run)
 #
 # Packages: redeclipse-data (IQM players, MD5 actors), 0ad-data (PMD/PSA animals and units from public.zip),
-# ufoai-data (MD2 soldiers, aliens, civilians from 0models.pk3), assimp-testmodels (the animated IQM sample).
+# ufoai-data (MD2 soldiers, aliens, civilians from 0models.pk3), assimp-testmodels (the animated IQM sample),
+# minetest-data and two Minetest mods (B3D player characters and the maid robot; 4 MB together).
 # Never add openarena*, megaglest*, nexuiz*/xonotic* or assimp-testmodels' MD2 files: they are the held-out
 # evaluation (the staging step refuses those packages by name and skips the MD2 files).
 set -euo pipefail
 OUT=${1:?usage: scripts/real_corpus.sh OUT}
-PACKAGES=(redeclipse-data 0ad-data ufoai-data assimp-testmodels)
+PACKAGES=(redeclipse-data 0ad-data ufoai-data assimp-testmodels minetest-data minetest-mod-3d-armor minetest-mod-maidroid)
 # Import settings: 16-frame windows every 8 frames, P = 512 FPS tokens (the paper's); the low-poly game meshes
 # go down to 128 vertices (the paper's lower bound is 512, which would drop most 0 A.D. animals and UFO:AI
 # models).

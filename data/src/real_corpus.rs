@@ -13,6 +13,8 @@
 //!   most [`MAX_UNIT_MESHES`] unit meshes are staged;
 //! - `ufoai-data`: from `base/0models.pk3`, every `.md2` model with an `.anm` animation table beside it;
 //! - `assimp-testmodels`: the animated `.iqm` sample. Its MD2 models are never staged;
+//! - `minetest-data` and `minetest-mod-*`: every `.b3d` under `usr/share/games/minetest` that has node keys (the
+//!   player character, mobs), one folder per file, the asset named after the file;
 //! - both of the last two (folder [`MOCAP_FOLDER`]): the `.bvh` motion capture of `assimp-testmodels` beside
 //!   copies of the Red Eclipse player meshes, retargeted at import ([`crate::formats::bvh`]).
 //!
@@ -71,6 +73,9 @@ pub fn stage(extracted: &Path, out: &Path) -> Result<StageReport> {
             "0ad-data" => stage_0ad(&dir, &dest, &package, &copyright, &mut report)?,
             "ufoai-data" => stage_ufoai(&dir, &dest, &package, &copyright, &mut report)?,
             "assimp-testmodels" => stage_assimp(&dir, &dest, &package, &copyright)?,
+            p if p == "minetest-data" || p.starts_with("minetest-mod-") => {
+                stage_minetest(&dir, &dest, &package, &copyright)?
+            }
             _ => continue,
         };
         report.assets.insert(package, n);
@@ -450,6 +455,32 @@ fn stage_ufoai(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut St
         if !path.exists() {
             write_provenance(&to, package, &licence, asset.trim())?;
         }
+        n += 1;
+    }
+    Ok(n)
+}
+
+fn stage_minetest(dir: &Path, dest: &Path, package: &str, c: &Dep5) -> Result<usize> {
+    let root = dir.join("usr/share/games/minetest");
+    if !root.is_dir() {
+        return Ok(0);
+    }
+    let mut folders = Vec::new();
+    walk_dirs(&root, &mut folders);
+    let mut n = 0;
+    for b3d in folders.iter().flat_map(|d| files_with(d, "b3d")) {
+        // Static models (doors, carts without keys, scenery) have no take.
+        if !crate::formats::b3d::list_takes(&b3d).is_ok_and(|t| !t.is_empty()) {
+            continue;
+        }
+        let stem = crate::formats::skeletal::stem(&b3d);
+        let to = dest.join(&stem);
+        if to.exists() {
+            continue;
+        }
+        copy(&b3d, &to.join(b3d.file_name().unwrap_or_default()))?;
+        let asset = caption::asset_words(&stem).join(" ");
+        write_provenance(&to, package, &c.licence(&rel(dir, &b3d)), asset.trim())?;
         n += 1;
     }
     Ok(n)

@@ -306,3 +306,51 @@ fn mocap_is_staged_beside_the_players_with_both_licences() {
         "{reason}"
     );
 }
+
+/// Minetest packages: every `.b3d` with node keys is staged (one folder each, asset named after the file), static
+/// ones are not, and the staged take imports with its package and licence.
+#[test]
+fn minetest_b3d_models_with_keys_are_staged_and_imported() {
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("extracted/minetest-mod-walker");
+    write(
+        &pkg.join("usr/share/doc/minetest-mod-walker/copyright"),
+        b"Format: dep5\n\nFiles: *\nLicense: CC-BY-SA-4.0+\n",
+    );
+    let models = pkg.join("usr/share/games/minetest/mods/walker/models");
+    let (pos, faces) = strip(4);
+    let keys: Vec<(i32, [f32; 3])> = (1..=20).map(|f| (f, [0.0, 0.1 * f as f32, 0.0])).collect();
+    let moving: Vec<u32> = (0..pos.len() as u32).filter(|v| v % 2 == 1).collect();
+    write(
+        &models.join("walker_mob.b3d"),
+        &any4d_data::formats::b3d::write_test_b3d(&pos, &faces, [0.0; 3], &moving, &keys),
+    );
+    write(
+        &models.join("fence.b3d"),
+        &any4d_data::formats::b3d::write_test_b3d(&pos, &faces, [0.0; 3], &moving, &[]),
+    );
+    let staged = dir.path().join("staged");
+    let report = stage(&dir.path().join("extracted"), &staged).unwrap();
+    assert_eq!(report.assets.get("minetest-mod-walker"), Some(&1), "{report:?}");
+    assert!(staged.join("minetest-mod-walker/walker_mob/walker_mob.b3d").is_file());
+    let out = dir.path().join("store");
+    let opts = ImportOptions {
+        filter: VertexFilter { min: 3, max: 4096 },
+        frames: 16,
+        stride: 4,
+        ..ImportOptions::default()
+    };
+    let rep = store::import(&[staged], &out, &opts).unwrap();
+    let rows = read_index(&out).unwrap();
+    let ok: Vec<_> = rows.iter().filter(|r| r.status == Status::Ok).collect();
+    // 20 key frames → windows at 0 and 4.
+    assert_eq!(ok.len(), 2, "{rep}");
+    for r in &ok {
+        assert_eq!(r.format, "b3d");
+        assert_eq!(
+            (r.licence.as_str(), r.source_package.as_str()),
+            ("CC-BY-SA-4.0+", "minetest-mod-walker")
+        );
+        assert!(r.caption.starts_with("a walker mob"), "{}", r.caption);
+    }
+}

@@ -9,6 +9,7 @@
 //! are not clips themselves.
 
 pub mod anime;
+pub mod b3d;
 pub mod bvh;
 pub mod bytes;
 pub mod dymesh_bin;
@@ -136,6 +137,8 @@ pub enum Format {
     Pmd,
     /// DeformingThings4D `.anime`.
     Anime,
+    /// Blitz3D `.b3d` (Minetest, Irrlicht).
+    B3d,
 }
 
 impl Format {
@@ -152,6 +155,7 @@ impl Format {
             Format::Md3 => "md3",
             Format::Pmd => "pmd",
             Format::Anime => "anime",
+            Format::B3d => "b3d",
         }
     }
 
@@ -163,7 +167,7 @@ impl Format {
 
 /// Extensions (lower case) of the files an import picks up as clip sources.
 pub const SOURCE_EXTENSIONS: &[&str] = &[
-    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime",
+    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime", "b3d",
 ];
 
 /// Whether `path` is a clip source for an import: a file with one of [`SOURCE_EXTENSIONS`], except an
@@ -197,6 +201,7 @@ impl Format {
             "md3" => Ok(Format::Md3),
             "pmd" => Ok(Format::Pmd),
             "anime" => Ok(Format::Anime),
+            "b3d" => Ok(Format::B3d),
             "md5anim" | "psa" | "bvh" => Err(DataError::new(
                 path,
                 "format",
@@ -212,7 +217,7 @@ impl Format {
                 "format",
                 format!(
                     "unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb, .iqm, .md5mesh, .md2, .md3, \
-                     .pmd, .anime or a folder of .obj)"
+                     .pmd, .anime, .b3d or a folder of .obj)"
                 ),
             )),
         }
@@ -266,6 +271,7 @@ fn read_take_unguarded(path: &Path, format: Format, opts: &ReadOptions) -> Resul
         Format::Md3 => md3::read(path, opts)?,
         Format::Pmd => pmd::read(path, opts)?,
         Format::Anime => anime::read(path, opts)?,
+        Format::B3d => b3d::read(path, opts)?,
     };
     Ok(Taken {
         clip,
@@ -289,6 +295,7 @@ fn list_takes_unguarded(path: &Path, format: Format) -> Result<Option<Vec<TakeIn
         Format::Md3 => md3::list_takes(path)?,
         Format::Pmd => pmd::list_takes(path)?,
         Format::Anime => anime::list_takes(path)?,
+        Format::B3d => b3d::list_takes(path)?,
     }))
 }
 
