@@ -11,15 +11,13 @@ use std::sync::OnceLock;
 
 use any4d_data::store::{Split, Store};
 use any4d_eval::methods::{MethodKind, hide_non_keyframes};
-use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::Duration;
 use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods};
 use any4d_train::loop_common::Outcome;
 use any4d_train::rf_loop::{LatentDraw, RfRunConfig, RfRunOptions, train_rf};
 use any4d_train::run_folder::{METRICS_FILE, SAMPLES_FILE, read_table};
 use any4d_train::vae_loop::train_vae;
-use burn::prelude::Device;
-use common::{VaeFixture, root, run_options, serial, synth_store, tiny_dymesh_vae, vae_fixture, vae_fixture_with};
+use common::{VaeFixture, cpu, root, run_options, serial, synth_store, tiny_dymesh_vae, vae_fixture, vae_fixture_with};
 
 /// The 4-frame store (seed 1) and a 6-step sequence-wise VAE run on it.
 fn dymesh() -> &'static VaeFixture {
@@ -31,10 +29,6 @@ fn dymesh() -> &'static VaeFixture {
 fn framewise() -> &'static VaeFixture {
     static FIXTURE: OnceLock<VaeFixture> = OnceLock::new();
     FIXTURE.get_or_init(|| vae_fixture(1))
-}
-
-fn cpu() -> Device {
-    device(Backend::Flex, Precision::F32).expect("flex device")
 }
 
 /// configs/rf/aam_tiny.toml for `steps` steps of 4 clips on the fixture, validation samples of 2 clips at the end.

@@ -12,7 +12,6 @@ use std::sync::OnceLock;
 use any4d_data::store::{Split, Store, write_synth_with};
 use any4d_data::synth::{ShapeFamily, SynthConfig};
 use any4d_eval::methods::{MethodKind, hide_non_keyframes};
-use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::bdlstm_acap::{ACAP_FILE, AcapObjective, AcapRecord, load_acap_bdlstm_run};
 use any4d_train::bdlstm_loop::resume_bdlstm;
 use any4d_train::bdlstm_loop::{
@@ -23,8 +22,7 @@ use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods};
 use any4d_train::loop_common::{Objective, Outcome};
 use any4d_train::pack::{Precision as PackPrecision, pack_run};
 use any4d_train::run_folder::{CONFIG_FILE, METRICS_FILE, VALID_FILE, read_table};
-use burn::prelude::Device;
-use common::{copy_dir, params, root, run_options, serial};
+use common::{bdlstm_preset, copy_dir, cpu, params, root, run_options, serial};
 
 struct Fixture {
     dir: tempfile::TempDir,
@@ -59,18 +57,9 @@ fn opts(store: &Path, name: &str) -> BdlstmRunOptions {
 
 /// configs/bdlstm/acap_tiny.toml for `steps` steps of 4 clips.
 fn tiny(steps: u64) -> BdlstmRunConfig {
-    let mut cfg = BdlstmRunConfig::load(&root().join("configs/bdlstm/acap_tiny.toml"), &[]).expect("acap preset");
+    let cfg = bdlstm_preset("acap_tiny.toml", steps);
     assert_eq!(cfg.model.variant, BdlstmVariant::Acap);
-    cfg.train.duration = Duration::Steps(steps);
-    cfg.train.batch_size = 4;
-    cfg.train.micro_batch = 4;
-    cfg.train.checkpoint_every = steps;
-    cfg.train.valid_every = steps;
     cfg
-}
-
-fn cpu() -> Device {
-    device(Backend::Flex, Precision::F32).expect("flex device")
 }
 
 #[test]

@@ -8,7 +8,6 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use any4d_eval::methods::{MethodKind, hide_non_keyframes};
-use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::bdlstm_loop::{
     BDLSTM_TERMS, BdlstmObjective, BdlstmRunConfig, BdlstmRunOptions, load_bdlstm_run, train_bdlstm,
 };
@@ -18,8 +17,7 @@ use any4d_train::loop_common::{Objective, Outcome, train};
 use any4d_train::pack::{Precision as PackPrecision, pack_run};
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, VALID_FILE, read_table};
 use any4d_train::runs::load_vae_run;
-use burn::prelude::Device;
-use common::{VaeFixture, params, quiet_setup, root, run_options, serial, vae_fixture};
+use common::{VaeFixture, bdlstm_preset, cpu, params, quiet_setup, root, run_options, serial, vae_fixture};
 
 /// The shared store and tiny VAE run (seed 4), made once per test process.
 fn fixture() -> &'static VaeFixture {
@@ -37,17 +35,7 @@ fn opts(name: &str) -> BdlstmRunOptions {
 
 /// configs/bdlstm/tiny.toml for `steps` steps of 4 clips.
 fn tiny(steps: u64) -> BdlstmRunConfig {
-    let mut cfg = BdlstmRunConfig::load(&root().join("configs/bdlstm/tiny.toml"), &[]).expect("tiny preset");
-    cfg.train.duration = Duration::Steps(steps);
-    cfg.train.batch_size = 4;
-    cfg.train.micro_batch = 4;
-    cfg.train.checkpoint_every = steps;
-    cfg.train.valid_every = steps;
-    cfg
-}
-
-fn cpu() -> Device {
-    device(Backend::Flex, Precision::F32).expect("flex device")
+    bdlstm_preset("tiny.toml", steps)
 }
 
 #[test]

@@ -319,3 +319,24 @@ pub fn vae_fixture_with(store_seed: u64, mut cfg: VaeRunConfig) -> VaeFixture {
         _dir: dir,
     }
 }
+
+/// `configs/bdlstm/<preset>` for `steps` steps of 4 clips, checkpointed and validated once at the end.
+pub fn bdlstm_preset(preset: &str, steps: u64) -> any4d_train::bdlstm_loop::BdlstmRunConfig {
+    let path = root().join("configs/bdlstm").join(preset);
+    let mut cfg = any4d_train::bdlstm_loop::BdlstmRunConfig::load(&path, &[]).expect("BD-LSTM preset");
+    cfg.train.duration = Duration::Steps(steps);
+    cfg.train.batch_size = 4;
+    cfg.train.micro_batch = 4;
+    cfg.train.checkpoint_every = steps;
+    cfg.train.valid_every = steps;
+    cfg
+}
+
+/// The flex CPU device in f32.
+pub fn cpu() -> Device {
+    any4d_train::backend::device(
+        any4d_train::backend::Backend::Flex,
+        any4d_train::backend::Precision::F32,
+    )
+    .expect("flex device")
+}
