@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
-"""RMSE per motion family of the procedural clips, every method of one `eval run --protocol table1` against lerp.
+"""RMSE per motion family of the procedural clips, every method of one `eval run` (table1 or table5) against lerp.
 
 Usage: python3 family.py CLIPS_PARQUET OUT_CSV
 The motion family is the third field of a synthetic clip id (`synth-<shape>-<motion>-...`). Writes one row per
-(method, motion, K_x): clips × seeds, mean RMSE ×100 and the ratio to lerp's mean on the same clips; prints the
-ratios as a table (one column per K_x). Needs pyarrow.
+(method, motion, K_x): clips × seeds, mean RMSE ×100 and the ratio to lerp's mean on the same clips (empty without
+a lerp row, as in table5); prints the ratios (or, without lerp, the RMSE ×100) as a table, one column per K_x.
+Needs pyarrow.
 """
 import csv
 import sys
@@ -29,12 +30,14 @@ def main(clips, out):
             for mo in motions:
                 for k in ks:
                     v, l = rmse.get((m, mo, k)), rmse.get(("lerp", mo, k))
-                    if v and l:
-                        w.writerow([m, mo, k, len(v), f"{100 * mean(v):.3f}", f"{mean(v) / mean(l):.3f}"])
+                    if v:
+                        ratio = f"{mean(v) / mean(l):.3f}" if l else ""
+                        w.writerow([m, mo, k, len(v), f"{100 * mean(v):.3f}", ratio])
     print(f"{'method':16s} {'motion':8s} n  " + "  ".join(f"K_x {k}" for k in ks))
     for m in methods:
         for mo in motions:
-            ratios = [mean(rmse[(m, mo, k)]) / mean(rmse[("lerp", mo, k)]) for k in ks if (m, mo, k) in rmse]
+            base = lambda k: mean(rmse[("lerp", mo, k)]) if ("lerp", mo, k) in rmse else 0.01  # noqa: E731
+            ratios = [mean(rmse[(m, mo, k)]) / base(k) for k in ks if (m, mo, k) in rmse]
             n = len(rmse.get((m, mo, ks[0]), []))
             print(f"{m:16s} {mo:8s} {n:3d} " + "  ".join(f"{x:5.2f}" for x in ratios))
 
