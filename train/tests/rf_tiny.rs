@@ -235,7 +235,7 @@ fn packed_runs_load_with_their_parameters_in_full_and_half_precision() {
     )
     .unwrap_err()
     .to_string();
-    assert!(err.contains("RF and BD-LSTM runs only"), "{err}");
+    assert!(err.contains("RF and latent BD-LSTM runs only"), "{err}");
     assert!(!bad.exists());
 }
 
