@@ -13,7 +13,7 @@ use any4d_model::mesh_vae::Posterior;
 use burn::prelude::*;
 use burn::tensor::TensorData;
 
-use crate::learned::end_keyframes;
+use crate::learned::{SegmentFailure, end_keyframes};
 use crate::methods::WindowSampler;
 
 type Frame = Vec<[f32; 3]>;
@@ -136,18 +136,6 @@ impl AcapBdlstmSampler {
             SegmentFailure::Data(e) => e,
         })?;
         Ok(merged.frames)
-    }
-}
-
-/// An error inside one segment's merge: the rule's own or the reconstruction's.
-enum SegmentFailure {
-    Rule(SegmentError),
-    Data(DataError),
-}
-
-impl From<SegmentError> for SegmentFailure {
-    fn from(e: SegmentError) -> Self {
-        Self::Rule(e)
     }
 }
 

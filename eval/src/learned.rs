@@ -822,8 +822,8 @@ pub struct BdlstmSampler {
     merge: MergeConfig,
 }
 
-/// An error inside one segment's merge: the rule's own or the codec's.
-enum SegmentFailure {
+/// An error inside one segment's merge of a BD-LSTM row: the rule's own or the decoder's / reconstruction's.
+pub(crate) enum SegmentFailure {
     Rule(SegmentError),
     Data(DataError),
 }
