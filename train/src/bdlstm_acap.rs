@@ -12,7 +12,6 @@ use any4d_data::store::{Split, Store};
 use any4d_model::bdlstm::{BdLstm, MeshConvCodec, MeshGraph};
 use any4d_model::mesh_vae::Posterior;
 use burn::prelude::{Device, Tensor, TensorData};
-use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
@@ -260,9 +259,7 @@ impl Objective for AcapObjective {
     /// One window length n ~ U{min_window..=max_window} per batch, one start per clip.
     fn loss(&self, model: &Self::Model, indices: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
         let clips = self.train_clips.draw(indices, rng);
-        let t = self.frames;
-        let n = rng.random_range(self.cfg.bdlstm.min_window..=self.cfg.max_window(t));
-        let starts: Vec<usize> = clips.iter().map(|_| rng.random_range(0..=t - n)).collect();
+        let (n, starts) = self.cfg.draw_window(self.frames, clips.len(), rng);
         let window = self.window(&self.train, &clips, &starts, n, device);
         self.losses(model, window, Posterior::Sample)
     }

@@ -193,6 +193,22 @@ impl BdlstmRunConfig {
         to_toml(self)
     }
 
+    /// The recurrent part (layers, initial state, retry noise); the codec carries the widths.
+    fn recurrent(&self) -> BdLstmConfig {
+        BdLstmConfig::new()
+            .with_layers(self.model.layers)
+            .with_initial_state(self.model.initial_state)
+            .with_retry_noise(self.model.retry_noise)
+    }
+
+    /// One training window for a batch of `clips` clips of `frames` frames: its length n ~
+    /// U{min_window..=max_window} and one start per clip, both from `rng`.
+    pub(crate) fn draw_window(&self, frames: usize, clips: usize, rng: &mut ChaCha8Rng) -> (usize, Vec<usize>) {
+        let n = rng.random_range(self.bdlstm.min_window..=self.max_window(frames));
+        let starts = (0..clips).map(|_| rng.random_range(0..=frames - n)).collect();
+        (n, starts)
+    }
+
     /// The network for latents of `tokens` × `channels` (the VAE's P and C) on `device`.
     pub fn init(&self, tokens: usize, channels: usize, device: &Device) -> BdLstm<LatentCodec> {
         let m = &self.model;
@@ -202,11 +218,7 @@ impl BdlstmRunConfig {
             .with_token_width(m.token_width)
             .with_latent(m.latent)
             .init(device);
-        BdLstmConfig::new()
-            .with_layers(m.layers)
-            .with_initial_state(m.initial_state)
-            .with_retry_noise(m.retry_noise)
-            .init(codec, device)
+        self.recurrent().init(codec, device)
     }
 
     /// The ACAP variant's network for a fixed topology of `vertices` vertices on `device`.
@@ -217,11 +229,7 @@ impl BdlstmRunConfig {
             .with_conv_layers(m.conv_layers)
             .with_latent(m.latent)
             .init(device);
-        BdLstmConfig::new()
-            .with_layers(m.layers)
-            .with_initial_state(m.initial_state)
-            .with_retry_noise(m.retry_noise)
-            .init(codec, device)
+        self.recurrent().init(codec, device)
     }
 
     /// The weights of (B3).
@@ -390,9 +398,7 @@ impl Objective for BdlstmObjective {
     /// chains' encoder.
     fn loss(&self, model: &Self::Model, indices: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
         let clips = self.train_clips.draw(indices, rng);
-        let t = self.train.frames;
-        let n = rng.random_range(self.cfg.bdlstm.min_window..=self.cfg.max_window(t));
-        let starts: Vec<usize> = clips.iter().map(|_| rng.random_range(0..=t - n)).collect();
+        let (n, starts) = self.cfg.draw_window(self.train.frames, clips.len(), rng);
         let window = self.window(&self.train, &clips, &starts, n, rng, device);
         Ok(self.losses(model, window, Posterior::Sample))
     }
