@@ -555,6 +555,12 @@ impl RfSampler {
         if !guidance.is_finite() {
             return bad("guidance", format!("{guidance} is not finite"));
         }
+        if !(options.noise_scale.is_finite() && options.noise_scale >= 0.0) {
+            return bad(
+                "noise_scale",
+                format!("{} is not a finite scale ≥ 0", options.noise_scale),
+            );
+        }
         Ok(Self {
             models,
             options,

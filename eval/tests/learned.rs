@@ -304,6 +304,35 @@ fn zero_velocity_leaves_the_seeded_noise_de_standardized() {
     assert!(max_diff(&other, &floats(sampler_noise(11, [1, P, T, C], &device))) > 0.1);
 }
 
+/// docs/method.md §8 X14: at noise scale 0 the seed no longer matters; a negative or non-finite scale is refused.
+#[test]
+fn rf_sampler_noise_scale_zero_is_seed_free_and_bad_scales_are_refused() {
+    let device = Device::flex();
+    let m = models(
+        frame_codec(&device, PadTo::BatchMax),
+        KeyframeConditioning::InputMask,
+        &device,
+    );
+    let zero = SampleOptions {
+        noise_scale: 0.0,
+        ..options(KeyframeConditioning::InputMask)
+    };
+    let sampler = RfSampler::new(m.clone(), zero, 1.0).unwrap();
+    let (gt, keys) = (wave_clip(), [0, 3]);
+    let visible = hide_non_keyframes(&gt, &keys);
+    let a = sampler.sample(&visible, &keys, "a waving flag", 42).unwrap();
+    let b = sampler.sample(&visible, &keys, "a waving flag", 43).unwrap();
+    assert!(rows_diff(&a, &b) < 1e-6, "scale 0 still depends on the seed");
+    for bad in [-0.5, f64::NAN, f64::INFINITY] {
+        let opts = SampleOptions {
+            noise_scale: bad,
+            ..zero
+        };
+        let err = RfSampler::new(m.clone(), opts, 1.0).err().expect("refused").to_string();
+        assert!(err.contains("noise_scale") && err.contains("≥ 0"), "{err}");
+    }
+}
+
 #[test]
 fn sample_latents_match_a_hand_wired_sample_mmdit() {
     // Reference wiring from the model API: standardized z₀ and μ, mask [1, T], ε of the seed, (R6), de-standardize.

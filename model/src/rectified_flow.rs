@@ -330,6 +330,10 @@ pub struct SampleOptions {
     pub tau_star: f64,
     /// Seed of `ReplaceNoise::Fresh` draws (each evaluation mixes in its τ).
     pub fresh_seed: u64,
+    /// Scale s of the sampler's noise (docs/method.md §4.6, X14): the ODE starts at X₀ = s ε, and fresh replacement
+    /// noise is drawn as s ε too. 1 in the paper; s < 1 samples nearer the centre of the learned distribution, s = 0
+    /// gives one deterministic completion per input.
+    pub noise_scale: f64,
 }
 
 impl SampleOptions {
@@ -342,6 +346,7 @@ impl SampleOptions {
             replace_noise: ReplaceNoise::Fixed,
             tau_star: 0.98,
             fresh_seed: 0,
+            noise_scale: 1.0,
         }
     }
 }
@@ -373,7 +378,7 @@ pub fn sampler_input(cond: &Conditioning, x: Tensor<4>, eps: &Tensor<4>, tau: f6
                 ReplaceNoise::Fixed => eps.clone(),
                 ReplaceNoise::Fresh => {
                     let seed = any4d_data::rng::splitmix64(opts.fresh_seed ^ tau.to_bits());
-                    sampler_noise(seed, eps.dims(), &eps.device())
+                    scale_noise(sampler_noise(seed, eps.dims(), &eps.device()), opts.noise_scale)
                 }
             };
             // (R7) keyframe latent noised to the state's level: (1 − τ) ε_key + τ Z_key
@@ -434,6 +439,7 @@ where
     );
     let [b, _, frames, _] = eps.dims();
     let device = eps.device();
+    let eps = scale_noise(eps, opts.noise_scale);
     let mut eval = |x: Tensor<4>, tau: f64| -> Tensor<4> {
         let input = sampler_input(cond, x.clone(), &eps, tau, opts);
         let tau_b = Tensor::<1>::full([b], tau, &device);
@@ -447,7 +453,7 @@ where
     };
     let steps = opts.n_grid - 1;
     let dt = 1.0 / steps as f64;
-    let mut x = eps.clone(); // X_0 = ε
+    let mut x = eps.clone(); // X_0 = s ε
     for i in 0..steps {
         let tau = i as f64 * dt;
         x = match opts.solver {
@@ -465,6 +471,11 @@ where
         }
         KeyframeConditioning::ImputeUntil | KeyframeConditioning::None => x,
     }
+}
+
+/// s ε, leaving ε as it is (bit for bit) at the paper's s = 1.
+fn scale_noise(eps: Tensor<4>, scale: f64) -> Tensor<4> {
+    if scale == 1.0 { eps } else { eps.mul_scalar(scale) }
 }
 
 /// Classifier-free guidance v = v_u + w (v_c − v_u).

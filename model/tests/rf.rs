@@ -104,6 +104,60 @@ fn oracle_velocity_maps_noise_to_data_euler_and_midpoint() {
     }
 }
 
+/// docs/method.md §8 X14: `noise_scale = s` is the sampler started from s ε, whatever reads ε — the ODE state and
+/// the fixed replacement noise of (R7) alike; s = 0 forgets ε.
+#[test]
+fn noise_scale_starts_the_sampler_from_scaled_noise() {
+    let _g = lock();
+    let d = dev();
+    let (b, p, t, c) = (2, 5, 4, 3);
+    let eps = normal([b, p, t, c], &d);
+    let mut mask = vec![0.0f32; b * t];
+    mask[1] = 1.0; // frame 1 of window 0 is a keyframe: its input is (1 − τ) ε_key + τ Z_key
+    let cond = Conditioning {
+        z0: normal([b, p, c], &d),
+        z_key: normal([b, p, t, c], &d),
+        mask: Tensor::from_data(TensorData::new(mask, [b, t]), &d),
+    };
+    // A velocity that reads its whole input (state, keyframe channels and mask), so any ε it sees shows.
+    let net = |input: Tensor<3>, tau: Tensor<1>| {
+        let [bb, pp, _] = input.dims();
+        let every = input.clone().sum_dim(2).tanh().expand([bb, pp, t * c]);
+        input.narrow(2, 0, t * c).tanh() + every + tau.reshape([bb, 1, 1]).expand([bb, pp, t * c]).mul_scalar(0.5)
+    };
+    for conditioning in [KeyframeConditioning::InputMask, KeyframeConditioning::ReplaceNoised] {
+        let paper = SampleOptions {
+            n_grid: 5,
+            ..SampleOptions::paper(conditioning)
+        };
+        let scaled = SampleOptions {
+            noise_scale: 0.5,
+            ..paper
+        };
+        let a = sample(net, &cond, eps.clone(), &scaled);
+        let b_ = sample(net, &cond, eps.clone().mul_scalar(0.5), &paper);
+        assert!(
+            max_abs_diff(a.clone(), b_) < 1e-6,
+            "{conditioning:?}: s = 0.5 is not the sampler from ε / 2"
+        );
+        let unscaled = sample(net, &cond, eps.clone(), &paper);
+        assert!(
+            max_abs_diff(a, unscaled) > 1e-3,
+            "{conditioning:?}: the scale changed nothing"
+        );
+        let zero = SampleOptions {
+            noise_scale: 0.0,
+            ..paper
+        };
+        let one = sample(net, &cond, eps.clone(), &zero);
+        let other = sample(net, &cond, normal([b, p, t, c], &d), &zero);
+        assert!(
+            max_abs_diff(one, other) < 1e-7,
+            "{conditioning:?}: s = 0 still depends on ε"
+        );
+    }
+}
+
 /// docs/method.md §4.9: a network that outputs the clean latents Z* moves the state straight towards them and lands
 /// on them exactly, on any grid and with either solver (the sampler divides by the exact 1 − τ).
 #[test]

@@ -58,6 +58,10 @@ pub struct CompleteArgs {
     /// Classifier-free guidance weight (1.0 in the paper: one conditional branch).
     #[arg(long, default_value_t = 1.0)]
     pub cfg: f64,
+    /// Scale s of the sampler's initial noise, X₀ = s ε (1 in the paper; below 1 the samples keep nearer the
+    /// centre of what the model learned, 0 gives one deterministic completion: docs/method.md §8 X14).
+    #[arg(long, default_value_t = 1.0)]
+    pub noise_scale: f64,
     /// Grid points of the ODE solver over [0, 1] (64 in the paper; midpoint rule).
     #[arg(long, default_value_t = SamplingSetup::default().n_grid)]
     pub steps: usize,
@@ -143,6 +147,7 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
     let sampling = SamplingSetup {
         n_grid: args.steps,
         guidance: args.cfg,
+        noise_scale: args.noise_scale,
         ..SamplingSetup::default()
     };
     let model = keyframe_method(&args.rf, sampling, &device)

@@ -56,6 +56,8 @@ pub struct SamplingSetup {
     pub replace_noise: ReplaceNoise,
     /// Keyframe latents: the posterior mean (the paper) or a seeded posterior sample.
     pub posterior: KeyPosterior,
+    /// Scale of the sampler's initial noise (docs/method.md §8 X14; 1 in the paper).
+    pub noise_scale: f64,
 }
 
 impl Default for SamplingSetup {
@@ -66,6 +68,7 @@ impl Default for SamplingSetup {
             guidance: 1.0,
             replace_noise: ReplaceNoise::Fixed,
             posterior: KeyPosterior::Mean,
+            noise_scale: 1.0,
         }
     }
 }
@@ -132,6 +135,7 @@ fn rf_method(kind: MethodKind, run_dir: &Path, sampling: SamplingSetup, device: 
     base.n_grid = sampling.n_grid;
     base.solver = sampling.solver;
     base.replace_noise = sampling.replace_noise;
+    base.noise_scale = sampling.noise_scale;
     let guidance = if kind == MethodKind::Aam {
         AAM_GUIDANCE
     } else {

@@ -100,6 +100,7 @@ fn every_combination_of_the_rf_switches_trains_and_samples() {
                             replace_noise,
                             tau_star: cfg.rf.tau_star,
                             fresh_seed: 7,
+                            noise_scale: 1.0,
                         };
                         let cond = Conditioning {
                             z0: z0.clone(),
