@@ -1,5 +1,6 @@
 //! `any4d eval metrics` end to end (docs/method.md §6.1–§6.2): runs the built binary on clip files written with
-//! `any4d_data::formats::write_clip`, checks the JSON and table outputs and the errors on malformed input.
+//! `any4d_data::formats::write_clip`, checks the JSON and table outputs and the errors on malformed input; and the
+//! `eval run` flags that a saved manifest overrides.
 
 use std::path::{Path, PathBuf};
 use std::process::Output;
@@ -173,4 +174,29 @@ fn bench_metrics_runs_on_tiny_clips() {
     } else {
         assert!(stdout.contains("reference skipped"), "{stdout}");
     }
+}
+
+/// A manifest fixes the clips, keyframes and seeds of a run: `--clips`, `--seeds` or `--placement` beside it would be
+/// ignored, so they are refused before anything is read.
+#[test]
+fn eval_run_refuses_item_flags_beside_a_manifest() {
+    let dir = tempfile::tempdir().unwrap();
+    let (m, out) = (dir.path().join("m.json"), dir.path().join("out"));
+    let base = [
+        "eval",
+        "run",
+        "--data",
+        "nowhere",
+        "--methods",
+        "lerp",
+        "--manifest",
+        m.to_str().unwrap(),
+    ];
+    for extra in [["--seeds", "42"], ["--clips", "5"], ["--placement", "every_4"]] {
+        let o = any4d(&[&base[..], &extra, &["--out", out.to_str().unwrap()]].concat());
+        let err = text(&o.stderr);
+        assert!(!o.status.success(), "{extra:?} accepted");
+        assert!(err.contains(extra[0]) && err.contains("--manifest"), "{extra:?}: {err}");
+    }
+    assert!(!out.exists(), "nothing written");
 }

@@ -240,21 +240,23 @@ pub struct RunArgs {
     /// apply to it).
     #[arg(long)]
     pub aam: Option<PathBuf>,
-    /// Clips in the manifest (docs/method.md §6.1: 100).
-    #[arg(long, default_value_t = PAPER_CLIPS)]
+    /// Clips in the manifest (docs/method.md §6.1: 100); a --manifest fixes its own.
+    #[arg(long, default_value_t = PAPER_CLIPS, conflicts_with = "manifest")]
     pub clips: usize,
-    /// Noise seeds; several give mean ± 95 % CI (docs/method.md §8 X8).
-    #[arg(long, value_delimiter = ',', default_value = "42")]
+    /// Noise seeds; several give mean ± 95 % CI (docs/method.md §8 X8); a --manifest fixes its own.
+    #[arg(long, value_delimiter = ',', default_value = "42", conflicts_with = "manifest")]
     pub seeds: Vec<u64>,
     /// Which clips of the store the items come from: val (the paper's protocol), train, or all (a held-out store
     /// imported from real files, scored whole).
     #[arg(long, default_value = "val", value_parser = EvalSplit::parse)]
     pub split: EvalSplit,
 
-    /// Keyframe placement of table 1: random, every_<r> or bernoulli_<p> (docs/method.md §8 X4).
-    #[arg(long, default_value = "random", value_parser = Placement::parse)]
+    /// Keyframe placement of table 1: random, every_<r> or bernoulli_<p> (docs/method.md §8 X4); a --manifest fixes
+    /// its own.
+    #[arg(long, default_value = "random", value_parser = Placement::parse, conflicts_with = "manifest")]
     pub placement: Placement,
-    /// Reuse a manifest instead of drawing one.
+    /// Reuse a manifest instead of drawing one: its clips, keyframes and seeds (so --clips, --seeds and --placement
+    /// are refused beside it; edit its `seeds` list to run other seeds on the same windows).
     #[arg(long)]
     pub manifest: Option<PathBuf>,
     /// Stage-2 reference of table 2 (docs/method.md §7, A8).
