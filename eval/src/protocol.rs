@@ -123,10 +123,11 @@ impl Manifest {
             return Err(bad(
                 "clips",
                 format!(
-                    "{} candidate clips in the {} split, the protocol needs {}",
+                    "{} candidate clips in the {} split, the protocol needs {} (ask for at most {} with --clips)",
                     candidates.len(),
                     opts.split,
-                    opts.n_clips
+                    opts.n_clips,
+                    candidates.len()
                 ),
             ));
         }
