@@ -331,8 +331,8 @@ pub struct SampleOptions {
     /// Seed of `ReplaceNoise::Fresh` draws (each evaluation mixes in its τ).
     pub fresh_seed: u64,
     /// Scale s of the sampler's noise (docs/method.md §4.6, X14): the ODE starts at X₀ = s ε, and fresh replacement
-    /// noise is drawn as s ε too. 1 in the paper; s < 1 samples nearer the centre of the learned distribution, s = 0
-    /// gives one deterministic completion per input.
+    /// noise is drawn as s ε too. 1 in the paper; s = 0 gives one deterministic completion per input (s < 1 is not a
+    /// temperature for a flow trained on unit noise: docs/method.md §4.6).
     pub noise_scale: f64,
 }
 

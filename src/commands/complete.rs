@@ -58,8 +58,8 @@ pub struct CompleteArgs {
     /// Classifier-free guidance weight (1.0 in the paper: one conditional branch).
     #[arg(long, default_value_t = 1.0)]
     pub cfg: f64,
-    /// Scale s of the sampler's initial noise, X₀ = s ε (1 in the paper; below 1 the samples keep nearer the
-    /// centre of what the model learned, 0 gives one deterministic completion: docs/method.md §8 X14).
+    /// Scale s of the sampler's initial noise, X₀ = s ε (1 in the paper; 0 gives one deterministic completion;
+    /// below 1 it is not a temperature and moves the samples further from the truth: docs/method.md §4.6).
     #[arg(long, default_value_t = 1.0)]
     pub noise_scale: f64,
     /// Grid points of the ODE solver over [0, 1] (64 in the paper; midpoint rule).

@@ -277,8 +277,9 @@ pub struct RunArgs {
     /// Noise that re-noises the Baseline's keyframes (docs/method.md §8 X9).
     #[arg(long, value_enum, default_value_t = ReplaceNoiseArg::Fixed)]
     pub replace_noise: ReplaceNoiseArg,
-    /// Scale s of the RF sampler's initial noise, X₀ = s ε (docs/method.md §8 X14; 1 in the paper, which every
-    /// target is stated for): below 1 samples nearer the centre of the learned distribution, 0 is deterministic.
+    /// Scale s of the RF sampler's initial noise, X₀ = s ε (docs/method.md §4.6, §8 X14; 1 in the paper, which every
+    /// target is stated for; 0 is deterministic; below 1 it is not a temperature: the early states leave the
+    /// training distribution).
     #[arg(long, default_value_t = 1.0)]
     pub noise_scale: f64,
     /// Keyframe latents (and table 5's): the posterior mean (the paper) or a seeded posterior sample, for a VAE
