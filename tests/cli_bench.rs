@@ -1,4 +1,4 @@
-//! `any4d bench train`, `bench complete` and `bench acap` run as a user would: the built binary, its exit code and its output.
+//! `any4d bench train` (RF, VAE and BD-LSTM presets), `bench complete` and `bench acap` run as a user would: the built binary, its exit code and its output.
 
 use std::path::{Path, PathBuf};
 
@@ -122,6 +122,67 @@ fn broken_configs_and_arguments_give_clear_errors() {
         &["bench", "train", "--config", p(&vae), "--steps", "2"],
         &["--data STORE"],
     );
+    let (latent, acap) = (
+        preset("configs/bdlstm/tiny.toml"),
+        preset("configs/bdlstm/acap_tiny.toml"),
+    );
+    let store = tmp.path().join("no-store");
+    fail(
+        &["bench", "train", "--config", p(&latent), "--steps", "2"],
+        &["--data STORE"],
+    );
+    fail(
+        &[
+            "bench",
+            "train",
+            "--config",
+            p(&latent),
+            "--data",
+            p(&store),
+            "--steps",
+            "2",
+        ],
+        &["--vae RUN"],
+    );
+    fail(
+        &[
+            "bench",
+            "train",
+            "--config",
+            p(&acap),
+            "--data",
+            p(&store),
+            "--vae",
+            p(&store),
+        ],
+        &["drop --vae"],
+    );
+    fail(
+        &["bench", "train", "--config", p(&rf), "--vae", p(&store)],
+        &["--vae applies to latent BD-LSTM presets only"],
+    );
+}
+
+/// The ACAP BD-LSTM preset trains on a single-topology store for a few steps and prints one row per backend.
+#[test]
+fn acap_bdlstm_preset_prints_a_positive_training_rate() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = tmp.path().join("store");
+    let mut synth = vec!["data", "synth", "--out", p(&store)];
+    synth.extend("--clips 6 --seed 3 --body blob --min-vertices 256 --max-vertices 512 --p 64".split(' '));
+    let out = any4d(&synth);
+    assert!(out.status.success(), "{:?}", text(&out));
+    let acap = preset("configs/bdlstm/acap_tiny.toml");
+    let mut args = vec!["bench", "train", "--config", p(&acap), "--data", p(&store)];
+    args.extend(["--steps", "3", "--backends", "flex"]);
+    let out = any4d(&args);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    let row = stdout.lines().find(|l| l.starts_with("flex")).expect(&stdout);
+    let cols: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(cols[1], "3", "{row}");
+    let rate: f64 = cols[2].parse().expect(row);
+    assert!(rate.is_finite() && rate > 0.0, "{row}");
 }
 
 /// Also the documented vertex policy: 2,000 vertices, twice the small model's training maximum, complete (the

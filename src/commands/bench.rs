@@ -17,7 +17,7 @@ pub enum BenchCmd {
     Data(super::data::BenchArgs),
     /// VAE encode+decode and RF forward+backward time per clip.
     Model(super::model::BenchArgs),
-    /// Training steps/s for a preset: RF presets on random latents with model FLOP/s, VAE presets on a store.
+    /// Training steps/s for a preset: RF presets on random latents with model FLOP/s, VAE and BD-LSTM presets on a store.
     Train(super::train::BenchArgs),
     /// Metric throughput against the numpy/scipy reference.
     Metrics(super::eval::BenchArgs),

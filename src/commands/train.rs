@@ -8,7 +8,7 @@ use any4d_data::store::DEFAULT_P;
 use any4d_model::bench::median;
 use any4d_train::backend::{self, Backend, Precision};
 use any4d_train::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, BdlstmVariant, resume_bdlstm, train_bdlstm};
-use any4d_train::bench::{RfShape, rf_step_flops, time_rf_steps, time_vae_steps};
+use any4d_train::bench::{RfShape, TrainThroughput, rf_step_flops, time_bdlstm_steps, time_rf_steps, time_vae_steps};
 use any4d_train::config::{Override, RunConfig};
 use any4d_train::loop_common::{Outcome, RunOptions};
 use any4d_train::multi_device::{Parallel, Strategy};
@@ -226,15 +226,19 @@ fn report(outcome: &Outcome) -> ExitCode {
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
-    /// Run config to time: an RF preset (`configs/rf/*.toml`, random latents, no store) or a VAE preset
-    /// (`configs/vae/*.toml`, trains on `--data`); told apart by its `[rf]` or `[vae]` table.
+    /// Run config to time: an RF preset (`configs/rf/*.toml`, random latents, no store), a VAE preset
+    /// (`configs/vae/*.toml`, trains on `--data`) or a BD-LSTM preset (`configs/bdlstm/*.toml`, trains on `--data`,
+    /// the latent variant with `--vae`); told apart by its `[rf]`, `[vae]` or `[bdlstm]` table.
     #[arg(long, default_value = "configs/vae/tiny.toml")]
     config: PathBuf,
     #[command(flatten)]
     overrides: ConfigArgs,
-    /// Dataset store folder (VAE presets only).
+    /// Dataset store folder (VAE and BD-LSTM presets).
     #[arg(long)]
     data: Option<PathBuf>,
+    /// The frozen VAE run whose latents a latent BD-LSTM preset trains on.
+    #[arg(long)]
+    vae: Option<PathBuf>,
     /// Optimiser steps per backend; the first is a warm-up and the median is over the others.
     #[arg(long, default_value_t = 10)]
     steps: u64,
@@ -268,15 +272,16 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
     match RunConfig::load(&args.config, &args.overrides.set)? {
         RunConfig::Rf(cfg) => bench_rf(&args, &cfg),
         RunConfig::Vae(cfg) => bench_vae(&args, &cfg),
-        RunConfig::Bdlstm(_) => {
-            bail!("bench train times VAE and RF presets; a BD-LSTM run logs its steps/s in metrics.csv")
-        }
+        RunConfig::Bdlstm(cfg) => bench_bdlstm(&args, &cfg),
     }
 }
 
 fn bench_rf(args: &BenchArgs, cfg: &RfRunConfig) -> anyhow::Result<ExitCode> {
     if args.data.is_some() {
         println!("note: --data is not used with an RF preset (the benchmark draws random latents)");
+    }
+    if args.vae.is_some() {
+        bail!("--vae applies to latent BD-LSTM presets only (an RF preset is timed on random latents)");
     }
     let shape = RfShape {
         batch: args.micro_batch.unwrap_or(cfg.train.micro_batch),
@@ -350,15 +355,74 @@ fn bench_rf(args: &BenchArgs, cfg: &RfRunConfig) -> anyhow::Result<ExitCode> {
 /// The same VAE preset for `--steps` steps on each backend; prints steps/s (median over the steps after the first,
 /// which includes start-up).
 fn bench_vae(args: &BenchArgs, base: &VaeRunConfig) -> anyhow::Result<ExitCode> {
+    let data = store_for_trained_preset(args, "a VAE preset")?;
+    if args.vae.is_some() {
+        bail!("--vae applies to latent BD-LSTM presets only");
+    }
+    bench_runs(args, |backend, runs, name| {
+        let mut cfg = base.clone();
+        cfg.device.backend = backend;
+        if let Some(p) = args.precision {
+            cfg.device.precision = p;
+        }
+        if let Some(mb) = args.micro_batch {
+            // One micro-batch per step: the step time of that many clips, no accumulation.
+            cfg.train.micro_batch = mb;
+            cfg.train.batch_size = mb;
+        }
+        Ok(time_vae_steps(&cfg, data, args.steps, runs, name)?)
+    })
+}
+
+/// A BD-LSTM preset for `--steps` steps on each backend: the latent variant on the VAE of `--vae`, the ACAP variant on
+/// the store's vertices (docs/method.md §5.3).
+fn bench_bdlstm(args: &BenchArgs, base: &BdlstmRunConfig) -> anyhow::Result<ExitCode> {
+    let data = store_for_trained_preset(args, "a BD-LSTM preset")?;
+    let vae = match (base.model.variant, &args.vae) {
+        (BdlstmVariant::Latent, Some(vae)) => Some(vae.as_path()),
+        (BdlstmVariant::Latent, None) => bail!(
+            "config {}: a latent BD-LSTM preset trains on a VAE's latents: give --vae RUN",
+            args.config.display()
+        ),
+        (BdlstmVariant::Acap, Some(_)) => bail!(
+            "config {}: the ACAP variant trains on the store's vertices, not on VAE latents: drop --vae",
+            args.config.display()
+        ),
+        (BdlstmVariant::Acap, None) => None,
+    };
+    bench_runs(args, |backend, runs, name| {
+        let mut cfg = base.clone();
+        cfg.device.backend = backend;
+        if let Some(p) = args.precision {
+            cfg.device.precision = p;
+        }
+        if let Some(mb) = args.micro_batch {
+            cfg.train.micro_batch = mb;
+            cfg.train.batch_size = mb;
+        }
+        Ok(time_bdlstm_steps(&cfg, data, vae, args.steps, runs, name)?)
+    })
+}
+
+/// The store a VAE or BD-LSTM preset trains on; the RF-only flags are refused.
+fn store_for_trained_preset<'a>(args: &'a BenchArgs, what: &str) -> anyhow::Result<&'a Path> {
     let Some(data) = &args.data else {
         bail!(
-            "config {}: a VAE preset trains on a store: give --data STORE (`any4d data synth|import`)",
+            "config {}: {what} trains on a store: give --data STORE (`any4d data synth|import`)",
             args.config.display()
         );
     };
     if args.tokens.is_some() || args.peak_tflops.is_some() {
         bail!("--tokens and --peak-tflops apply to RF presets only");
     }
+    Ok(data)
+}
+
+/// Runs `time(backend, runs folder, run name)` for every backend and prints one row each.
+fn bench_runs(
+    args: &BenchArgs,
+    time: impl Fn(Backend, &Path, &str) -> anyhow::Result<TrainThroughput>,
+) -> anyhow::Result<ExitCode> {
     let runs = tempfile::Builder::new()
         .prefix("any4d-bench-train-")
         .tempdir()
@@ -368,18 +432,8 @@ fn bench_vae(args: &BenchArgs, base: &VaeRunConfig) -> anyhow::Result<ExitCode> 
         "backend  steps  median steps/s  median samples/s  wall s   ({})",
         args.config.display()
     );
-    for backend in &args.backends {
-        let mut cfg = base.clone();
-        cfg.device.backend = *backend;
-        if let Some(p) = args.precision {
-            cfg.device.precision = p;
-        }
-        if let Some(mb) = args.micro_batch {
-            // One micro-batch per step: the step time of that many clips, no accumulation.
-            cfg.train.micro_batch = mb;
-            cfg.train.batch_size = mb;
-        }
-        let t = time_vae_steps(&cfg, data, args.steps, &runs, &format!("bench-{backend}"))?;
+    for &backend in &args.backends {
+        let t = time(backend, &runs, &format!("bench-{backend}"))?;
         println!(
             "{:<8} {:>5}  {:>14.3}  {:>16.2}  {:>6.1}",
             backend.to_string(),

@@ -1,7 +1,8 @@
 //! What `any4d bench train` measures: the training throughput of a run preset on a backend. An RF preset times the
 //! RF training step at the preset's size on random standardised latents — no VAE run and no store needed — with its
-//! analytic model FLOPs; a VAE preset trains on a store through [`train_vae`] and reads the throughput from
-//! `metrics.csv`.
+//! analytic model FLOPs; a VAE preset trains on a store through [`train_vae`], a BD-LSTM preset through
+//! [`train_bdlstm`] (on a VAE's latents or, the ACAP variant, on the store's vertices), and each reads the throughput
+//! from its run's `metrics.csv`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -14,6 +15,7 @@ use burn::tensor::Distribution;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use crate::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, train_bdlstm};
 use crate::config::Duration;
 use crate::error::{Result, TrainError};
 use crate::loop_common::{RunOptions, StopFlag, clip_global_norm, scalar, step_seed};
@@ -154,9 +156,9 @@ pub fn time_rf_steps(cfg: &RfRunConfig, shape: RfShape, steps: u64, device: &Dev
     Ok(secs)
 }
 
-/// Throughput of a VAE preset: medians over the steps after the first (which includes start-up).
+/// Throughput of a trained preset (VAE or BD-LSTM): medians over the steps after the first (which includes start-up).
 #[derive(Clone, Debug, PartialEq)]
-pub struct VaeThroughput {
+pub struct TrainThroughput {
     /// Median optimiser steps per second.
     pub steps_per_s: f64,
     /// Median clips per second.
@@ -175,36 +177,63 @@ pub fn time_vae_steps(
     steps: u64,
     runs_dir: &Path,
     name: &str,
-) -> Result<VaeThroughput> {
+) -> Result<TrainThroughput> {
     let mut cfg = cfg.clone();
     cfg.train.duration = Duration::Steps(steps);
     cfg.train.checkpoint_every = steps;
     cfg.train.valid_every = steps;
-    let opts = RunOptions {
+    let t0 = Instant::now();
+    let (run, _) = train_vae(&cfg, &quiet_run(data, runs_dir, name))?;
+    throughput(run.root(), t0.elapsed().as_secs_f64())
+}
+
+/// [`time_vae_steps`] for a BD-LSTM preset: the latent variant on the frozen VAE of `vae_run`, the ACAP variant
+/// (`vae_run` = `None`) on the features of the store's single topology.
+pub fn time_bdlstm_steps(
+    cfg: &BdlstmRunConfig,
+    data: &Path,
+    vae_run: Option<&Path>,
+    steps: u64,
+    runs_dir: &Path,
+    name: &str,
+) -> Result<TrainThroughput> {
+    let mut cfg = cfg.clone();
+    cfg.train.duration = Duration::Steps(steps);
+    cfg.train.checkpoint_every = steps;
+    cfg.train.valid_every = steps;
+    let opts = BdlstmRunOptions {
+        run: quiet_run(data, runs_dir, name),
+        vae_run: vae_run.map(Path::to_path_buf),
+    };
+    let t0 = Instant::now();
+    let (run, _) = train_bdlstm(&cfg, &opts)?;
+    throughput(run.root(), t0.elapsed().as_secs_f64())
+}
+
+fn quiet_run(data: &Path, runs_dir: &Path, name: &str) -> RunOptions {
+    RunOptions {
         data: data.to_path_buf(),
         runs_dir: runs_dir.to_path_buf(),
         name: name.to_string(),
         progress: ProgressMode::Quiet,
         stop: StopFlag::new(),
         parallel: None,
-    };
-    let t0 = Instant::now();
-    let (run, _) = train_vae(&cfg, &opts)?;
-    let wall_s = t0.elapsed().as_secs_f64();
-    let table = read_table(&run.path(METRICS_FILE))?;
+    }
+}
+
+/// The medians of `metrics.csv` in `run` (rows after the first).
+fn throughput(run: &Path, wall_s: f64) -> Result<TrainThroughput> {
+    let table = read_table(&run.join(METRICS_FILE))?;
     let col = |name: &str| table.header.iter().position(|h| h == name).map(|i| i - 1);
     let (Some(sps), Some(xps)) = (col("steps_per_s"), col("samples_per_s")) else {
-        return Err(crate::error::run_err(
-            run.root(),
-            "metrics.csv lacks the throughput columns",
-        ));
+        return Err(crate::error::run_err(run, "metrics.csv lacks the throughput columns"));
     };
     let median_of = |c: usize| median(&table.rows.iter().skip(1).map(|r| r.1[c]).collect::<Vec<_>>());
-    Ok(VaeThroughput {
+    Ok(TrainThroughput {
         steps_per_s: median_of(sps),
         samples_per_s: median_of(xps),
         wall_s,
-        run: run.root().to_path_buf(),
+        run: run.to_path_buf(),
     })
 }
 
