@@ -18,6 +18,8 @@ fn record(method: &str, k: usize, seed: u64, item: usize, rmse: f64) -> ClipReco
         ("dtw", 0.5 * rmse),
         ("mae_elem", 0.8 * rmse),
         ("jerk_ratio", 1.0),
+        ("jerk", 0.3),
+        ("jerk_gt", 0.3),
         ("energy_ratio", 0.9),
     ]
     .into_iter()
@@ -112,6 +114,33 @@ fn summary_averages_clips_per_seed_then_seeds() {
         "training-free methods name no checkpoint: {}",
         lines[3]
     );
+}
+
+/// The pooled jerk column is Σ jerk / Σ ground-truth jerk per seed: a clip whose ground truth barely moves dominates
+/// the mean of per-clip ratios but not the pooled ratio; a seed whose ground truth never moves gives NaN.
+#[test]
+fn pooled_jerk_is_a_ratio_of_sums_per_seed() {
+    let with_jerk = |seed, item, jerk: f64, gt: f64| {
+        let mut r = record("keyframe_rf", 0, seed, item, 0.1);
+        r.metrics.insert("jerk".into(), jerk);
+        r.metrics.insert("jerk_gt".into(), gt);
+        r.metrics.insert("jerk_ratio".into(), jerk / gt);
+        r
+    };
+    let records = vec![
+        with_jerk(42, 0, 1.0, 0.001),
+        with_jerk(42, 1, 2.0, 1.0),
+        with_jerk(43, 0, 3.0, 1.0),
+        with_jerk(43, 1, 3.0, 2.0),
+    ];
+    let rows = summarize(&records, &TABLE1).unwrap();
+    let at = |key: &str| TABLE1.columns.iter().position(|c| c.key == key).expect(key);
+    let (mean_of_ratios, pooled) = (rows[0].values[at("jerk_ratio")], rows[0].values[at("jerk_pooled")]);
+    assert!((mean_of_ratios.mean - (501.0 + 2.25) / 2.0).abs() < 1e-9, "{mean_of_ratios:?}");
+    assert!((pooled.mean - (3.0 / 1.001 + 6.0 / 3.0) / 2.0).abs() < 1e-9, "{pooled:?}");
+    assert!(csv(&TABLE1, &rows, &header()).lines().next().unwrap().contains(",jerk_pooled_mean,"));
+    let still = summarize(&[with_jerk(42, 0, 1.0, 0.0)], &TABLE1).unwrap();
+    assert!(still[0].values[at("jerk_pooled")].mean.is_nan());
 }
 
 #[test]

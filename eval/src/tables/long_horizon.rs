@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use any4d_data::{Clip, DataError};
 
-use super::summary::{Layout, MetricColumn, col};
+use super::summary::{Layout, MetricColumn, col, pooled};
 use super::{Items, TableOptions, TableReport, run_completion};
 use crate::methods::{Method, metrics_map};
 use crate::metrics::{Motion, evaluate_clip, replace_keyframes};
@@ -26,7 +26,9 @@ const COLUMNS: &[MetricColumn] = &[
     col("chamfer", "Chamfer ×100", 100.0),
     col("dtw", "DTW ×100", 100.0),
     col("jerk_ratio", "jerk / GT", 1.0),
+    pooled("jerk_pooled", "jerk", "jerk_gt", "jerk Σ/ΣGT"),
     col("seam_jerk_ratio", "seam jerk / GT", 1.0),
+    pooled("seam_jerk_pooled", "seam_jerk", "seam_jerk_gt", "seam jerk Σ/ΣGT"),
 ];
 
 /// Frames on each side of a seam whose jerk is reported (docs/method.md §7: a ±2-frame band).

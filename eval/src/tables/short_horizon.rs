@@ -4,7 +4,7 @@
 use any4d_data::DataError;
 use any4d_data::keyframes::Placement;
 
-use super::summary::{Layout, MetricColumn, col};
+use super::summary::{Layout, MetricColumn, col, pooled};
 use super::{Items, TableOptions, TableReport, run_completion};
 use crate::protocol::ManifestOptions;
 use crate::rollout::OverlapSource;
@@ -22,6 +22,7 @@ const COLUMNS: &[MetricColumn] = &[
     col("dtw", "DTW ×100", 100.0),
     col("mae_elem", "MAE ×100", 100.0),
     col("jerk_ratio", "jerk / GT", 1.0),
+    pooled("jerk_pooled", "jerk", "jerk_gt", "jerk Σ/ΣGT"),
     col("energy_ratio", "motion / GT", 1.0),
 ];
 

@@ -31,17 +31,45 @@ pub struct Layout {
 /// One metric column of a summary table.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MetricColumn {
-    /// Key in [`ClipRecord::metrics`].
+    /// Key in [`ClipRecord::metrics`] (or, pooled, the column's own name in the CSV).
     pub key: &'static str,
     /// Column header.
     pub header: &'static str,
     /// Multiplier applied when printing (100 where the paper scales).
     pub scale: f64,
+    /// How the clips of one seed combine.
+    pub aggregate: Aggregate,
+}
+
+/// How a column combines the clips of one seed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Aggregate {
+    /// The mean over clips of the record's value under the column's key.
+    Mean,
+    /// Σ `num` / Σ `den` over the clips: a ratio of means, which clips with a near-zero `den` (a ground truth that
+    /// barely moves, for a jerk ratio) cannot dominate as they dominate the mean of per-clip ratios. NaN when Σ `den`
+    /// is 0.
+    Pooled { num: &'static str, den: &'static str },
 }
 
 /// A metric column: record key, header, scale (100 where the paper prints × 100).
 pub const fn col(key: &'static str, header: &'static str, scale: f64) -> MetricColumn {
-    MetricColumn { key, header, scale }
+    MetricColumn {
+        key,
+        header,
+        scale,
+        aggregate: Aggregate::Mean,
+    }
+}
+
+/// A pooled ratio column named `key`: Σ `num` / Σ `den` over the clips of a seed ([`Aggregate::Pooled`]).
+pub const fn pooled(key: &'static str, num: &'static str, den: &'static str, header: &'static str) -> MetricColumn {
+    MetricColumn {
+        key,
+        header,
+        scale: 1.0,
+        aggregate: Aggregate::Pooled { num, den },
+    }
 }
 
 /// The metrics of one (method, keyframe set, seed, clip) generation.
@@ -125,8 +153,8 @@ pub fn mean_ci95(xs: &[f64]) -> Estimate {
 pub fn summarize(records: &[ClipRecord], layout: &Layout) -> Result<Vec<SummaryRow>> {
     let columns = layout.columns;
     let mut method_order: Vec<&str> = Vec::new();
-    // (method, placement, k) → seed → (sums per column, clip count)
-    type PerSeed = BTreeMap<u64, (Vec<f64>, usize)>;
+    // (method, placement, k) → seed → (numerator and denominator sums per column, clip count)
+    type PerSeed = BTreeMap<u64, (Vec<(f64, f64)>, usize)>;
     let mut groups: BTreeMap<(usize, &str, usize), PerSeed> = BTreeMap::new();
     for r in records {
         let m = match method_order.iter().position(|&m| m == r.method) {
@@ -140,16 +168,23 @@ pub fn summarize(records: &[ClipRecord], layout: &Layout) -> Result<Vec<SummaryR
             .entry((m, r.placement.as_str(), r.k_extra))
             .or_default()
             .entry(r.seed)
-            .or_insert_with(|| (vec![0.0; columns.len()], 0));
-        for (c, col) in columns.iter().enumerate() {
-            let v = r.metrics.get(col.key).ok_or_else(|| {
+            .or_insert_with(|| (vec![(0.0, 0.0); columns.len()], 0));
+        let get = |key: &str| {
+            r.metrics.get(key).copied().ok_or_else(|| {
                 DataError::new(
                     &r.clip_id,
-                    col.key,
+                    key,
                     format!("missing from the record of method {}", r.method),
                 )
-            })?;
-            entry.0[c] += v;
+            })
+        };
+        for (c, col) in columns.iter().enumerate() {
+            let (num, den) = match col.aggregate {
+                Aggregate::Mean => (get(col.key)?, 1.0),
+                Aggregate::Pooled { num, den } => (get(num)?, get(den)?),
+            };
+            entry.0[c].0 += num;
+            entry.0[c].1 += den;
         }
         entry.1 += 1;
     }
@@ -157,7 +192,16 @@ pub fn summarize(records: &[ClipRecord], layout: &Layout) -> Result<Vec<SummaryR
     for ((m, placement, k), seeds) in groups {
         let clips = seeds.values().map(|(_, n)| *n).max().unwrap_or(0);
         let values = (0..columns.len())
-            .map(|c| mean_ci95(&seeds.values().map(|(sums, n)| sums[c] / *n as f64).collect::<Vec<_>>()))
+            .map(|c| {
+                let per_seed: Vec<f64> = seeds
+                    .values()
+                    .map(|(sums, _)| {
+                        let (num, den) = sums[c];
+                        if den == 0.0 { f64::NAN } else { num / den }
+                    })
+                    .collect();
+                mean_ci95(&per_seed)
+            })
             .collect();
         rows.push(SummaryRow {
             method: method_order[m].to_string(),
