@@ -136,9 +136,21 @@ fn pooled_jerk_is_a_ratio_of_sums_per_seed() {
     let rows = summarize(&records, &TABLE1).unwrap();
     let at = |key: &str| TABLE1.columns.iter().position(|c| c.key == key).expect(key);
     let (mean_of_ratios, pooled) = (rows[0].values[at("jerk_ratio")], rows[0].values[at("jerk_pooled")]);
-    assert!((mean_of_ratios.mean - (501.0 + 2.25) / 2.0).abs() < 1e-9, "{mean_of_ratios:?}");
-    assert!((pooled.mean - (3.0 / 1.001 + 6.0 / 3.0) / 2.0).abs() < 1e-9, "{pooled:?}");
-    assert!(csv(&TABLE1, &rows, &header()).lines().next().unwrap().contains(",jerk_pooled_mean,"));
+    assert!(
+        (mean_of_ratios.mean - (501.0 + 2.25) / 2.0).abs() < 1e-9,
+        "{mean_of_ratios:?}"
+    );
+    assert!(
+        (pooled.mean - (3.0 / 1.001 + 6.0 / 3.0) / 2.0).abs() < 1e-9,
+        "{pooled:?}"
+    );
+    assert!(
+        csv(&TABLE1, &rows, &header())
+            .lines()
+            .next()
+            .unwrap()
+            .contains(",jerk_pooled_mean,")
+    );
     let still = summarize(&[with_jerk(42, 0, 1.0, 0.0)], &TABLE1).unwrap();
     assert!(still[0].values[at("jerk_pooled")].mean.is_nan());
 }
