@@ -9,7 +9,7 @@ use any4d_model::bench::median;
 use any4d_train::backend::{self, Backend, Precision};
 use any4d_train::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, BdlstmVariant, resume_bdlstm, train_bdlstm};
 use any4d_train::bench::{RfShape, TrainThroughput, rf_step_flops, time_bdlstm_steps, time_rf_steps, time_vae_steps};
-use any4d_train::config::{Override, RunConfig};
+use any4d_train::config::{DeviceConfig, Override, RunConfig, TrainConfig};
 use any4d_train::loop_common::{Outcome, RunOptions};
 use any4d_train::multi_device::{Parallel, Strategy};
 use any4d_train::progress::ProgressMode;
@@ -361,15 +361,7 @@ fn bench_vae(args: &BenchArgs, base: &VaeRunConfig) -> anyhow::Result<ExitCode> 
     }
     bench_runs(args, |backend, runs, name| {
         let mut cfg = base.clone();
-        cfg.device.backend = backend;
-        if let Some(p) = args.precision {
-            cfg.device.precision = p;
-        }
-        if let Some(mb) = args.micro_batch {
-            // One micro-batch per step: the step time of that many clips, no accumulation.
-            cfg.train.micro_batch = mb;
-            cfg.train.batch_size = mb;
-        }
+        bench_settings(args, backend, &mut cfg.device, &mut cfg.train);
         Ok(time_vae_steps(&cfg, data, args.steps, runs, name)?)
     })
 }
@@ -392,16 +384,22 @@ fn bench_bdlstm(args: &BenchArgs, base: &BdlstmRunConfig) -> anyhow::Result<Exit
     };
     bench_runs(args, |backend, runs, name| {
         let mut cfg = base.clone();
-        cfg.device.backend = backend;
-        if let Some(p) = args.precision {
-            cfg.device.precision = p;
-        }
-        if let Some(mb) = args.micro_batch {
-            cfg.train.micro_batch = mb;
-            cfg.train.batch_size = mb;
-        }
+        bench_settings(args, backend, &mut cfg.device, &mut cfg.train);
         Ok(time_bdlstm_steps(&cfg, data, vae, args.steps, runs, name)?)
     })
+}
+
+/// A timed run's backend, `--precision` and `--micro-batch` (one micro-batch per step: the step time of that many
+/// clips, no accumulation).
+fn bench_settings(args: &BenchArgs, backend: Backend, device: &mut DeviceConfig, train: &mut TrainConfig) {
+    device.backend = backend;
+    if let Some(p) = args.precision {
+        device.precision = p;
+    }
+    if let Some(mb) = args.micro_batch {
+        train.micro_batch = mb;
+        train.batch_size = mb;
+    }
 }
 
 /// The store a VAE or BD-LSTM preset trains on; the RF-only flags are refused.

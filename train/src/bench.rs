@@ -16,7 +16,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, train_bdlstm};
-use crate::config::Duration;
+use crate::config::{Duration, TrainConfig};
 use crate::error::{Result, TrainError};
 use crate::loop_common::{RunOptions, StopFlag, clip_global_norm, scalar, step_seed};
 use crate::progress::ProgressMode;
@@ -179,9 +179,7 @@ pub fn time_vae_steps(
     name: &str,
 ) -> Result<TrainThroughput> {
     let mut cfg = cfg.clone();
-    cfg.train.duration = Duration::Steps(steps);
-    cfg.train.checkpoint_every = steps;
-    cfg.train.valid_every = steps;
+    steps_only(&mut cfg.train, steps);
     let t0 = Instant::now();
     let (run, _) = train_vae(&cfg, &quiet_run(data, runs_dir, name))?;
     throughput(run.root(), t0.elapsed().as_secs_f64())
@@ -198,9 +196,7 @@ pub fn time_bdlstm_steps(
     name: &str,
 ) -> Result<TrainThroughput> {
     let mut cfg = cfg.clone();
-    cfg.train.duration = Duration::Steps(steps);
-    cfg.train.checkpoint_every = steps;
-    cfg.train.valid_every = steps;
+    steps_only(&mut cfg.train, steps);
     let opts = BdlstmRunOptions {
         run: quiet_run(data, runs_dir, name),
         vae_run: vae_run.map(Path::to_path_buf),
@@ -208,6 +204,13 @@ pub fn time_bdlstm_steps(
     let t0 = Instant::now();
     let (run, _) = train_bdlstm(&cfg, &opts)?;
     throughput(run.root(), t0.elapsed().as_secs_f64())
+}
+
+/// `steps` steps, with the checkpoint and the validation only at the end.
+fn steps_only(train: &mut TrainConfig, steps: u64) {
+    train.duration = Duration::Steps(steps);
+    train.checkpoint_every = steps;
+    train.valid_every = steps;
 }
 
 fn quiet_run(data: &Path, runs_dir: &Path, name: &str) -> RunOptions {
