@@ -74,7 +74,7 @@ pub fn stage(extracted: &Path, out: &Path) -> Result<StageReport> {
             "ufoai-data" => stage_ufoai(&dir, &dest, &package, &copyright, &mut report)?,
             "assimp-testmodels" => stage_assimp(&dir, &dest, &package, &copyright)?,
             p if p == "minetest-data" || p.starts_with("minetest-mod-") => {
-                stage_minetest(&dir, &dest, &package, &copyright)?
+                stage_minetest(&dir, &dest, &package, &copyright, &mut report)?
             }
             _ => continue,
         };
@@ -460,7 +460,7 @@ fn stage_ufoai(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut St
     Ok(n)
 }
 
-fn stage_minetest(dir: &Path, dest: &Path, package: &str, c: &Dep5) -> Result<usize> {
+fn stage_minetest(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut StageReport) -> Result<usize> {
     let root = dir.join("usr/share/games/minetest");
     if !root.is_dir() {
         return Ok(0);
@@ -469,9 +469,14 @@ fn stage_minetest(dir: &Path, dest: &Path, package: &str, c: &Dep5) -> Result<us
     walk_dirs(&root, &mut folders);
     let mut n = 0;
     for b3d in folders.iter().flat_map(|d| files_with(d, "b3d")) {
-        // Static models (doors, carts without keys, scenery) have no take.
-        if !crate::formats::b3d::list_takes(&b3d).is_ok_and(|t| !t.is_empty()) {
-            continue;
+        match crate::formats::b3d::list_takes(&b3d) {
+            // Static models (doors, carts without keys, scenery) have no take.
+            Ok(takes) if takes.is_empty() => continue,
+            Ok(_) => {}
+            Err(e) => {
+                report.refused.push((rel(dir, &b3d), e.to_string()));
+                continue;
+            }
         }
         let stem = crate::formats::skeletal::stem(&b3d);
         let to = dest.join(&stem);

@@ -308,7 +308,7 @@ fn mocap_is_staged_beside_the_players_with_both_licences() {
 }
 
 /// Minetest packages: every `.b3d` with node keys is staged (one folder each, asset named after the file), static
-/// ones are not, and the staged take imports with its package and licence.
+/// ones are not, an unreadable one is listed as refused, and the staged take imports with its package and licence.
 #[test]
 fn minetest_b3d_models_with_keys_are_staged_and_imported() {
     let dir = tempfile::tempdir().unwrap();
@@ -329,9 +329,17 @@ fn minetest_b3d_models_with_keys_are_staged_and_imported() {
         &models.join("fence.b3d"),
         &any4d_data::formats::b3d::write_test_b3d(&pos, &faces, [0.0; 3], &moving, &[]),
     );
+    write(&models.join("broken.b3d"), b"BB3D\x10\0\0\0truncated");
     let staged = dir.path().join("staged");
     let report = stage(&dir.path().join("extracted"), &staged).unwrap();
     assert_eq!(report.assets.get("minetest-mod-walker"), Some(&1), "{report:?}");
+    assert!(
+        report
+            .refused
+            .iter()
+            .any(|(path, why)| path.ends_with("broken.b3d") && !why.is_empty()),
+        "an unreadable model is listed, not dropped: {report:?}"
+    );
     assert!(staged.join("minetest-mod-walker/walker_mob/walker_mob.b3d").is_file());
     let out = dir.path().join("store");
     let opts = ImportOptions {

@@ -362,7 +362,7 @@ fn bench_vae(args: &BenchArgs, base: &VaeRunConfig) -> anyhow::Result<ExitCode> 
     bench_runs(args, |backend, runs, name| {
         let mut cfg = base.clone();
         bench_settings(args, backend, &mut cfg.device, &mut cfg.train);
-        Ok(time_vae_steps(&cfg, data, args.steps, runs, name)?)
+        Ok(time_vae_steps(cfg, data, args.steps, runs, name)?)
     })
 }
 
@@ -385,7 +385,7 @@ fn bench_bdlstm(args: &BenchArgs, base: &BdlstmRunConfig) -> anyhow::Result<Exit
     bench_runs(args, |backend, runs, name| {
         let mut cfg = base.clone();
         bench_settings(args, backend, &mut cfg.device, &mut cfg.train);
-        Ok(time_bdlstm_steps(&cfg, data, vae, args.steps, runs, name)?)
+        Ok(time_bdlstm_steps(cfg, data, vae, args.steps, runs, name)?)
     })
 }
 

@@ -21,7 +21,7 @@ use crate::error::{Result, TrainError};
 use crate::loop_common::{RunOptions, StopFlag, clip_global_norm, scalar, step_seed};
 use crate::progress::ProgressMode;
 use crate::rf_loop::{RfRunConfig, training_mask};
-use crate::run_folder::{METRICS_FILE, read_table};
+use crate::run_folder::{METRICS_FILE, RunFolder, read_table};
 use crate::vae_loop::{VaeRunConfig, train_vae};
 
 /// Sizes of the timed RF batch.
@@ -172,38 +172,38 @@ pub struct TrainThroughput {
 /// Trains `cfg` for `steps` steps on the store `data` into a run named `name` under `runs_dir` (checkpoints and
 /// validation only at the end) and reads its throughput from `metrics.csv`.
 pub fn time_vae_steps(
-    cfg: &VaeRunConfig,
+    mut cfg: VaeRunConfig,
     data: &Path,
     steps: u64,
     runs_dir: &Path,
     name: &str,
 ) -> Result<TrainThroughput> {
-    let mut cfg = cfg.clone();
     steps_only(&mut cfg.train, steps);
-    let t0 = Instant::now();
-    let (run, _) = train_vae(&cfg, &quiet_run(data, runs_dir, name))?;
-    throughput(run.root(), t0.elapsed().as_secs_f64())
+    timed(quiet_run(data, runs_dir, name), |run| Ok(train_vae(&cfg, &run)?.0))
 }
 
 /// [`time_vae_steps`] for a BD-LSTM preset: the latent variant on the frozen VAE of `vae_run`, the ACAP variant
 /// (`vae_run` = `None`) on the features of the store's single topology.
 pub fn time_bdlstm_steps(
-    cfg: &BdlstmRunConfig,
+    mut cfg: BdlstmRunConfig,
     data: &Path,
     vae_run: Option<&Path>,
     steps: u64,
     runs_dir: &Path,
     name: &str,
 ) -> Result<TrainThroughput> {
-    let mut cfg = cfg.clone();
     steps_only(&mut cfg.train, steps);
-    let opts = BdlstmRunOptions {
-        run: quiet_run(data, runs_dir, name),
-        vae_run: vae_run.map(Path::to_path_buf),
-    };
+    timed(quiet_run(data, runs_dir, name), |run| {
+        let vae_run = vae_run.map(Path::to_path_buf);
+        Ok(train_bdlstm(&cfg, &BdlstmRunOptions { run, vae_run })?.0)
+    })
+}
+
+/// Runs `train` with `run` and reads the throughput of the run folder it wrote, with the wall time of the call.
+fn timed(run: RunOptions, train: impl FnOnce(RunOptions) -> Result<RunFolder>) -> Result<TrainThroughput> {
     let t0 = Instant::now();
-    let (run, _) = train_bdlstm(&cfg, &opts)?;
-    throughput(run.root(), t0.elapsed().as_secs_f64())
+    let folder = train(run)?;
+    throughput(folder.root(), t0.elapsed().as_secs_f64())
 }
 
 /// `steps` steps, with the checkpoint and the validation only at the end.

@@ -24,7 +24,7 @@ use std::path::Path;
 use super::bytes::Bytes;
 use super::skeletal::{
     self, Influences, Mat, ReadOptions, SkinStats, TakeInfo, apply, clean_influences, globals, inverse, mul,
-    normalize_quat, skin_frame, trs,
+    normalize_quat, skin_frame, slerp, trs,
 };
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
@@ -274,23 +274,6 @@ fn sample<T: Copy>(keys: &[(i64, T)], frame: i64, lerp: impl Fn(T, T, f64) -> T)
 
 fn lerp3(a: [f64; 3], b: [f64; 3], t: f64) -> [f64; 3] {
     std::array::from_fn(|k| a[k] + t * (b[k] - a[k]))
-}
-
-/// Spherical interpolation of unit quaternions along the shorter arc.
-fn slerp(a: [f64; 4], b: [f64; 4], t: f64) -> [f64; 4] {
-    let mut dot: f64 = (0..4).map(|k| a[k] * b[k]).sum();
-    let b = if dot < 0.0 {
-        dot = -dot;
-        b.map(|x| -x)
-    } else {
-        b
-    };
-    if dot > 0.9995 {
-        return normalize_quat(std::array::from_fn(|k| a[k] + t * (b[k] - a[k])));
-    }
-    let theta = dot.clamp(-1.0, 1.0).acos();
-    let (wa, wb) = (((1.0 - t) * theta).sin() / theta.sin(), (t * theta).sin() / theta.sin());
-    std::array::from_fn(|k| wa * a[k] + wb * b[k])
 }
 
 impl Node {

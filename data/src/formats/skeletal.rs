@@ -213,6 +213,24 @@ pub fn normalize_quat(q: [f64; 4]) -> [f64; 4] {
     }
 }
 
+/// Spherical interpolation of unit quaternions along the shorter arc (normalised linear interpolation when they are
+/// nearly parallel); component order does not matter.
+pub fn slerp(a: [f64; 4], b: [f64; 4], t: f64) -> [f64; 4] {
+    let mut dot: f64 = (0..4).map(|k| a[k] * b[k]).sum();
+    let b = if dot < 0.0 {
+        dot = -dot;
+        b.map(|x| -x)
+    } else {
+        b
+    };
+    if dot > 0.9995 {
+        return normalize_quat(std::array::from_fn(|k| a[k] + t * (b[k] - a[k])));
+    }
+    let theta = dot.clamp(-1.0, 1.0).acos();
+    let (wa, wb) = (((1.0 - t) * theta).sin() / theta.sin(), (t * theta).sin() / theta.sin());
+    std::array::from_fn(|k| wa * a[k] + wb * b[k])
+}
+
 /// Hamilton product `a · b` of `(x, y, z, w)` quaternions.
 pub fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
     let [ax, ay, az, aw] = a;

@@ -5,6 +5,7 @@
 
 use super::{Ctx, MAX_BAKE_STEPS};
 use crate::error::Result;
+use crate::formats::skeletal;
 
 pub(super) type Mat = [[f64; 4]; 4]; // column-major, m[col][row], as glTF stores it
 
@@ -148,7 +149,11 @@ impl Track {
         let (a, b) = (self.key(k, 1), self.key(k + 1, 1));
         let mut v: Vec<f64> = match self.interpolation {
             Interpolation::Step => a.to_vec(),
-            Interpolation::Linear if self.property == Property::Rotation => slerp(a, b, u),
+            Interpolation::Linear if self.property == Property::Rotation => {
+                // Rotation tracks are VEC4 (`read.rs`).
+                let q = |v: &[f64]| std::array::from_fn(|k| v[k]);
+                skeletal::slerp(q(a), q(b), u).to_vec()
+            }
             Interpolation::Linear => a.iter().zip(b).map(|(x, y)| x + u * (y - x)).collect(),
             Interpolation::CubicSpline => {
                 let (m0, m1) = (self.key(k, 2), self.key(k + 1, 0));
@@ -169,22 +174,6 @@ impl Track {
         }
         v
     }
-}
-
-pub(super) fn slerp(a: &[f64], b: &[f64], u: f64) -> Vec<f64> {
-    let mut dot: f64 = a.iter().zip(b).map(|(x, y)| x * y).sum();
-    let sign = if dot < 0.0 { -1.0 } else { 1.0 };
-    dot *= sign;
-    let (wa, wb) = if dot > 0.9995 {
-        (1.0 - u, u)
-    } else {
-        let theta = dot.acos();
-        (
-            (((1.0 - u) * theta).sin()) / theta.sin(),
-            (u * theta).sin() / theta.sin(),
-        )
-    };
-    a.iter().zip(b).map(|(x, y)| wa * x + wb * sign * y).collect()
 }
 
 /// A node at rest: its parent, TRS (used when animated) and matrix (used otherwise).
@@ -357,7 +346,7 @@ mod tests {
     #[test]
     fn slerp_halfway_is_45_degrees() {
         let s = 0.5f64.sqrt();
-        let q = slerp(&[0.0, 0.0, 0.0, 1.0], &[0.0, 0.0, s, s], 0.5);
+        let q = skeletal::slerp([0.0, 0.0, 0.0, 1.0], [0.0, 0.0, s, s], 0.5);
         let half = (std::f64::consts::PI / 8.0).sin();
         assert!((q[2] - half).abs() < 1e-12, "{q:?}");
     }
