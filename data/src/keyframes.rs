@@ -30,6 +30,9 @@ pub enum KeyframeStrategy {
     /// SceneMI's training sampler (docs/method.md §5.4): k ~ Unif{2..=T}, first and last frames always included,
     /// the other k − 2 drawn uniformly from the inner frames (T ≥ 2).
     Scenemi,
+    /// The evaluation's placement as a training sampler (docs/method.md §4.10; not in the paper): frames 0 and T−1
+    /// always, plus k − 2 inner frames with k ~ Unif{2..=k_max} (T ≥ 2, 2 ≤ k_max ≤ T).
+    FirstLastRandom { k_max: usize },
     /// Evaluation (docs/method.md §6.1): {0, T−1} ∪ K_x distinct frames drawn from {1..T−2}. For one generator state
     /// the sets are nested across K_x: the set for K_x is a subset of the set for K_x + 1.
     FirstLastPlus(usize),
@@ -56,6 +59,17 @@ impl KeyframeStrategy {
             Self::Random { .. } => Ok(()),
             Self::Scenemi if t < 2 => err(format!("first and last frames need T ≥ 2, got T = {t}")),
             Self::Scenemi => Ok(()),
+            Self::FirstLastRandom { k_max } => {
+                if t < 2 {
+                    return err(format!("first and last frames need T ≥ 2, got T = {t}"));
+                }
+                if !(2..=t).contains(k_max) {
+                    return err(format!(
+                        "k_max = {k_max} must count the first and last frames and fit the window: 2 ≤ k_max ≤ T = {t}"
+                    ));
+                }
+                Ok(())
+            }
             Self::FirstLastPlus(kx) => {
                 if t < 2 {
                     return err(format!("first and last frames need T ≥ 2, got T = {t}"));
@@ -107,6 +121,16 @@ pub fn sample_keyframes(strategy: &KeyframeStrategy, t: usize, rng: &mut impl Rn
             mask[0] = true;
             mask[t - 1] = true;
             let k = rng.random_range(2..=t);
+            let mut inner: Vec<usize> = (1..t - 1).collect();
+            let (chosen, _) = inner.partial_shuffle(rng, k - 2);
+            for &f in chosen.iter() {
+                mask[f] = true;
+            }
+        }
+        KeyframeStrategy::FirstLastRandom { k_max } => {
+            mask[0] = true;
+            mask[t - 1] = true;
+            let k = rng.random_range(2..=*k_max);
             let mut inner: Vec<usize> = (1..t - 1).collect();
             let (chosen, _) = inner.partial_shuffle(rng, k - 2);
             for &f in chosen.iter() {
@@ -167,6 +191,9 @@ pub enum TrainingKeyframes {
     Random,
     /// SceneMI: k ~ Unif{2..=T}, first and last always included.
     Scenemi,
+    /// First and last frames always, k ~ Unif{2..=k_max} in all (docs/method.md §4.10; the evaluation's placement,
+    /// not the paper's sampler).
+    FirstLast,
 }
 
 impl TrainingKeyframes {
@@ -175,6 +202,7 @@ impl TrainingKeyframes {
         match self {
             TrainingKeyframes::Random => KeyframeStrategy::Random { k_max },
             TrainingKeyframes::Scenemi => KeyframeStrategy::Scenemi,
+            TrainingKeyframes::FirstLast => KeyframeStrategy::FirstLastRandom { k_max },
         }
     }
 }
@@ -309,6 +337,28 @@ mod tests {
             assert!((870..=1130).contains(&n), "k = {k} drawn {n} times of 6000: {hist:?}");
         }
         assert!(ends_free, "first/last must not be forced in Random");
+    }
+
+    #[test]
+    fn first_last_random_keeps_the_ends_and_draws_k_uniformly_in_2_to_k_max() {
+        let mut r = rng(7, 1);
+        let mut hist = [0usize; 6];
+        let strategy = KeyframeStrategy::FirstLastRandom { k_max: 5 };
+        for _ in 0..4000 {
+            let m = sample_keyframes(&strategy, 16, &mut r);
+            assert!(m[0] && m[15], "first and last frames must be keyframes: {m:?}");
+            hist[count(&m)] += 1;
+        }
+        assert_eq!(hist[0] + hist[1], 0, "{hist:?}");
+        // k = 2..=5 each with probability 1/4 = 1000 of 4000; 4.5 standard deviations is about 123.
+        for (k, &n) in hist.iter().enumerate().skip(2) {
+            assert!((877..=1123).contains(&n), "k = {k} drawn {n} times of 4000: {hist:?}");
+        }
+        assert_eq!(TrainingKeyframes::FirstLast.strategy(5), strategy);
+        for (k_max, t) in [(1, 16), (17, 16), (2, 1)] {
+            let bad = KeyframeStrategy::FirstLastRandom { k_max };
+            assert!(bad.check(t).is_err(), "k_max {k_max} with T = {t} must be refused");
+        }
     }
 
     #[test]

@@ -57,6 +57,22 @@ pub enum Prediction {
     Data,
 }
 
+/// What the flow generates (docs/method.md §4.10, `model.anchor`): the trajectory latents themselves, as in the paper,
+/// or their residual from the keyframes' latent interpolation A, scaled: X₁ = (Z − A)/s, Ẑ = A + s X₁.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Anchor {
+    /// X₁ = Z (the paper).
+    #[default]
+    None,
+    /// X₁ = (Z − A)/scale with A the keyframes' interpolation along the frames ([`crate::rectified_flow::keyframe_lerp`]);
+    /// `scale` > 0 is about the residual's standard deviation in standardized units, so that X₁ is near unit scale.
+    KeyframeLerp {
+        /// s.
+        scale: f64,
+    },
+}
+
 /// Size of the MMDiT: the `[model]` table of `configs/rf/*.toml`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -80,6 +96,11 @@ pub struct MmditConfig {
     /// the key existed predict velocity.
     #[serde(default)]
     pub prediction: Prediction,
+    /// What the flow generates: the latents (the paper) or their residual from the keyframe interpolation
+    /// (docs/method.md §4.10; needs `conditioning = "input_mask"`). Run folders written before the key existed have
+    /// none.
+    #[serde(default)]
+    pub anchor: Anchor,
 }
 
 impl MmditConfig {
@@ -94,6 +115,7 @@ impl MmditConfig {
             text_dim,
             conditioning,
             prediction: Prediction::Velocity,
+            anchor: Anchor::None,
         }
     }
 
@@ -108,6 +130,7 @@ impl MmditConfig {
             text_dim: 8,
             conditioning: KeyframeConditioning::InputMask,
             prediction: Prediction::Velocity,
+            anchor: Anchor::None,
         }
     }
 
@@ -141,6 +164,20 @@ impl MmditConfig {
                 "model.width ({}) must be a multiple of model.heads ({})",
                 self.width, self.heads
             ));
+        }
+        if let Anchor::KeyframeLerp { scale } = self.anchor {
+            if !(scale > 0.0 && scale.is_finite()) {
+                return Err(format!(
+                    "model.anchor.keyframe_lerp.scale {scale} must be finite and positive"
+                ));
+            }
+            if self.conditioning != KeyframeConditioning::InputMask {
+                return Err(format!(
+                    "model.anchor = keyframe_lerp needs model.conditioning = \"input_mask\" (the anchor is built from \
+                     the clean keyframes), got {:?}",
+                    self.conditioning
+                ));
+            }
         }
         crate::summary::check_param_estimate(
             "model.width, blocks, frames, channels and text_dim",
@@ -206,6 +243,7 @@ impl MmditConfig {
             in_channels: self.in_channels(),
             text_dim: self.text_dim,
             prediction: self.prediction,
+            anchor: self.anchor,
         }
     }
 }
@@ -575,6 +613,8 @@ pub struct Mmdit {
     text_dim: usize,
     #[module(skip)]
     prediction: Prediction,
+    #[module(skip)]
+    anchor: Anchor,
 }
 
 impl Mmdit {
@@ -627,6 +667,11 @@ impl Mmdit {
     /// What [`Mmdit::forward`] outputs: velocities or clean latents (docs/method.md §4.9).
     pub fn prediction(&self) -> Prediction {
         self.prediction
+    }
+
+    /// What the flow generates: latents or their residual from the keyframe interpolation (docs/method.md §4.10).
+    pub fn anchor(&self) -> Anchor {
+        self.anchor
     }
 }
 

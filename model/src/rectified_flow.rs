@@ -11,7 +11,7 @@ use burn::tensor::Distribution;
 use serde::{Deserialize, Serialize};
 
 use crate::mmdit::{
-    KeyframeConditioning, Mmdit, Prediction, assemble_input, build_input, replace_keyframes, split_output,
+    Anchor, KeyframeConditioning, Mmdit, Prediction, assemble_input, build_input, replace_keyframes, split_output,
 };
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -61,6 +61,70 @@ pub fn output_velocity(
             let gap = tau.neg().add_scalar(1.0).clamp_min(min_gap).reshape([b, 1, 1, 1]);
             (output - x_tau) / gap
         }
+    }
+}
+
+/// The keyframes' interpolation A along the frames (docs/method.md §4.10): at a keyframe its own latent, between two
+/// keyframes a < f < b the line (L1) A_f = Z_a + (f − a)/(b − a)(Z_b − Z_a), before the first (after the last)
+/// keyframe that keyframe's latent, and 0 in a window without keyframes. Only keyframe slots of `z_key` are read.
+///
+/// # Shapes
+/// - z_key: `[B, P, T, C]`; mask: `[B, T]`, 1 = observed; output `[B, P, T, C]`
+pub fn keyframe_lerp(z_key: Tensor<4>, mask: Tensor<2>) -> Tensor<4> {
+    let [b, p, t, c] = z_key.dims();
+    let device = z_key.device();
+    let host: Vec<f32> = mask
+        .into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .expect("a float tensor converts to f32 values");
+    let weights = Tensor::<3>::from_data(TensorData::new(lerp_weights(&host, b, t), [b, t, t]), &device);
+    let z = z_key.swap_dims(1, 2).reshape([b, t, p * c]);
+    weights.matmul(z).reshape([b, t, p, c]).swap_dims(1, 2)
+}
+
+/// The rows of [`keyframe_lerp`] as a matrix per window: entry (f, g) is the weight of frame g's latent in A_f.
+///
+/// # Shapes
+/// - mask: `B · T` row-major, > 0.5 = keyframe; output `B · T · T` row-major `[B, T, T]`
+pub fn lerp_weights(mask: &[f32], b: usize, t: usize) -> Vec<f32> {
+    let mut w = vec![0.0f32; b * t * t];
+    for bi in 0..b {
+        let keys: Vec<usize> = (0..t).filter(|&f| mask[bi * t + f] > 0.5).collect();
+        let (Some(&first), Some(&last)) = (keys.first(), keys.last()) else {
+            continue;
+        };
+        let row = |f: usize, g: usize| bi * t * t + f * t + g;
+        for f in 0..t {
+            if f <= first {
+                w[row(f, first)] = 1.0;
+            } else if f >= last {
+                w[row(f, last)] = 1.0;
+            } else {
+                let i = keys.partition_point(|&k| k <= f); // keys[i − 1] ≤ f < keys[i]
+                let (a, bk) = (keys[i - 1], keys[i]);
+                let x = (f - a) as f32 / (bk - a) as f32;
+                w[row(f, a)] += 1.0 - x;
+                w[row(f, bk)] += x;
+            }
+        }
+    }
+    w
+}
+
+/// The anchor A and scale s of [`Anchor::KeyframeLerp`] for these keyframes; `None` for [`Anchor::None`].
+fn anchor_of(anchor: Anchor, z_key: &Tensor<4>, mask: &Tensor<2>) -> Option<(Tensor<4>, f64)> {
+    match anchor {
+        Anchor::None => None,
+        Anchor::KeyframeLerp { scale } => Some((keyframe_lerp(z_key.clone(), mask.clone()), scale)),
+    }
+}
+
+/// The flow's state x as latents: A + s x with an anchor (docs/method.md §4.10), x itself without.
+fn lift(anchor: &Option<(Tensor<4>, f64)>, x: Tensor<4>) -> Tensor<4> {
+    match anchor {
+        Some((a, s)) => a.clone() + x.mul_scalar(*s),
+        None => x,
     }
 }
 
@@ -258,8 +322,15 @@ pub fn rf_training_loss(
     opts: &RfLossOptions,
 ) -> Tensor<1> {
     let [_, _, frames, _] = batch.z.dims();
-    let x_tau = interpolant(eps.clone(), batch.z.clone(), tau.clone()); // (R1)
-    let x_state = x_tau.clone();
+    // docs/method.md §4.10: with an anchor the flow's data end is the scaled residual X₁ = (Z − A)/s, and the network
+    // sees the state as latents, A + s X_τ.
+    let anchor = anchor_of(model.anchor(), &batch.z_key, &batch.mask);
+    let x1 = match &anchor {
+        Some((a, s)) => (batch.z.clone() - a.clone()).div_scalar(*s),
+        None => batch.z.clone(),
+    };
+    let x_state = interpolant(eps.clone(), x1.clone(), tau.clone()); // (R1)
+    let x_tau = lift(&anchor, x_state.clone());
     let mask = match opts.conditioning {
         KeyframeConditioning::InputMask => batch.mask.clone(),
         KeyframeConditioning::ImputeUntil => impute_mask(batch.mask.clone(), tau.clone(), opts.tau_star),
@@ -284,12 +355,7 @@ pub fn rf_training_loss(
         frames,
     ); // (R4)
     let v = output_velocity(model.prediction(), out, x_state, tau, DATA_PREDICTION_MIN_GAP);
-    rf_loss(
-        v,
-        target_velocity(eps, batch.z.clone()),
-        batch.mask.clone(),
-        opts.keyframe_loss,
-    )
+    rf_loss(v, target_velocity(eps, x1), batch.mask.clone(), opts.keyframe_loss)
 }
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -411,11 +477,13 @@ pub fn sample<F>(velocity: F, cond: &Conditioning, eps: Tensor<4>, opts: &Sample
 where
     F: FnMut(Tensor<3>, Tensor<1>) -> Tensor<3>,
 {
-    sample_outputs(velocity, Prediction::Velocity, cond, eps, opts)
+    sample_outputs(velocity, Prediction::Velocity, Anchor::None, cond, eps, opts)
 }
 
 /// [`sample`] for a closure whose output is `prediction` (velocities or clean latents, docs/method.md §4.9),
-/// turned into the velocity of (R6) at every evaluation by [`output_velocity`] with the current ODE state.
+/// turned into the velocity of (R6) at every evaluation by [`output_velocity`] with the current ODE state, for a flow
+/// that generates what `anchor` says (docs/method.md §4.10: with an anchor the state is the scaled residual, lifted to
+/// latents A + s x for the network input and at the end).
 ///
 /// # Shapes
 /// - eps: `[B, P, T, C]` initial noise; output `[B, P, T, C]`
@@ -425,6 +493,7 @@ where
 pub fn sample_outputs<F>(
     mut network: F,
     prediction: Prediction,
+    anchor: Anchor,
     cond: &Conditioning,
     eps: Tensor<4>,
     opts: &SampleOptions,
@@ -440,8 +509,9 @@ where
     let [b, _, frames, _] = eps.dims();
     let device = eps.device();
     let eps = scale_noise(eps, opts.noise_scale);
+    let anchor = anchor_of(anchor, &cond.z_key, &cond.mask);
     let mut eval = |x: Tensor<4>, tau: f64| -> Tensor<4> {
-        let input = sampler_input(cond, x.clone(), &eps, tau, opts);
+        let input = sampler_input(cond, lift(&anchor, x.clone()), &eps, tau, opts);
         let tau_b = Tensor::<1>::full([b], tau, &device);
         let out = split_output(network(input, tau_b), frames);
         match prediction {
@@ -465,6 +535,7 @@ where
             }
         };
     }
+    let x = lift(&anchor, x);
     match opts.conditioning {
         KeyframeConditioning::InputMask | KeyframeConditioning::ReplaceNoised => {
             replace_keyframes(x, cond.z_key.clone(), cond.mask.clone())
@@ -531,6 +602,7 @@ pub fn sample_mmdit(
     sample_outputs(
         mmdit_velocity(model, text, keep, guidance),
         model.prediction(),
+        model.anchor(),
         cond,
         eps,
         opts,

@@ -5,7 +5,7 @@
 use std::sync::Mutex;
 
 use any4d_model::mmdit::{
-    KeyframeConditioning, Mmdit, MmditConfig, Prediction, TIME_FREQS, build_input, merge_slots, split_output,
+    Anchor, KeyframeConditioning, Mmdit, MmditConfig, Prediction, TIME_FREQS, build_input, merge_slots, split_output,
     timestep_sinusoid,
 };
 use any4d_model::rectified_flow::{
@@ -183,6 +183,7 @@ fn a_data_predicting_oracle_lands_on_its_prediction_on_every_grid() {
             let out = sample_outputs(
                 |_input, _tau| oracle.clone(),
                 Prediction::Data,
+                Anchor::None,
                 &cond,
                 eps.clone(),
                 &opts,

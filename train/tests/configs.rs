@@ -163,6 +163,33 @@ fn overlays_are_short_and_resolve_to_their_base_with_the_changed_keys() {
     assert_eq!(seq.train.batch_size, 128);
 }
 
+/// docs/method.md §4.10: the anchored preset is `small.toml` plus the anchor and the first-last keyframe sampler; the
+/// anchor is refused with a sampler that can leave a window without its ends, and with another conditioning.
+#[test]
+fn the_anchor_preset_adds_two_keys_and_the_anchor_needs_the_window_ends() {
+    let path = root().join("configs/rf/anchored_small.toml");
+    let anchored = RfRunConfig::load(&path, &[]).unwrap();
+    let mut small = RfRunConfig::load(&root().join("configs/rf/small.toml"), &[]).unwrap();
+    assert_ne!(anchored, small);
+    small.model.anchor = anchored.model.anchor;
+    small.rf.kf_sampler = anchored.rf.kf_sampler;
+    assert_eq!(
+        anchored, small,
+        "the preset changes only model.anchor and rf.kf_sampler"
+    );
+    let set = |s: &str| -> Vec<Override> { vec![s.parse().unwrap()] };
+    let err = RfRunConfig::load(&path, &set("rf.kf_sampler=\"random\""))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("first_last") && err.contains("extrapolates"), "{err}");
+    let err = RfRunConfig::load(&path, &set("model.conditioning=\"replace_noised\""))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("input_mask"), "{err}");
+    let err = RfRunConfig::load(&path, &set("rf.k_max=1")).unwrap_err().to_string();
+    assert!(err.contains("k_max"), "{err}");
+}
+
 #[test]
 fn set_overrides_apply_after_extends_and_reject_unknown_keys() {
     let tiny = root().join("configs/rf/baseline_tiny.toml");

@@ -11,7 +11,7 @@ use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mesh_vae::{self, MeshVae};
 use any4d_model::mmdit::KeyframeConditioning;
-use any4d_model::rectified_flow::RfBatch;
+use any4d_model::rectified_flow::{RfBatch, keyframe_lerp};
 use any4d_model::text::caption_keep;
 use any4d_model::text::scratch::ScratchTokenizer;
 use burn::prelude::{Device, Tensor, TensorData};
@@ -187,6 +187,32 @@ impl RfBatcher {
     /// The caption tokenizer (shared).
     pub fn tokenizer(&self) -> &Arc<ScratchTokenizer> {
         &self.tokenizer
+    }
+
+    /// The root mean square of Z − A over the generated slots of the first `clips` TRAIN windows (docs/method.md
+    /// §4.10: the size the anchor's scale s should have), on standardized posterior means with training keyframe masks
+    /// from `rng`; `None` without cached latents or TRAIN clips.
+    pub fn anchor_residual_rms(&self, clips: usize, rng: &mut ChaCha8Rng, device: &Device) -> Option<f64> {
+        let set = self.train.cached.as_ref()?;
+        let n = clips.min(set.clips.len());
+        if n == 0 {
+            return None;
+        }
+        let (t, p, c) = (set.frames, set.tokens, set.channels);
+        let mu: Vec<f32> = set.clips[..n].iter().flat_map(|clip| clip.mu.iter().copied()).collect();
+        let z = self
+            .stats
+            .standardize_motion(Tensor::<4>::from_data(TensorData::new(mu, [n, t, p, c]), device).swap_dims(1, 2));
+        let mask: Vec<f32> = (0..n)
+            .flat_map(|_| training_mask(&self.cfg.rf, self.cfg.model.conditioning, t, rng))
+            .map(|m| f32::from(u8::from(m)))
+            .collect();
+        let generated = mask.iter().filter(|&&m| m == 0.0).count() * p * c;
+        let mask = Tensor::<2>::from_data(TensorData::new(mask, [n, t]), device);
+        let residual = z.clone() - keyframe_lerp(z, mask.clone());
+        let free = mask.neg().add_scalar(1.0).reshape([n, 1, t, 1]);
+        let sum = f64::from((residual.powi_scalar(2) * free).sum().into_scalar::<f32>());
+        (generated > 0).then(|| (sum / generated as f64).sqrt())
     }
 
     /// Builds the batch of positions `indices` of `subset`: z = μ + σξ or μ (`rf.latent`), standardized (docs/method.md

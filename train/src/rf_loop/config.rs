@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use any4d_data::keyframes::TrainingKeyframes;
-use any4d_model::mmdit::{KeyframeConditioning, MmditConfig};
+use any4d_model::mmdit::{Anchor, KeyframeConditioning, MmditConfig};
 use any4d_model::rectified_flow::{KeyframeLoss, RfLossOptions, TauSampler};
 use any4d_model::text::scratch::ScratchTextConfig;
 use serde::{Deserialize, Serialize};
@@ -147,6 +147,23 @@ impl RfRunConfig {
             return Err(bad(format!(
                 "rf.kf_sampler = \"scenemi\" keeps the first and last frames: needs model.frames ≥ 2, got {}",
                 cfg.model.frames
+            )));
+        }
+        if rf.kf_sampler == TrainingKeyframes::FirstLast {
+            rf.kf_sampler.strategy(rf.k_max).check(cfg.model.frames).map_err(|e| {
+                bad(format!(
+                    "rf.kf_sampler = \"first_last\" with rf.k_max = {}: {e}",
+                    rf.k_max
+                ))
+            })?;
+        }
+        if let Anchor::KeyframeLerp { .. } = cfg.model.anchor
+            && !matches!(rf.kf_sampler, TrainingKeyframes::FirstLast | TrainingKeyframes::Scenemi)
+        {
+            return Err(bad(format!(
+                "model.anchor = keyframe_lerp needs training keyframes that always include the first and last frames \
+                 (rf.kf_sampler = \"first_last\" or \"scenemi\"), got {:?}: without them the anchor extrapolates",
+                rf.kf_sampler
             )));
         }
         if rf.valid_sample_every > 0 {

@@ -3,8 +3,11 @@
 use std::path::{Path, PathBuf};
 
 use any4d_data::store::{Split, Store};
+use any4d_model::mmdit::Anchor;
 use any4d_model::text::scratch::ScratchTokenizer;
 use burn::prelude::Device;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
 
 use crate::backend;
 use crate::error::{Result, TrainError};
@@ -87,6 +90,16 @@ fn run_rf(
     let vocab = tokenizer.vocab_size();
     let mut objective = RfObjective::new(cfg, &opts.run.data, vae, tokenizer, &devices[0])?;
     objective.log_validation_samples(run)?;
+    if let Anchor::KeyframeLerp { scale } = cfg.model.anchor {
+        let mut rng = ChaCha8Rng::seed_from_u64(cfg.train.seed);
+        let clips = cfg.train.batch_size;
+        if let Some(rms) = objective.batcher().anchor_residual_rms(clips, &mut rng, &devices[0]) {
+            run.log(&format!(
+                "anchor: Z − A has RMS {rms:.4} on the generated slots of the first {clips} TRAIN windows \
+                 (standardized posterior means); model.anchor scale s = {scale}"
+            ))?;
+        }
+    }
     run.log(&format!(
         "RF {:?} on {} ({} train clips in {} windows / {} val clips, latents {:?}: {:.1} MiB), VAE {} step {}, backend {}",
         cfg.model.conditioning,
