@@ -1,6 +1,7 @@
 //! Networks of CompletionAny4D (docs/method.md §3–§5): frame-wise mesh VAE, keyframe-conditioned rectified-flow MMDiT,
 //! the sequence-wise DyMeshVAE ablation, text encoders. No file IO except weight loading.
 
+pub mod anchor;
 pub mod any_vae;
 pub mod attention;
 pub mod bdlstm;

@@ -65,7 +65,7 @@ pub enum Anchor {
     /// X₁ = Z (the paper).
     #[default]
     None,
-    /// X₁ = (Z − A)/scale with A the keyframes' interpolation along the frames ([`crate::rectified_flow::keyframe_lerp`]);
+    /// X₁ = (Z − A)/scale with A the keyframes' interpolation along the frames ([`crate::anchor::keyframe_lerp`]);
     /// `scale` > 0 is about the residual's standard deviation in standardized units, so that X₁ is near unit scale.
     KeyframeLerp {
         /// s.

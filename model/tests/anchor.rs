@@ -1,10 +1,11 @@
 //! The keyframe-interpolation anchor of the flow (docs/method.md §4.10): the interpolation itself, the sampler's lift
 //! from residual to latents, the training target and the config checks.
 
+use any4d_model::anchor::keyframe_lerp;
 use any4d_model::mmdit::{Anchor, KeyframeConditioning, MmditConfig, Prediction, build_input, merge_slots};
 use any4d_model::rectified_flow::{
-    Conditioning, KeyframeLoss, RfBatch, RfLossOptions, SampleOptions, keyframe_lerp, rf_loss, rf_training_loss,
-    sample_outputs, target_velocity,
+    Conditioning, KeyframeLoss, RfBatch, RfLossOptions, SampleOptions, rf_loss, rf_training_loss, sample_outputs,
+    target_velocity,
 };
 use burn::prelude::*;
 use burn::tensor::{Distribution, TensorData};

@@ -7,11 +7,12 @@ use std::sync::Arc;
 
 use any4d_data::keyframes::sample_keyframes;
 use any4d_data::store::{Split, Store};
+use any4d_model::anchor::keyframe_lerp;
 use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mesh_vae::{self, MeshVae};
 use any4d_model::mmdit::KeyframeConditioning;
-use any4d_model::rectified_flow::{RfBatch, keyframe_lerp};
+use any4d_model::rectified_flow::RfBatch;
 use any4d_model::text::caption_keep;
 use any4d_model::text::scratch::ScratchTokenizer;
 use burn::prelude::{Device, Tensor, TensorData};
