@@ -29,7 +29,7 @@ pub fn keyframe_lerp(z_key: Tensor<4>, mask: Tensor<2>) -> Tensor<4> {
 ///
 /// # Shapes
 /// - mask: `B · T` row-major, > 0.5 = keyframe; output `B · T · T` row-major `[B, T, T]`
-pub fn lerp_weights(mask: &[f32], b: usize, t: usize) -> Vec<f32> {
+fn lerp_weights(mask: &[f32], b: usize, t: usize) -> Vec<f32> {
     let mut w = vec![0.0f32; b * t * t];
     for bi in 0..b {
         let keys: Vec<usize> = (0..t).filter(|&f| mask[bi * t + f] > 0.5).collect();
