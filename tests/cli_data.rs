@@ -191,7 +191,9 @@ fn bench_data_reports_throughput() {
         "{stdout}"
     );
     // Every reader is timed on the same clips written in its format.
-    for format in ["bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd"] {
+    for format in [
+        "bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd", "b3d", "x",
+    ] {
         assert!(
             stdout
                 .lines()

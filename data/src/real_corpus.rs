@@ -12,7 +12,8 @@
 //!   animations of the first actor naming it; a unit mesh keeps at most [`MAX_UNIT_ANIMS`] animations, and at
 //!   most [`MAX_UNIT_MESHES`] unit meshes are staged;
 //! - `ufoai-data`: from `base/0models.pk3`, every `.md2` model with an `.anm` animation table beside it;
-//! - `assimp-testmodels`: the animated `.iqm` sample. Its MD2 models are never staged;
+//! - `assimp-testmodels`: the animated `.iqm` sample and the two skinned, animated DirectX `.x` files. Its MD2
+//!   models are never staged;
 //! - `minetest-data` and `minetest-mod-*`: every `.b3d` under `usr/share/games/minetest` that has node keys (the
 //!   player character, mobs), one folder per file, the asset named after the file;
 //! - both of the last two (folder [`MOCAP_FOLDER`]): the `.bvh` motion capture of `assimp-testmodels` beside
@@ -492,14 +493,25 @@ fn stage_minetest(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut
 }
 
 fn stage_assimp(dir: &Path, dest: &Path, package: &str, c: &Dep5) -> Result<usize> {
-    let mesh = dir.join("usr/share/assimp/models/IQM/mrfixit.iqm");
-    if !mesh.is_file() {
-        return Ok(0);
+    // (file under usr/share/assimp/models, staged folder, asset name). The DirectX files are the two skinned,
+    // animated ones; `anim_test.x` is left out: its mesh names bones its frames lack (its own notes say so).
+    const FILES: &[(&str, &str, &str)] = &[
+        ("IQM/mrfixit.iqm", "mrfixit", "robot"),
+        ("X/BCN_Epileptic.X", "bcn_epileptic", "person"),
+        ("X/Testwuson.X", "wuson", "pig"),
+    ];
+    let mut n = 0;
+    for (file, folder, asset) in FILES {
+        let mesh = dir.join("usr/share/assimp/models").join(file);
+        if !mesh.is_file() {
+            continue;
+        }
+        let to = dest.join(folder);
+        copy(&mesh, &to.join(mesh.file_name().unwrap_or_default()))?;
+        write_provenance(&to, package, &c.licence(&rel(dir, &mesh)), asset)?;
+        n += 1;
     }
-    let to = dest.join("mrfixit");
-    copy(&mesh, &to.join("mrfixit.iqm"))?;
-    write_provenance(&to, package, &c.licence(&rel(dir, &mesh)), "robot")?;
-    Ok(1)
+    Ok(n)
 }
 
 #[cfg(test)]

@@ -362,3 +362,65 @@ fn minetest_b3d_models_with_keys_are_staged_and_imported() {
         assert!(r.caption.starts_with("a walker mob"), "{}", r.caption);
     }
 }
+
+/// `assimp-testmodels`: its two skinned DirectX characters are staged (the pig under its own asset name) and
+/// import with the package's licence; its MD2 models (held out) never are.
+#[test]
+fn assimp_directx_characters_are_staged_and_imported_but_not_its_md2() {
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("extracted/assimp-testmodels");
+    write(
+        &pkg.join("usr/share/doc/assimp-testmodels/copyright"),
+        b"Format: dep5\n\nFiles: *\nLicense: BSD-3-clause\n",
+    );
+    let models = pkg.join("usr/share/assimp/models");
+    let (pos, faces) = strip(4);
+    let skin: Vec<u8> = (0..pos.len()).map(|v| (v % 2) as u8).collect();
+    let keys: Vec<Vec<[f32; 3]>> = (0..20).map(|f| vec![[0.0; 3], [0.0, 0.1 * f as f32, 0.0]]).collect();
+    write(
+        &models.join("X/Testwuson.X"),
+        any4d_data::formats::x::write_test_x(&pos, &faces, &skin, &keys).as_bytes(),
+    );
+    write(&models.join("MD2/faerie.md2"), b"IDP2 held out");
+    let staged = dir.path().join("staged");
+    let report = stage(&dir.path().join("extracted"), &staged).unwrap();
+    assert_eq!(report.assets.get("assimp-testmodels"), Some(&1), "{report:?}");
+    assert!(staged.join("assimp-testmodels/wuson/Testwuson.X").is_file());
+    let md2_staged = walk(&staged)
+        .iter()
+        .any(|p| p.to_string_lossy().to_lowercase().ends_with(".md2"));
+    assert!(!md2_staged, "an MD2 of assimp-testmodels was staged");
+    let out = dir.path().join("store");
+    let opts = ImportOptions {
+        filter: VertexFilter { min: 3, max: 4096 },
+        frames: 16,
+        stride: 4,
+        ..ImportOptions::default()
+    };
+    let rep = store::import(&[staged], &out, &opts).unwrap();
+    let rows = read_index(&out).unwrap();
+    let ok: Vec<_> = rows.iter().filter(|r| r.status == Status::Ok).collect();
+    // 20 key times → windows at 0 and 4.
+    assert_eq!(ok.len(), 2, "{rep}");
+    for r in &ok {
+        assert_eq!(r.format, "x");
+        assert_eq!(
+            (r.licence.as_str(), r.source_package.as_str()),
+            ("BSD-3-clause", "assimp-testmodels")
+        );
+        assert!(r.caption.starts_with("a pig"), "{}", r.caption);
+    }
+}
+
+fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}

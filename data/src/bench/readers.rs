@@ -2,9 +2,10 @@
 //! thread) of the benchmark clips written in every format the readers take.
 //!
 //! Vertex formats (`.bin`, `.glb`, `.anime`, OBJ folders, MD2, MD3) store the clip's frames (MD2 quantised to
-//! bytes, MD3 to 1/64 units); the skeletal formats (IQM, MD5, 0 A.D. PMD/PSA) store frame 0 rigidly skinned to
-//! [`JOINTS`] joints whose translations move per frame, so their reads include the skinning bake. Each clip gets
-//! its own folder (MD5 and PMD find their animations beside the mesh).
+//! bytes, MD3 to 1/64 units); the skeletal formats (IQM, MD5, 0 A.D. PMD/PSA, DirectX `.x`) store frame 0
+//! rigidly skinned to [`JOINTS`] joints whose translations move per frame, so their reads include the skinning
+//! bake (B3D: one moving joint holding every [`JOINTS`]-th vertex, the rest on the still root). Each clip gets its
+//! own folder (MD5 and PMD find their animations beside the mesh).
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -13,7 +14,7 @@ use std::time::Instant;
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
 use crate::formats::skeletal::ReadOptions;
-use crate::formats::{self, iqm, md2, md3, pmd};
+use crate::formats::{self, b3d, iqm, md2, md3, pmd, x};
 use crate::fps::farthest_point_sampling;
 use crate::preprocess;
 
@@ -21,7 +22,9 @@ use crate::preprocess;
 pub const JOINTS: usize = 8;
 
 /// The formats benchmarked, in report order.
-const FORMATS: &[&str] = &["bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd"];
+const FORMATS: &[&str] = &[
+    "bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd", "b3d", "x",
+];
 
 /// Translation of joint `j` at frame `f` (non-negative: IQM's test writer quantises without an offset).
 fn joint_shift(f: usize, j: usize) -> [f32; 3] {
@@ -115,6 +118,21 @@ fn write(format: &str, clip: &Clip, dir: &Path) -> Result<PathBuf> {
                 .map(|f| (0..JOINTS).map(|j| joint_shift(f, j)).collect())
                 .collect();
             write_bytes(&dir.join("walk.psa"), pmd::write_test_psa(&keys))?;
+            path
+        }
+        "b3d" => {
+            let bone: Vec<u32> = (0..n as u32).step_by(JOINTS).collect();
+            let keys: Vec<(i32, [f32; 3])> = (0..clip.frames).map(|f| (f as i32 + 1, joint_shift(f, 1))).collect();
+            let path = dir.join("clip.b3d");
+            write_bytes(&path, b3d::write_test_b3d(frame0, &clip.faces, [0.0; 3], &bone, &keys))?;
+            path
+        }
+        "x" => {
+            let keys: Vec<Vec<[f32; 3]>> = (0..clip.frames)
+                .map(|f| (0..JOINTS).map(|j| joint_shift(f, j)).collect())
+                .collect();
+            let path = dir.join("clip.x");
+            write_bytes(&path, x::write_test_x(frame0, &clip.faces, &skin, &keys))?;
             path
         }
         other => {

@@ -22,6 +22,7 @@ pub mod obj;
 pub mod pickle;
 pub mod pmd;
 pub mod skeletal;
+pub mod x;
 
 use std::io::Read;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -139,6 +140,8 @@ pub enum Format {
     Anime,
     /// Blitz3D `.b3d` (Minetest, Irrlicht).
     B3d,
+    /// DirectX `.x` (text form).
+    X,
 }
 
 impl Format {
@@ -156,6 +159,7 @@ impl Format {
             Format::Pmd => "pmd",
             Format::Anime => "anime",
             Format::B3d => "b3d",
+            Format::X => "x",
         }
     }
 
@@ -167,7 +171,7 @@ impl Format {
 
 /// Extensions (lower case) of the files an import picks up as clip sources.
 pub const SOURCE_EXTENSIONS: &[&str] = &[
-    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime", "b3d",
+    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime", "b3d", "x",
 ];
 
 /// Whether `path` is a clip source for an import: a file with one of [`SOURCE_EXTENSIONS`], except an
@@ -202,6 +206,7 @@ impl Format {
             "pmd" => Ok(Format::Pmd),
             "anime" => Ok(Format::Anime),
             "b3d" => Ok(Format::B3d),
+            "x" => Ok(Format::X),
             "md5anim" | "psa" | "bvh" => Err(DataError::new(
                 path,
                 "format",
@@ -217,7 +222,7 @@ impl Format {
                 "format",
                 format!(
                     "unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb, .iqm, .md5mesh, .md2, .md3, \
-                     .pmd, .anime, .b3d or a folder of .obj)"
+                     .pmd, .anime, .b3d, .x or a folder of .obj)"
                 ),
             )),
         }
@@ -272,6 +277,7 @@ fn read_take_unguarded(path: &Path, format: Format, opts: &ReadOptions) -> Resul
         Format::Pmd => pmd::read(path, opts)?,
         Format::Anime => anime::read(path, opts)?,
         Format::B3d => b3d::read(path, opts)?,
+        Format::X => x::read(path, opts)?,
     };
     Ok(Taken {
         clip,
@@ -296,6 +302,7 @@ fn list_takes_unguarded(path: &Path, format: Format) -> Result<Option<Vec<TakeIn
         Format::Pmd => pmd::list_takes(path)?,
         Format::Anime => anime::list_takes(path)?,
         Format::B3d => b3d::list_takes(path)?,
+        Format::X => x::list_takes(path)?,
     }))
 }
 
