@@ -2,8 +2,8 @@
 RMSE / Chamfer / DTW x100, RMSE relative to lerp, pooled jerk / GT (sum of jerk over sum of GT jerk), and each
 row's paired RMSE difference from the reference row (the first) with a 95 % bootstrap interval over clips.
 
-usage: compare.py OUT.csv LABEL=PARQUET:METHOD [LABEL=PARQUET:METHOD ...] [--seeds 42,43]
-The first row is the reference of the paired differences; a row labelled `lerp` is the denominator of the ratios."""
+usage: compare.py OUT.csv LABEL=PARQUET[+PARQUET...]:METHOD [LABEL=...] [--seeds 42,43]
+(several files joined by + are one row's rows, e.g. one file per seed). The first row is the reference of the paired differences; a row labelled `lerp` is the denominator of the ratios."""
 import sys, numpy as np, pyarrow.parquet as pq
 
 args = sys.argv[2:]
@@ -16,12 +16,14 @@ rows = {}
 for spec in args:
     label, rest = spec.split("=", 1)
     path, method = rest.rsplit(":", 1)
-    t = pq.read_table(path).to_pydict()
-    rows[label] = {
-        (t["k_extra"][i], t["seed"][i], t["item"][i]): {c: t[c][i] for c in ("rmse", "chamfer", "dtw", "jerk", "jerk_gt")}
-        for i in range(len(t["method"]))
-        if t["method"][i] == method and (seeds is None or t["seed"][i] in seeds)
-    }
+    rows[label] = {}
+    for part in path.split("+"):
+        t = pq.read_table(part).to_pydict()
+        rows[label].update({
+            (t["k_extra"][i], t["seed"][i], t["item"][i]): {c: t[c][i] for c in ("rmse", "chamfer", "dtw", "jerk", "jerk_gt")}
+            for i in range(len(t["method"]))
+            if t["method"][i] == method and (seeds is None or t["seed"][i] in seeds)
+        })
 common = set.intersection(*(set(r) for r in rows.values()))
 labels = list(rows)
 ref = labels[0]
