@@ -172,7 +172,10 @@ fn the_anchor_preset_adds_the_anchor_and_the_anchor_needs_the_window_ends() {
     let anchored = RfRunConfig::load(&path, &[]).unwrap();
     let mut small = RfRunConfig::load(&root().join("configs/rf/small.toml"), &[]).unwrap();
     assert_ne!(anchored, small);
-    assert_eq!(small.rf.kf_sampler, anchored.rf.kf_sampler, "both draw first-last keyframes");
+    assert_eq!(
+        small.rf.kf_sampler, anchored.rf.kf_sampler,
+        "both draw first-last keyframes"
+    );
     small.model.anchor = anchored.model.anchor;
     assert_eq!(anchored, small, "the preset changes only model.anchor");
     let set = |s: &str| -> Vec<Override> { vec![s.parse().unwrap()] };
