@@ -341,25 +341,33 @@ fn minetest_b3d_models_with_keys_are_staged_and_imported() {
         "an unreadable model is listed, not dropped: {report:?}"
     );
     assert!(staged.join("minetest-mod-walker/walker_mob/walker_mob.b3d").is_file());
-    let out = dir.path().join("store");
+    // 20 key frames → windows at 0 and 4.
+    import_two_windows(
+        &staged,
+        &dir.path().join("store"),
+        "b3d",
+        ("CC-BY-SA-4.0+", "minetest-mod-walker"),
+        "a walker mob",
+    );
+}
+
+/// Import `staged` in 16-frame windows every 4 frames and check that it gives exactly two clips, each of `format`
+/// with `(licence, package)` and a caption starting with `caption`.
+fn import_two_windows(staged: &Path, out: &Path, format: &str, source: (&str, &str), caption: &str) {
     let opts = ImportOptions {
         filter: VertexFilter { min: 3, max: 4096 },
         frames: 16,
         stride: 4,
         ..ImportOptions::default()
     };
-    let rep = store::import(&[staged], &out, &opts).unwrap();
-    let rows = read_index(&out).unwrap();
+    let rep = store::import(&[staged.to_path_buf()], out, &opts).unwrap();
+    let rows = read_index(out).unwrap();
     let ok: Vec<_> = rows.iter().filter(|r| r.status == Status::Ok).collect();
-    // 20 key frames → windows at 0 and 4.
     assert_eq!(ok.len(), 2, "{rep}");
     for r in &ok {
-        assert_eq!(r.format, "b3d");
-        assert_eq!(
-            (r.licence.as_str(), r.source_package.as_str()),
-            ("CC-BY-SA-4.0+", "minetest-mod-walker")
-        );
-        assert!(r.caption.starts_with("a walker mob"), "{}", r.caption);
+        assert_eq!(r.format, format);
+        assert_eq!((r.licence.as_str(), r.source_package.as_str()), source);
+        assert!(r.caption.starts_with(caption), "{}", r.caption);
     }
 }
 
@@ -390,26 +398,14 @@ fn assimp_directx_characters_are_staged_and_imported_but_not_its_md2() {
         .iter()
         .any(|p| p.to_string_lossy().to_lowercase().ends_with(".md2"));
     assert!(!md2_staged, "an MD2 of assimp-testmodels was staged");
-    let out = dir.path().join("store");
-    let opts = ImportOptions {
-        filter: VertexFilter { min: 3, max: 4096 },
-        frames: 16,
-        stride: 4,
-        ..ImportOptions::default()
-    };
-    let rep = store::import(&[staged], &out, &opts).unwrap();
-    let rows = read_index(&out).unwrap();
-    let ok: Vec<_> = rows.iter().filter(|r| r.status == Status::Ok).collect();
     // 20 key times → windows at 0 and 4.
-    assert_eq!(ok.len(), 2, "{rep}");
-    for r in &ok {
-        assert_eq!(r.format, "x");
-        assert_eq!(
-            (r.licence.as_str(), r.source_package.as_str()),
-            ("BSD-3-clause", "assimp-testmodels")
-        );
-        assert!(r.caption.starts_with("a pig"), "{}", r.caption);
-    }
+    import_two_windows(
+        &staged,
+        &dir.path().join("store"),
+        "x",
+        ("BSD-3-clause", "assimp-testmodels"),
+        "a pig",
+    );
 }
 
 fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
