@@ -23,8 +23,8 @@ use std::path::Path;
 
 use super::bytes::Bytes;
 use super::skeletal::{
-    self, Influences, Mat, ReadOptions, SkinStats, TakeInfo, apply, clean_influences, globals, inverse, mul,
-    normalize_quat, skin_frame, slerp, trs,
+    self, Influences, Mat, ReadOptions, SkinStats, TakeInfo, apply, clean_influences, globals, inverse, lerp3, mul,
+    normalize_quat, sample_keys, skin_frame, slerp, trs,
 };
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
@@ -261,28 +261,13 @@ fn mesh(b: &mut Bytes, end: usize, node: usize, file: &mut B3d) -> Result<()> {
     Ok(())
 }
 
-/// The key value at `frame`: linear between the surrounding keys (`lerp`), held outside them.
-fn sample<T: Copy>(keys: &[(i64, T)], frame: i64, lerp: impl Fn(T, T, f64) -> T) -> Option<T> {
-    let after = keys.partition_point(|(k, _)| *k <= frame);
-    match (after.checked_sub(1).map(|i| keys[i]), keys.get(after)) {
-        (Some((_, v)), None) => Some(v),
-        (None, Some(&(_, v))) => Some(v),
-        (Some((k0, v0)), Some(&(k1, v1))) => Some(lerp(v0, v1, (frame - k0) as f64 / (k1 - k0) as f64)),
-        (None, None) => None,
-    }
-}
-
-fn lerp3(a: [f64; 3], b: [f64; 3], t: f64) -> [f64; 3] {
-    std::array::from_fn(|k| a[k] + t * (b[k] - a[k]))
-}
-
 impl Node {
     fn local(&self, frame: Option<i64>) -> Mat {
         let at = |f: i64| {
             (
-                sample(&self.keys.position, f, lerp3).unwrap_or(self.position),
-                sample(&self.keys.rotation, f, slerp).unwrap_or(self.rotation),
-                sample(&self.keys.scale, f, lerp3).unwrap_or(self.scale),
+                sample_keys(&self.keys.position, f, lerp3).unwrap_or(self.position),
+                sample_keys(&self.keys.rotation, f, slerp).unwrap_or(self.rotation),
+                sample_keys(&self.keys.scale, f, lerp3).unwrap_or(self.scale),
             )
         };
         let (t, q, s) = match frame {
@@ -371,9 +356,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
         let skin: Vec<Mat> = g.iter().zip(&inv_rest).map(|(g, inv)| mul(g, inv)).collect();
         skin_frame(&bind, &infl, &skin, &mut vertices);
     }
-    // Left-handed → right-handed: mirror z and reverse every triangle's winding.
-    vertices.iter_mut().for_each(|v| v[2] = -v[2]);
-    let faces = faces.into_iter().map(|[a, b, c]| [a, c, b]).collect();
+    let faces = skeletal::to_right_handed(&mut vertices, faces);
     let clip = Clip::new(
         skeletal::stem(path),
         vertices,

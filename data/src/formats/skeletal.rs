@@ -375,6 +375,28 @@ pub fn clean_influences(path: &Path, field: &str, infl: &mut Influences, joints:
     Ok(stats)
 }
 
+/// A key track's value at `frame` (keys sorted by frame): `lerp` between the surrounding keys, held outside them;
+/// `None` for an empty track.
+pub fn sample_keys<T: Copy>(keys: &[(i64, T)], frame: i64, lerp: impl Fn(T, T, f64) -> T) -> Option<T> {
+    let after = keys.partition_point(|(k, _)| *k <= frame);
+    match (after.checked_sub(1).map(|i| keys[i]), keys.get(after)) {
+        (Some((_, v)), None) | (None, Some(&(_, v))) => Some(v),
+        (Some((k0, v0)), Some(&(k1, v1))) => Some(lerp(v0, v1, (frame - k0) as f64 / (k1 - k0) as f64)),
+        (None, None) => None,
+    }
+}
+
+/// Linear interpolation of 3-vectors.
+pub fn lerp3(a: [f64; 3], b: [f64; 3], t: f64) -> [f64; 3] {
+    std::array::from_fn(|k| a[k] + t * (b[k] - a[k]))
+}
+
+/// Left-handed → right-handed (DirectX, Blitz3D): mirror z and reverse every triangle's winding.
+pub fn to_right_handed(vertices: &mut [[f32; 3]], faces: Vec<[u32; 3]>) -> Vec<[u32; 3]> {
+    vertices.iter_mut().for_each(|v| v[2] = -v[2]);
+    faces.into_iter().map(|[a, b, c]| [a, c, b]).collect()
+}
+
 /// One frame of linear blend skinning: append `Σ_i w_i · skin_i · p` for each bind position `p`.
 pub fn skin_frame(bind: &[[f64; 3]], infl: &Influences, skin: &[Mat], out: &mut Vec<[f32; 3]>) {
     for (p, list) in bind.iter().zip(infl) {

@@ -22,8 +22,8 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use super::skeletal::{
-    self, IDENTITY, Influences, Mat, ReadOptions, SkinStats, TakeInfo, clean_influences, globals, mul, skin_frame,
-    slerp, trs,
+    self, IDENTITY, Influences, Mat, ReadOptions, SkinStats, TakeInfo, clean_influences, globals, lerp3, mul,
+    sample_keys, skin_frame, slerp, trs,
 };
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
@@ -62,10 +62,10 @@ struct Mesh<'a> {
 
 #[derive(Default)]
 struct Keys {
-    rotation: Vec<(u64, [f64; 4])>,
-    scale: Vec<(u64, [f64; 3])>,
-    position: Vec<(u64, [f64; 3])>,
-    matrix: Vec<(u64, Mat)>,
+    rotation: Vec<(i64, [f64; 4])>,
+    scale: Vec<(i64, [f64; 3])>,
+    position: Vec<(i64, [f64; 3])>,
+    matrix: Vec<(i64, Mat)>,
 }
 
 struct Set<'a> {
@@ -236,6 +236,10 @@ fn animation<'a>(path: &Path, obj: &Obj<'a>) -> Result<(&'a str, Keys)> {
         let n = v.count(2 + width)?;
         for _ in 0..n {
             let t = v.uint()?;
+            if t > u64::from(u32::MAX) {
+                return Err(v.err(format!("key time {t} does not fit the file's 32-bit tick count")));
+            }
+            let t = t as i64;
             let w = v.uint()?;
             if w != width as u64 {
                 return Err(v.err(format!("a key of type {kind} with {w} values (expected {width})")));
@@ -260,8 +264,8 @@ fn animation<'a>(path: &Path, obj: &Obj<'a>) -> Result<(&'a str, Keys)> {
 }
 
 impl Keys {
-    fn times(&self) -> Vec<u64> {
-        let mut t: Vec<u64> = self.rotation.iter().map(|k| k.0).collect();
+    fn times(&self) -> Vec<i64> {
+        let mut t: Vec<i64> = self.rotation.iter().map(|k| k.0).collect();
         t.extend(self.scale.iter().map(|k| k.0));
         t.extend(self.position.iter().map(|k| k.0));
         t.extend(self.matrix.iter().map(|k| k.0));
@@ -269,33 +273,19 @@ impl Keys {
     }
 
     /// The frame's local transform at tick `t`, `rest` supplying what the keys leave out.
-    fn local(&self, t: u64, rest: &Mat) -> Mat {
-        if let Some(m) = sample(&self.matrix, t, |a, b, f| {
+    fn local(&self, t: i64, rest: &Mat) -> Mat {
+        if let Some(m) = sample_keys(&self.matrix, t, |a, b, f| {
             std::array::from_fn(|r| std::array::from_fn(|c| a[r][c] + f * (b[r][c] - a[r][c])))
         }) {
             return m;
         }
         let (rest_t, rest_q, rest_s) = decompose(rest);
         trs(
-            sample(&self.position, t, lerp3).unwrap_or(rest_t),
-            sample(&self.rotation, t, slerp).unwrap_or(rest_q),
-            sample(&self.scale, t, lerp3).unwrap_or(rest_s),
+            sample_keys(&self.position, t, lerp3).unwrap_or(rest_t),
+            sample_keys(&self.rotation, t, slerp).unwrap_or(rest_q),
+            sample_keys(&self.scale, t, lerp3).unwrap_or(rest_s),
         )
     }
-}
-
-/// The key value at tick `t`: linear between the surrounding keys (`lerp`), held outside them.
-fn sample<T: Copy>(keys: &[(u64, T)], t: u64, lerp: impl Fn(T, T, f64) -> T) -> Option<T> {
-    let after = keys.partition_point(|(k, _)| *k <= t);
-    match (after.checked_sub(1).map(|i| keys[i]), keys.get(after)) {
-        (Some((_, v)), None) | (None, Some(&(_, v))) => Some(v),
-        (Some((k0, v0)), Some(&(k1, v1))) => Some(lerp(v0, v1, (t - k0) as f64 / (k1 - k0) as f64)),
-        (None, None) => None,
-    }
-}
-
-fn lerp3(a: [f64; 3], b: [f64; 3], t: f64) -> [f64; 3] {
-    std::array::from_fn(|k| a[k] + t * (b[k] - a[k]))
 }
 
 /// Translation, unit quaternion `(x, y, z, w)` and scale of an affine matrix without shear.
@@ -341,8 +331,8 @@ fn decompose(m: &Mat) -> ([f64; 3], [f64; 4], [f64; 3]) {
 }
 
 /// First key tick, frame step and frame count of a take (`None` without keys).
-fn timeline(set: &Set) -> Option<(u64, u64, u64)> {
-    let times: Vec<u64> = set.tracks.iter().flat_map(|(_, k)| k.times()).collect();
+fn timeline(set: &Set) -> Option<(i64, i64, i64)> {
+    let times: Vec<i64> = set.tracks.iter().flat_map(|(_, k)| k.times()).collect();
     let first = *times.iter().min()?;
     let last = *times.iter().max()?;
     let step = times.iter().fold(0, |g, &t| gcd(g, t - first));
@@ -353,7 +343,7 @@ fn timeline(set: &Set) -> Option<(u64, u64, u64)> {
     })
 }
 
-fn gcd(a: u64, b: u64) -> u64 {
+fn gcd(a: i64, b: i64) -> i64 {
     if b == 0 { a } else { gcd(b, a % b) }
 }
 
@@ -459,7 +449,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     let stats = clean_influences(path, "SkinWeights", &mut infl, n_frames + 1 + bones.len())?;
 
     let mut vertices = Vec::with_capacity(info.frames * bind.len());
-    for f in 0..info.frames as u64 {
+    for f in 0..info.frames as i64 {
         let t = first + f * step;
         let locals: Vec<Mat> = file
             .frames
@@ -473,9 +463,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
         skin.extend(bones.iter().map(|(j, offset)| mul(&g[*j], offset)));
         skin_frame(&bind, &infl, &skin, &mut vertices);
     }
-    // Left-handed → right-handed: mirror z and reverse every triangle's winding.
-    vertices.iter_mut().for_each(|v| v[2] = -v[2]);
-    let faces = faces.into_iter().map(|[a, b, c]| [a, c, b]).collect();
+    let faces = skeletal::to_right_handed(&mut vertices, faces);
     let n = bind.len();
     let clip = Clip::new(
         skeletal::stem(path),
