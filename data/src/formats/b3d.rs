@@ -350,6 +350,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
         .enumerate()
         .map(|(j, m)| inverse(m).ok_or_else(|| DataError::new(path, format!("nodes[{j}]"), "singular rest transform")))
         .collect::<Result<_>>()?;
+    skeletal::check_rows(path, info.frames, n)?;
     let mut vertices = Vec::with_capacity(info.frames * n);
     for f in 0..info.frames {
         let g = frame_globals(Some(first + f as i64));

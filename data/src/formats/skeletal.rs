@@ -180,6 +180,23 @@ pub fn check_frames(path: &Path, take: &str, frames: usize, max: usize) -> Resul
     Ok(())
 }
 
+/// Refuse a bake of `frames` × `vertices` rows over the clip limit
+/// ([`CLIP_VERTICES`](crate::limits::CLIP_VERTICES), `--limit-clip-vertices`) before anything is allocated for it.
+pub fn check_rows(path: &Path, frames: usize, vertices: usize) -> Result<()> {
+    let max = crate::limits::CLIP_VERTICES.get_usize();
+    if frames.checked_mul(vertices).is_none_or(|rows| rows > max) {
+        return Err(DataError::new(
+            path,
+            "vertices",
+            format!(
+                "{frames} frames × {vertices} vertices is more than the limit of {max} baked vertices{}",
+                crate::limits::CLIP_VERTICES.hint()
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// `(x, y, z)` of a Z-up file in Y-up coordinates.
 pub fn z_up_to_y_up(p: [f64; 3]) -> [f64; 3] {
     [p[0], p[2], -p[1]]

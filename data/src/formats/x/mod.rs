@@ -448,6 +448,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     }
     let stats = clean_influences(path, "SkinWeights", &mut infl, n_frames + 1 + bones.len())?;
 
+    skeletal::check_rows(path, info.frames, bind.len())?;
     let mut vertices = Vec::with_capacity(info.frames * bind.len());
     for f in 0..info.frames as i64 {
         let t = first + f * step;

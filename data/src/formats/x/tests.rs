@@ -152,6 +152,12 @@ fn refuses_static_truncated_lying_deep_and_overlong_files() {
     assert!(err("xof 0303bin 0032 junk").reason.contains("binary"));
     assert!(err("xof 0303tzip0032 junk").reason.contains("compressed"));
     assert!(err("ply\nformat ascii").reason.contains("xof"));
+    // 4,096 frames × 16,385 vertices is over the default clip limit (2²⁶ rows): refused before the bake allocates.
+    let many: Vec<[f32; 3]> = (0..16_385).map(|i| [i as f32, 0.0, 0.0]).collect();
+    let mut keys = vec![vec![[0.0f32; 3]]; 4096];
+    keys[1][0] = [0.0, 1.0, 0.0];
+    let e = err(&write_test_x(&many, &[[0, 1, 2]], &vec![0; many.len()], &keys));
+    assert!(e.reason.contains("baked vertices"), "{e}");
     let deep = format!("xof 0303txt 0032\n{}", "Frame a {\n".repeat(100_000));
     assert!(err(&deep).reason.contains("deeper"));
 }
