@@ -460,6 +460,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
         .enumerate()
         .map(|(j, m)| inverse(m).ok_or_else(|| err(&format!("joints[{j}]"), "singular bind transform".into())))
         .collect::<Result<_>>()?;
+    skeletal::check_rows(path, info.frames, n)?;
     let mut vertices = Vec::with_capacity(info.frames * n);
     for f in 0..anim.count {
         let row = &anim_file.frames[(anim.first + f) * anim_file.channels..];

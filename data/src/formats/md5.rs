@@ -434,6 +434,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
         ));
     }
     let n = mesh.verts.len();
+    skeletal::check_rows(path, anim.frames.len(), n)?;
     let mut vertices = Vec::with_capacity(anim.frames.len() * n);
     for frame in &anim.frames {
         for (ws, s) in mesh.verts.iter().zip(&scale) {

@@ -178,6 +178,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     let h = psa_header(&mut b)?;
     b.seek(h.keys_at, "keys")?;
     let n = pmd.positions.len();
+    skeletal::check_rows(path, h.frames, n)?;
     let mut vertices = Vec::with_capacity(h.frames * n);
     for f in 0..h.frames {
         let skin: Vec<Mat> = inv_rest
