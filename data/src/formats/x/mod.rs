@@ -174,11 +174,7 @@ fn mesh<'a>(path: &Path, obj: &Obj<'a>, frame: Option<usize>) -> Result<Mesh<'a>
         }
         let mut corners = Vec::with_capacity(k);
         for _ in 0..k {
-            let i = v.uint()?;
-            if i >= n as u64 {
-                return Err(v.err(format!("face {f} names vertex {i}, but the mesh has {n}")));
-            }
-            corners.push(i as u32);
+            corners.push(v.vertex(n, || format!("face {f}"))? as u32);
         }
         faces.extend((1..k - 1).map(|c| [corners[0], corners[c], corners[c + 1]]));
     }
@@ -189,11 +185,7 @@ fn mesh<'a>(path: &Path, obj: &Obj<'a>, frame: Option<usize>) -> Result<Mesh<'a>
         let k = v.count(2)?;
         let mut vertices = Vec::with_capacity(k);
         for _ in 0..k {
-            let i = v.uint()?;
-            if i >= n as u64 {
-                return Err(v.err(format!("weights vertex {i}, but the mesh has {n}")));
-            }
-            vertices.push(i as usize);
+            vertices.push(v.vertex(n, || "a skin weight".into())?);
         }
         let weights = (0..k).map(|_| v.float()).collect::<Result<Vec<f64>>>()?;
         let offset = v.matrix()?;

@@ -215,6 +215,15 @@ impl<'o, 'a> Vals<'o, 'a> {
             .map_err(|_| self.err(format!("`{w}` is not a non-negative whole number")))
     }
 
+    /// A vertex index below `n`; `what` names the entry in the error (built only then).
+    pub(super) fn vertex(&mut self, n: usize, what: impl Fn() -> String) -> Result<usize> {
+        let i = self.uint()?;
+        if i >= n as u64 {
+            return Err(self.err(format!("{} names vertex {i}, but the mesh has {n}", what())));
+        }
+        Ok(i as usize)
+    }
+
     /// A count of items of `each` values that must still be there.
     pub(super) fn count(&mut self, each: usize) -> Result<usize> {
         let n = self.uint()?;
