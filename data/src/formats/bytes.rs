@@ -1,5 +1,5 @@
 //! A bounds-checked little-endian reader over a file's bytes, shared by the binary game formats (IQM, MD2, MD3,
-//! 0 A.D. PMD/PSA, `.anime`).
+//! 0 A.D. PMD/PSA, `.anime`, FBX).
 //!
 //! Every count a file claims goes through [`Bytes::check_count`] (count × element size against the bytes that
 //! remain, or against a named limit) before anything is allocated from it, so memory stays bounded by the file's
@@ -87,6 +87,10 @@ impl<'a> Bytes<'a> {
 
     pub fn i32(&mut self, field: &str) -> Result<i32> {
         Ok(i32::from_le_bytes(self.take(4, field)?.try_into().expect("4 bytes")))
+    }
+
+    pub fn u64(&mut self, field: &str) -> Result<u64> {
+        Ok(u64::from_le_bytes(self.take(8, field)?.try_into().expect("8 bytes")))
     }
 
     /// A u32 count or offset as usize.

@@ -13,6 +13,7 @@ pub mod b3d;
 pub mod bvh;
 pub mod bytes;
 pub mod dymesh_bin;
+pub mod fbx;
 pub mod gltf;
 pub mod iqm;
 pub mod md2;
@@ -142,6 +143,8 @@ pub enum Format {
     B3d,
     /// DirectX `.x` (text form).
     X,
+    /// Binary FBX 7.
+    Fbx,
 }
 
 impl Format {
@@ -160,6 +163,7 @@ impl Format {
             Format::Anime => "anime",
             Format::B3d => "b3d",
             Format::X => "x",
+            Format::Fbx => "fbx",
         }
     }
 
@@ -171,7 +175,7 @@ impl Format {
 
 /// Extensions (lower case) of the files an import picks up as clip sources.
 pub const SOURCE_EXTENSIONS: &[&str] = &[
-    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime", "b3d", "x",
+    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime", "b3d", "x", "fbx",
 ];
 
 /// Whether `path` is a clip source for an import: a file with one of [`SOURCE_EXTENSIONS`], except an
@@ -207,6 +211,7 @@ impl Format {
             "anime" => Ok(Format::Anime),
             "b3d" => Ok(Format::B3d),
             "x" => Ok(Format::X),
+            "fbx" => Ok(Format::Fbx),
             "md5anim" | "psa" | "bvh" => Err(DataError::new(
                 path,
                 "format",
@@ -222,7 +227,7 @@ impl Format {
                 "format",
                 format!(
                     "unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb, .iqm, .md5mesh, .md2, .md3, \
-                     .pmd, .anime, .b3d, .x or a folder of .obj)"
+                     .pmd, .anime, .b3d, .x, .fbx or a folder of .obj)"
                 ),
             )),
         }
@@ -278,6 +283,7 @@ fn read_take_unguarded(path: &Path, format: Format, opts: &ReadOptions) -> Resul
         Format::Anime => anime::read(path, opts)?,
         Format::B3d => b3d::read(path, opts)?,
         Format::X => x::read(path, opts)?,
+        Format::Fbx => fbx::read(path, opts)?,
     };
     Ok(Taken {
         clip,
@@ -303,6 +309,7 @@ fn list_takes_unguarded(path: &Path, format: Format) -> Result<Option<Vec<TakeIn
         Format::Anime => anime::list_takes(path)?,
         Format::B3d => b3d::list_takes(path)?,
         Format::X => x::list_takes(path)?,
+        Format::Fbx => fbx::list_takes(path)?,
     }))
 }
 
@@ -344,7 +351,8 @@ mod tests {
             Format::from_path(Path::new(env!("CARGO_MANIFEST_DIR"))).unwrap(),
             Format::ObjSeq
         );
-        assert_eq!(Format::from_path(Path::new("x.fbx")).unwrap_err().field, "format");
+        assert_eq!(Format::from_path(Path::new("x.FBX")).unwrap(), Format::Fbx);
+        assert_eq!(Format::from_path(Path::new("x.dae")).unwrap_err().field, "format");
         assert_eq!(Format::from_path(Path::new("a/b.MD5MESH")).unwrap(), Format::Md5);
         assert_eq!(
             Format::from_path(Path::new("deer.dae.cached.pmd")).unwrap(),
