@@ -30,6 +30,8 @@ rm -rf "$OUT/files" "$OUT/pk3" "$OUT/store"
 mkdir -p "$OUT/files" "$OUT/pk3"
 pak="$OUT/extracted/openarena-data/usr/share/games/openarena/baseoa/pak0.pk3"
 # Only the players' first-LOD bodies (lower.md3, upper.md3): the _1/_2 files are coarser copies, heads do not move.
+# They are copied without animation.cfg: each file stays one take of all its frames (as when the held-out
+# figures of the experiments were measured), not one take per animation.
 unzip -q -o "$pak" 'models/players/*/lower.md3' 'models/players/*/upper.md3' -d "$OUT/pk3"
 for f in "$OUT"/pk3/models/players/*/{lower,upper}.md3; do
   cp "$f" "$OUT/files/$(basename "$(dirname "$f")")_$(basename "$f")"
