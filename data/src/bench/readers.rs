@@ -14,7 +14,7 @@ use std::time::Instant;
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
 use crate::formats::skeletal::ReadOptions;
-use crate::formats::{self, b3d, fbx, iqm, md2, md3, pmd, x};
+use crate::formats::{self, b3d, dae, fbx, iqm, md2, md3, pmd, x};
 use crate::fps::farthest_point_sampling;
 use crate::preprocess;
 
@@ -23,7 +23,7 @@ pub const JOINTS: usize = 8;
 
 /// The formats benchmarked, in report order.
 const FORMATS: &[&str] = &[
-    "bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd", "b3d", "x", "fbx",
+    "bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd", "b3d", "x", "fbx", "dae",
 ];
 
 /// Translation of joint `j` at frame `f` (non-negative: IQM's test writer quantises without an offset).
@@ -127,15 +127,15 @@ fn write(format: &str, clip: &Clip, dir: &Path) -> Result<PathBuf> {
             write_bytes(&path, b3d::write_test_b3d(frame0, &clip.faces, [0.0; 3], &bone, &keys))?;
             path
         }
-        "x" | "fbx" => {
+        "x" | "fbx" | "dae" => {
             let keys: Vec<Vec<[f32; 3]>> = (0..clip.frames)
                 .map(|f| (0..JOINTS).map(|j| joint_shift(f, j)).collect())
                 .collect();
             let path = dir.join(format!("clip.{format}"));
-            if format == "x" {
-                write_bytes(&path, x::write_test_x(frame0, &clip.faces, &skin, &keys))?;
-            } else {
-                write_bytes(&path, fbx::write_test_fbx(frame0, &clip.faces, &skin, &keys))?;
+            match format {
+                "x" => write_bytes(&path, x::write_test_x(frame0, &clip.faces, &skin, &keys))?,
+                "dae" => write_bytes(&path, dae::write_test_dae(frame0, &clip.faces, &skin, &keys))?,
+                _ => write_bytes(&path, fbx::write_test_fbx(frame0, &clip.faces, &skin, &keys))?,
             }
             path
         }

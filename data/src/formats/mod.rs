@@ -12,6 +12,7 @@ pub mod anime;
 pub mod b3d;
 pub mod bvh;
 pub mod bytes;
+pub mod dae;
 pub mod dymesh_bin;
 pub mod fbx;
 pub mod gltf;
@@ -145,6 +146,8 @@ pub enum Format {
     X,
     /// Binary FBX 7.
     Fbx,
+    /// COLLADA `.dae`.
+    Dae,
 }
 
 impl Format {
@@ -164,6 +167,7 @@ impl Format {
             Format::B3d => "b3d",
             Format::X => "x",
             Format::Fbx => "fbx",
+            Format::Dae => "dae",
         }
     }
 
@@ -175,7 +179,7 @@ impl Format {
 
 /// Extensions (lower case) of the files an import picks up as clip sources.
 pub const SOURCE_EXTENSIONS: &[&str] = &[
-    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime", "b3d", "x", "fbx",
+    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime", "b3d", "x", "fbx", "dae",
 ];
 
 /// Whether `path` is a clip source for an import: a file with one of [`SOURCE_EXTENSIONS`], except an
@@ -212,6 +216,7 @@ impl Format {
             "b3d" => Ok(Format::B3d),
             "x" => Ok(Format::X),
             "fbx" => Ok(Format::Fbx),
+            "dae" => Ok(Format::Dae),
             "md5anim" | "psa" | "bvh" => Err(DataError::new(
                 path,
                 "format",
@@ -227,7 +232,7 @@ impl Format {
                 "format",
                 format!(
                     "unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb, .iqm, .md5mesh, .md2, .md3, \
-                     .pmd, .anime, .b3d, .x, .fbx or a folder of .obj)"
+                     .pmd, .anime, .b3d, .x, .fbx, .dae or a folder of .obj)"
                 ),
             )),
         }
@@ -284,6 +289,7 @@ fn read_take_unguarded(path: &Path, format: Format, opts: &ReadOptions) -> Resul
         Format::B3d => b3d::read(path, opts)?,
         Format::X => x::read(path, opts)?,
         Format::Fbx => fbx::read(path, opts)?,
+        Format::Dae => dae::read(path, opts)?,
     };
     Ok(Taken {
         clip,
@@ -310,6 +316,7 @@ fn list_takes_unguarded(path: &Path, format: Format) -> Result<Option<Vec<TakeIn
         Format::B3d => b3d::list_takes(path)?,
         Format::X => x::list_takes(path)?,
         Format::Fbx => fbx::list_takes(path)?,
+        Format::Dae => dae::list_takes(path)?,
     }))
 }
 
@@ -352,7 +359,8 @@ mod tests {
             Format::ObjSeq
         );
         assert_eq!(Format::from_path(Path::new("x.FBX")).unwrap(), Format::Fbx);
-        assert_eq!(Format::from_path(Path::new("x.dae")).unwrap_err().field, "format");
+        assert_eq!(Format::from_path(Path::new("x.DAE")).unwrap(), Format::Dae);
+        assert_eq!(Format::from_path(Path::new("x.blend")).unwrap_err().field, "format");
         assert_eq!(Format::from_path(Path::new("a/b.MD5MESH")).unwrap(), Format::Md5);
         assert_eq!(
             Format::from_path(Path::new("deer.dae.cached.pmd")).unwrap(),
