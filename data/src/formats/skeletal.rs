@@ -451,6 +451,17 @@ pub fn companions(mesh: &Path, exts: &[&str], parent: bool) -> Vec<PathBuf> {
     found
 }
 
+/// A baked take of `path` as a clip: id = the file's stem, caption empty, source = the path.
+pub fn baked_clip(
+    path: &Path,
+    vertices: Vec<[f32; 3]>,
+    frames: usize,
+    faces: Vec<[u32; 3]>,
+) -> Result<crate::clip::Clip> {
+    let n = vertices.len().checked_div(frames).unwrap_or(0);
+    crate::clip::Clip::new(stem(path), vertices, frames, n, faces, "", path.display().to_string())
+}
+
 /// The stem of `path` as a take or asset name.
 pub fn stem(path: &Path) -> String {
     let name = path

@@ -124,13 +124,7 @@ fn ints(doc: &Doc, node: Option<Node>) -> Result<Vec<i64>> {
         .collect()
 }
 
-fn vertex_weights(
-    doc: &Doc,
-    skin: Node,
-    field: &str,
-    n: usize,
-    n_joints: usize,
-) -> Result<Weights> {
+fn vertex_weights(doc: &Doc, skin: Node, field: &str, n: usize, n_joints: usize) -> Result<Weights> {
     let vw = child(skin, "vertex_weights").ok_or_else(|| doc.err(field, "no <vertex_weights>"))?;
     let (mut joint_at, mut weight_at, mut stride, mut weights) = (None, None, 0, Vec::new());
     for input in children(vw, "input") {

@@ -379,16 +379,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     for v in &mut vertices {
         *v = turn(v.map(f64::from)).map(|x| x as f32);
     }
-    let n = bind.len();
-    let clip = Clip::new(
-        skeletal::stem(path),
-        vertices,
-        info.frames,
-        n,
-        faces,
-        "",
-        path.display().to_string(),
-    )?;
+    let clip = skeletal::baked_clip(path, vertices, info.frames, faces)?;
     Ok((clip, stats, info))
 }
 

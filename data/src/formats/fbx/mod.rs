@@ -466,16 +466,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     if mirror {
         faces = faces.into_iter().map(|[a, b, c]| [a, c, b]).collect();
     }
-    let n = bind.len();
-    let clip = Clip::new(
-        skeletal::stem(path),
-        vertices,
-        info.frames,
-        n,
-        faces,
-        "",
-        path.display().to_string(),
-    )?;
+    let clip = skeletal::baked_clip(path, vertices, info.frames, faces)?;
     Ok((clip, stats, info))
 }
 

@@ -457,16 +457,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
         skin_frame(&bind, &infl, &skin, &mut vertices);
     }
     let faces = skeletal::to_right_handed(&mut vertices, faces);
-    let n = bind.len();
-    let clip = Clip::new(
-        skeletal::stem(path),
-        vertices,
-        info.frames,
-        n,
-        faces,
-        "",
-        path.display().to_string(),
-    )?;
+    let clip = skeletal::baked_clip(path, vertices, info.frames, faces)?;
     Ok((clip, stats, info))
 }
 
