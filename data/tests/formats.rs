@@ -323,7 +323,7 @@ fn read_and_write_clip_dispatch_by_path() {
         assert_eq!((back.frames, &back.faces), (clip.frames, &clip.faces), "{name}");
         assert_close(&back.vertices, &clip.vertices, 1e-6);
     }
-    assert_eq!(read_clip(&dir.path().join("c.fbx")).unwrap_err().field, "format");
+    assert_eq!(read_clip(&dir.path().join("c.blend")).unwrap_err().field, "format");
 }
 
 /// The Khronos sample files that Debian's `assimp-testmodels` installs; not copied into the repository.
