@@ -27,7 +27,7 @@
 
 use std::path::Path;
 
-use super::skeletal::{IDENTITY, Mat, apply, mul};
+use super::skeletal::{IDENTITY, Mat, apply, axis_rotation, mul};
 use crate::error::{DataError, Result};
 
 /// Largest BVH file read, in bytes.
@@ -420,18 +420,6 @@ pub fn parse(path: &Path, max_frames: usize, motion: bool) -> Result<Bvh> {
     Ok(bvh)
 }
 
-/// Rotation by `deg` degrees about axis 0/1/2.
-fn axis_rot(axis: usize, deg: f64) -> Mat {
-    let (s, c) = deg.to_radians().sin_cos();
-    let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
-    let mut m = IDENTITY;
-    m[a][a] = c;
-    m[a][b] = -s;
-    m[b][a] = s;
-    m[b][b] = c;
-    m
-}
-
 impl Bvh {
     /// Joint names in file order.
     pub fn names(&self) -> Vec<String> {
@@ -452,7 +440,7 @@ impl Bvh {
                 c += 1;
                 match *ch {
                     Channel::Pos(a) => pos[a] = if row.is_some() { v } else { pos[a] },
-                    Channel::Rot(a) => rot = mul(&rot, &axis_rot(a, v)),
+                    Channel::Rot(a) => rot = mul(&rot, &axis_rotation(a, v)),
                 }
             }
             for (r, row) in local.iter_mut().enumerate().take(3) {

@@ -220,6 +220,18 @@ pub fn apply(m: &Mat, p: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|r| m[r][0] * p[0] + m[r][1] * p[1] + m[r][2] * p[2] + m[r][3])
 }
 
+/// Rotation about axis `axis` (0 x, 1 y, 2 z) by `deg` degrees.
+pub fn axis_rotation(axis: usize, deg: f64) -> Mat {
+    let (s, c) = deg.to_radians().sin_cos();
+    let (i, j) = ((axis + 1) % 3, (axis + 2) % 3);
+    let mut m = IDENTITY;
+    m[i][i] = c;
+    m[i][j] = -s;
+    m[j][i] = s;
+    m[j][j] = c;
+    m
+}
+
 /// Unit quaternion `(x, y, z, w)`; a zero quaternion becomes the identity.
 pub fn normalize_quat(q: [f64; 4]) -> [f64; 4] {
     let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();

@@ -4,19 +4,7 @@
 use super::binary::Prop;
 use super::scene::Scene;
 use crate::error::Result;
-use crate::formats::skeletal::{IDENTITY, Mat, inverse, mul};
-
-/// Rotation about axis `axis` (0 x, 1 y, 2 z) by `deg` degrees.
-pub(super) fn axis_rotation(axis: usize, deg: f64) -> Mat {
-    let (s, c) = deg.to_radians().sin_cos();
-    let (i, j) = ((axis + 1) % 3, (axis + 2) % 3);
-    let mut m = IDENTITY;
-    m[i][i] = c;
-    m[i][j] = -s;
-    m[j][i] = s;
-    m[j][j] = c;
-    m
-}
+use crate::formats::skeletal::{IDENTITY, Mat, axis_rotation, inverse, mul};
 
 /// Euler rotation of `deg` in FBX rotation order `order` (0 `XYZ` … 5 `ZYX`; the first letter turns first).
 pub(super) fn euler(deg: [f64; 3], order: i64) -> Mat {
