@@ -22,34 +22,27 @@ pub(super) struct Channel {
 }
 
 impl Channel {
-    /// The values at time `t` (linear between keys, held outside them).
-    fn at(&self, t: f64) -> &[f64] {
-        let w = self.width;
-        let after = self.times.partition_point(|&k| k <= t);
-        if after == 0 {
-            return &self.values[..w];
-        }
-        &self.values[(after - 1) * w..after * w]
-    }
-
+    /// Write the values at time `t` (linear between keys, held outside them and after `STEP` keys) into `out`:
+    /// all of the element's values, or its one animated value.
     fn sample(&self, t: f64, out: &mut [f64]) {
         let w = self.width;
         let after = self.times.partition_point(|&k| k <= t);
-        let held = after == 0 || after == self.times.len() || self.step[after - 1];
-        let v: Vec<f64> = if held {
-            self.at(t).to_vec()
+        let key = |i: usize| &self.values[i * w..(i + 1) * w];
+        let (a, b, f) = if after == 0 {
+            (key(0), key(0), 0.0)
+        } else if after == self.times.len() || self.step[after - 1] {
+            (key(after - 1), key(after - 1), 0.0)
         } else {
             let (t0, t1) = (self.times[after - 1], self.times[after]);
             let f = if t1 > t0 { (t - t0) / (t1 - t0) } else { 0.0 };
-            let (a, b) = (
-                &self.values[(after - 1) * w..after * w],
-                &self.values[after * w..(after + 1) * w],
-            );
-            a.iter().zip(b).map(|(x, y)| x + f * (y - x)).collect()
+            (key(after - 1), key(after), f)
         };
-        match self.component {
-            Some(c) => out[c] = v[0],
-            None => out.copy_from_slice(&v),
+        let target = match self.component {
+            Some(c) => &mut out[c..=c],
+            None => out,
+        };
+        for ((o, x), y) in target.iter_mut().zip(a).zip(b) {
+            *o = x + f * (y - x);
         }
     }
 }
@@ -64,13 +57,12 @@ pub(super) struct Take {
 /// Node `node`'s local transform at time `t` under `channels`.
 pub(super) fn local(node: &SceneNode, channels: &[Channel], t: f64) -> Mat {
     let mut m = IDENTITY;
+    let mut v = [0.0; 16];
     for (i, e) in node.elements.iter().enumerate() {
-        let mut v = e.values.clone();
-        channels
-            .iter()
-            .filter(|c| c.element == i)
-            .for_each(|c| c.sample(t, &mut v));
-        m = mul(&m, &e.matrix(&v));
+        let v = &mut v[..e.values.len()];
+        v.copy_from_slice(&e.values);
+        channels.iter().filter(|c| c.element == i).for_each(|c| c.sample(t, v));
+        m = mul(&m, &e.matrix(v));
     }
     m
 }

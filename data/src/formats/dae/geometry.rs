@@ -26,7 +26,7 @@ type Weights = Vec<Vec<(Option<usize>, f64)>>;
 type Surface = (Vec<[f64; 3]>, Vec<[u32; 3]>);
 
 /// A row-major 4×4 matrix from 16 values.
-fn matrix(v: &[f64]) -> Mat {
+pub(super) fn matrix(v: &[f64]) -> Mat {
     std::array::from_fn(|r| std::array::from_fn(|c| v[r * 4 + c]))
 }
 

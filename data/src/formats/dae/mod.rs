@@ -64,7 +64,7 @@ enum Kind {
 impl Element<'_> {
     fn matrix(&self, v: &[f64]) -> Mat {
         match self.kind {
-            Kind::Matrix => std::array::from_fn(|r| std::array::from_fn(|c| v[r * 4 + c])),
+            Kind::Matrix => geometry::matrix(v),
             Kind::Translate => {
                 let mut m = IDENTITY;
                 (0..3).for_each(|k| m[k][3] = v[k]);
@@ -277,7 +277,7 @@ fn walk<'a, 'input>(
     Ok(())
 }
 
-/// The `up_axis` turn to Y-up and whether it mirrors (it never does: both turns are rotations).
+/// The `up_axis` turn to Y-up (`Z_UP` and `X_UP` are both rotations, so windings stay).
 fn up_axis(doc: &Doc) -> fn([f64; 3]) -> [f64; 3] {
     let up = child(doc.root, "asset")
         .and_then(|a| child(a, "up_axis"))
@@ -350,8 +350,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
                 *l = vec![(m.node, 1.0)];
             }
         }
-        let shape = if m.weights.is_empty() { IDENTITY } else { m.bind_shape };
-        bind.extend(m.positions.iter().map(|p| skeletal::apply(&shape, *p)));
+        bind.extend(m.positions.iter().map(|p| skeletal::apply(&m.bind_shape, *p)));
         infl.extend(lists);
         faces.extend(m.faces.iter().map(|f| f.map(|i| i + base)));
     }

@@ -265,7 +265,7 @@ fn read_doc(path: &Path) -> Result<binary::Document> {
 /// The takes of an `.fbx` file: its animation stacks that move something.
 pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
     let doc = read_doc(path)?;
-    let scene = Scene::new(path, &doc)?;
+    let scene = Scene::new(path, &doc);
     let (order, _) = hierarchy(&scene)?;
     let index = order.iter().enumerate().map(|(i, &m)| (m, i)).collect();
     Ok(takes(&scene, &index)?.into_iter().map(|t| t.info).collect())
@@ -378,7 +378,7 @@ fn instance(
 /// Bake take `opts.take` of an `.fbx` file into a clip (id = file stem, caption empty).
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInfo)> {
     let doc = read_doc(path)?;
-    let scene = Scene::new(path, &doc)?;
+    let scene = Scene::new(path, &doc);
     let (order, parents) = hierarchy(&scene)?;
     let index: HashMap<i64, usize> = order.iter().enumerate().map(|(i, &m)| (m, i)).collect();
     let pivots = order

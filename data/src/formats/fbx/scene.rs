@@ -39,7 +39,7 @@ pub(super) fn p70<'a>(node: &'a Node, name: &str) -> Option<&'a [Prop]> {
 }
 
 impl<'a> Scene<'a> {
-    pub(super) fn new(path: &'a Path, doc: &'a binary::Document) -> Result<Self> {
+    pub(super) fn new(path: &'a Path, doc: &'a binary::Document) -> Self {
         let top = |n: &str| doc.nodes.iter().find(|x| x.name == n);
         let mut objects = HashMap::new();
         for node in top("Objects").map(|o| o.children.as_slice()).unwrap_or_default() {
@@ -71,13 +71,13 @@ impl<'a> Scene<'a> {
             }
         }
         let settings = top("GlobalSettings").and_then(|g| g.child("Properties70"));
-        Ok(Scene {
+        Scene {
             path,
             objects,
             links,
             settings,
             templates,
-        })
+        }
     }
 
     pub(super) fn err(&self, field: impl Into<String>, reason: impl Into<String>) -> DataError {
@@ -121,10 +121,7 @@ impl<'a> Scene<'a> {
         let f = |k: usize| v.get(k).and_then(Prop::float).filter(|x| x.is_finite());
         match (f(0), f(1), f(2)) {
             (Some(x), Some(y), Some(z)) => Ok([x, y, z]),
-            _ => Err(self.err(
-                format!("{} {:?} {name}", self.objects[&id].node.name, self.objects[&id].name),
-                "not three finite numbers",
-            )),
+            _ => Err(self.err(self.field(id, name), "not three finite numbers")),
         }
     }
 
@@ -132,29 +129,45 @@ impl<'a> Scene<'a> {
         self.settings.and_then(|s| p70(s, name)).and_then(|v| v.first())
     }
 
-    /// The array property `name` of object `id`'s child node `name` (empty when the node is missing).
-    pub(super) fn array(&self, id: i64, name: &str) -> Result<&'a [f64]> {
+    /// `Kind "name" what`: the field an error about object `id` names.
+    fn field(&self, id: i64, what: &str) -> String {
         let o = &self.objects[&id];
-        match o.node.child(name).and_then(|n| n.props.first()) {
-            None => Ok(&[]),
-            Some(Prop::Floats(v)) => Ok(v),
-            Some(_) => Err(self.err(
-                format!("{} {:?} {name}", o.node.name, o.name),
-                "not an array of numbers",
-            )),
+        format!("{} {:?} {what}", o.node.name, o.name)
+    }
+
+    /// The first property of object `id`'s child node `name`, picked by `pick` (`None` when the node is missing;
+    /// an error saying `expected` when it holds something else).
+    fn child_prop<T: ?Sized>(
+        &self,
+        id: i64,
+        name: &str,
+        expected: &str,
+        pick: impl Fn(&'a Prop) -> Option<&'a T>,
+    ) -> Result<Option<&'a T>> {
+        match self.objects[&id].node.child(name).and_then(|n| n.props.first()) {
+            None => Ok(None),
+            Some(p) => pick(p)
+                .map(Some)
+                .ok_or_else(|| self.err(self.field(id, name), format!("not an array of {expected}"))),
         }
     }
 
+    /// The float array of object `id`'s child node `name` (empty when the node is missing).
+    pub(super) fn array(&self, id: i64, name: &str) -> Result<&'a [f64]> {
+        let pick = |p: &'a Prop| match p {
+            Prop::Floats(v) => Some(v.as_slice()),
+            _ => None,
+        };
+        Ok(self.child_prop(id, name, "numbers", pick)?.unwrap_or_default())
+    }
+
+    /// The integer array of object `id`'s child node `name` (empty when the node is missing).
     pub(super) fn ints(&self, id: i64, name: &str) -> Result<&'a [i64]> {
-        let o = &self.objects[&id];
-        match o.node.child(name).and_then(|n| n.props.first()) {
-            None => Ok(&[]),
-            Some(Prop::Ints(v)) => Ok(v),
-            Some(_) => Err(self.err(
-                format!("{} {:?} {name}", o.node.name, o.name),
-                "not an array of integers",
-            )),
-        }
+        let pick = |p: &'a Prop| match p {
+            Prop::Ints(v) => Some(v.as_slice()),
+            _ => None,
+        };
+        Ok(self.child_prop(id, name, "integers", pick)?.unwrap_or_default())
     }
 
     pub(super) fn matrix(&self, id: i64, name: &str) -> Result<Option<Mat>> {
@@ -163,8 +176,7 @@ impl<'a> Scene<'a> {
             return Ok(None);
         }
         if a.len() != 16 || a.iter().any(|x| !x.is_finite()) {
-            let o = &self.objects[&id];
-            return Err(self.err(format!("{} {:?} {name}", o.node.name, o.name), "not 16 finite numbers"));
+            return Err(self.err(self.field(id, name), "not 16 finite numbers"));
         }
         // Stored column after column.
         Ok(Some(std::array::from_fn(|r| std::array::from_fn(|c| a[c * 4 + r]))))
