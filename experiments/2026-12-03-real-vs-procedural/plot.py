@@ -10,6 +10,8 @@ import matplotlib.pyplot as plt
 labels = {"procedural": "RF trained on procedural clips (shipped, 1,500 steps)",
           "procedural1000": "RF trained on procedural clips, step 1,000",
           "real1000": "RF trained on real clips, step 1,000",
+          "both1000": "RF trained on procedural + real clips, step 1,000",
+          "baseline": "replacement Baseline (shipped, procedural)",
           "latentlerp": "latent lerp (the VAE on interpolated keyframe latents)", "lerp": "lerp"}
 panels = [("real-val.csv", "real validation (50 windows)"), ("heldout.csv", "held-out real (63 windows)"),
           ("procedural-val.csv", "procedural validation (50 windows)")]
@@ -30,3 +32,13 @@ for ax, (path, title) in zip(axes, panels):
 axes[0].legend(fontsize=7)
 fig.tight_layout()
 fig.savefig("rmse_vs_kx.png", dpi=120)
+
+# summary.csv: the three tables in one file, with the evaluation set as the first column
+with open("summary.csv", "w", newline="") as out:
+    writer = None
+    for path, _ in panels:
+        for r in csv.DictReader(open(path)):
+            if writer is None:
+                writer = csv.DictWriter(out, ["set"] + list(r))
+                writer.writeheader()
+            writer.writerow({"set": path[:-4], **r})
