@@ -581,6 +581,7 @@ fn vae_batch(clip: &Clip, device: &Device) -> VaeBatch {
         vmask: Tensor::from_data(TensorData::new(vec![true; N], [1, N]), device),
         fps: Tensor::from_data(TensorData::new(fps, [1, P]), device),
         edges: EdgeList::new(&[edges], N, device).unwrap(),
+        noise_seed: None,
     }
 }
 

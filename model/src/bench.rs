@@ -221,6 +221,7 @@ fn synthetic_vae_batch(
         vmask: Tensor::<2, Bool>::from_data(TensorData::new(vec![true; batch * vertices], [batch, vertices]), device),
         fps: Tensor::from_data(TensorData::new(fps_ids, [batch, tokens]), device),
         edges,
+        noise_seed: None,
     })
 }
 

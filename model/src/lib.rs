@@ -11,6 +11,7 @@ pub mod frame_vae;
 pub mod latent_stats;
 pub mod mesh_vae;
 pub mod mmdit;
+pub mod noise;
 pub mod point_embed;
 pub mod rectified_flow;
 pub mod summary;

@@ -411,6 +411,15 @@ pub fn sample(mu: Tensor<4>, logvar: Tensor<4>) -> Tensor<4> {
     mu + logvar.mul_scalar(0.5).exp() * noise
 }
 
+/// [`sample`] with ξ drawn on the host from `rng` ([`crate::noise`]): the same draws on every backend and thread.
+///
+/// # Shapes
+/// - `mu`, `logvar`: `[B, G, P, C]` → `[B, G, P, C]`
+pub fn sample_with(mu: Tensor<4>, logvar: Tensor<4>, rng: &mut impl any4d_data::rng::Rng) -> Tensor<4> {
+    let noise = crate::noise::normal(mu.dims(), rng, &mu.device());
+    mu + logvar.mul_scalar(0.5).exp() * noise
+}
+
 /// (V1) mean per-vertex Euclidean distance over the real vertices of all frames: per clip
 /// (1/B) Σ_b Σ_{f,v real} ‖x̂ − x̄‖₂ / (T · N_v^b), or over the whole batch Σ_{b,f,v real} ‖x̂ − x̄‖₂ / (T · Σ_b N_v)
 /// (the AnimateAnyMesh code), as `average` says.
@@ -503,6 +512,8 @@ pub struct VaeBatch {
     pub fps: Tensor<2, Int>,
     /// Mesh edges of the batch.
     pub edges: EdgeList,
+    /// Seed of the posterior noise ξ, drawn on the host ([`sample_with`]); `None` draws it from the device's stream.
+    pub noise_seed: Option<u64>,
 }
 
 /// The interface both mesh VAEs share (frame-wise [`crate::frame_vae::FrameVae`], sequence-wise
@@ -596,7 +607,10 @@ pub trait MeshVae {
     fn reconstruct(&self, batch: &VaeBatch, posterior: Posterior) -> (Tensor<4>, VaeEncoding) {
         let enc = self.encode_vae_batch(batch);
         let z = match posterior {
-            Posterior::Sample => self.sample(enc.mu.clone(), enc.logvar.clone()),
+            Posterior::Sample => match batch.noise_seed {
+                Some(seed) => sample_with(enc.mu.clone(), enc.logvar.clone(), &mut crate::noise::generator(seed)),
+                None => self.sample(enc.mu.clone(), enc.logvar.clone()),
+            },
             Posterior::Mean => enc.mu.clone(),
         };
         let recon = self.decode(enc.e0.clone(), batch.reference.clone(), enc.z0.clone(), z);

@@ -104,6 +104,11 @@ impl TauSampler {
         }
     }
 
+    /// Draws B times from `rng` on the host ([`crate::noise`]): the same τ on every backend and thread.
+    pub fn sample_with(self, batch: usize, rng: &mut impl any4d_data::rng::Rng, device: &Device) -> Tensor<1> {
+        self.map(crate::noise::uniform_open(batch, rng, device))
+    }
+
     /// Draws B times from the device's random stream (seed it with `device.seed`).
     pub fn sample(self, batch: usize, device: &Device) -> Tensor<1> {
         match self {

@@ -98,6 +98,7 @@ fn batch(fx: &Fixture, pad_value: Option<f32>, device: &Device) -> VaeBatch {
         vmask: Tensor::from_data(TensorData::new(vmask, [B, N]), device),
         fps: Tensor::from_data(TensorData::new(fps, [B, P]), device),
         edges: EdgeList::new(&fx.edges, N, device).expect("fixture edges are valid"),
+        noise_seed: None,
     }
 }
 
@@ -561,6 +562,7 @@ fn paper_size_forward_backward_on_one_clip() {
             &device,
         ),
         edges: EdgeList::new(&[edges], n, &device).expect("valid edges"),
+        noise_seed: None,
     };
     let start = std::time::Instant::now();
     let loss = vae.loss(&b).total;

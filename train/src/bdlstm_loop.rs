@@ -325,7 +325,9 @@ impl BdlstmObjective {
                     clip.mu[range.clone()]
                         .iter()
                         .zip(&clip.logvar[range])
-                        .map(|(&mu, &logvar)| mu + (0.5 * logvar).exp() * crate::rf_loop::standard_normal(rng) as f32),
+                        .map(|(&mu, &logvar)| {
+                            mu + (0.5 * logvar).exp() * any4d_model::noise::standard_normal(rng) as f32
+                        }),
                 ),
             }
         }

@@ -14,7 +14,7 @@ use burn::module::{Module, ModuleMapper, ModuleVisitor, Param, ParamId};
 use burn::optim::{GradientsAccumulator, GradientsParams, ModuleOptimizer};
 use burn::prelude::{Device, Tensor};
 use burn::tensor::Gradients;
-use rand::SeedableRng;
+use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use any4d_data::rng::{GOLDEN_GAMMA, splitmix64};
@@ -123,8 +123,24 @@ pub struct LoopSetup<'a> {
 /// non-finite value. Returns the model to sample with (the parameter average when `train.ema_decay > 0`, else the
 /// trained parameters) and how the run ended. Checkpoints go to `run/checkpoints/`.
 pub fn train<O: Objective>(objective: &O, model: O::Model, setup: LoopSetup<'_>) -> Result<(O::Model, Outcome)> {
+    materialise(&model, &setup.device, setup.train.seed);
     let one = OneDevice(setup.device.clone());
     run_steps(objective, model, setup, &one)
+}
+
+/// Draws every lazily initialised parameter of `model` now, from `device`'s stream seeded with `seed`. burn
+/// initialises a parameter when it is first read; left to that, the initial weights would depend on what drew from
+/// the stream before (the first step's forward pass on one device, a fork onto each worker on several). Here they
+/// are a function of the seed alone, the same for every device list.
+pub(crate) fn materialise<M: Module>(model: &M, device: &Device, seed: u64) {
+    struct Touch;
+    impl ModuleVisitor for Touch {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            let _ = param.val();
+        }
+    }
+    device.seed(seed);
+    model.visit(&mut Touch);
 }
 
 /// How one step's gradients are computed from its micro-batches: the only part of the loop that differs
@@ -166,7 +182,10 @@ impl<O: Objective> StepGradients<O> for OneDevice {
         let mut accum = GradientsAccumulator::<O::Model>::new();
         for _ in 0..cfg.accumulation() {
             let idx = state.order.take(cfg.micro_batch);
-            let (micro, grads) = micro_batch(objective, model, &idx, &mut state.rng, &self.0, cfg)?;
+            // A generator per micro-batch, seeded from the run's, as each data-parallel worker gets: one device and
+            // several draw the same numbers for the same micro-batches.
+            let mut rng = ChaCha8Rng::seed_from_u64(state.rng.next_u64());
+            let (micro, grads) = micro_batch(objective, model, &idx, &mut rng, &self.0, cfg)?;
             losses.record(&micro)?;
             accum.accumulate(model, GradientsParams::from_grads(grads, model));
         }

@@ -187,8 +187,9 @@ impl Parallel {
 /// `accumulation()` micro-batches go to the devices in rounds of `devices.len()`, each worker on its own
 /// thread; under DDP every round must use every device, so the accumulation must be a multiple of the device
 /// count. The objective's `rng` argument is a per-micro-batch generator seeded from the run's generator, so a
-/// run is reproducible and resumes exactly for a given device count; in-model device noise is reseeded per step
-/// on every device, but listing one device twice shares its generator between threads (ordering then varies).
+/// run is reproducible and resumes exactly; the RF and VAE objectives draw their noise (ξ, ε, τ) from that generator on
+/// the host ([`any4d_model::noise`]), so listing one CPU device twice (`flex,flex`, one worker per core) trains the
+/// same numbers as one device with the same micro-batches.
 /// Under DDP a worker that fails before its backward pass leaves the others waiting in burn's all-reduce, which
 /// has no timeout in 0.22.1: such a run must be killed and resumed from its last checkpoint.
 pub fn train_data_parallel<O>(
@@ -206,6 +207,7 @@ where
             "data-parallel training needs at least one device".into(),
         ));
     };
+    crate::loop_common::materialise(&model, main, setup.train.seed);
     let model = model.fork(main);
     match strategy {
         Strategy::Ddp => {
@@ -224,10 +226,30 @@ where
                     all_reduce_op: ReduceOperation::Sum,
                 },
             );
-            run_steps(objective, model, setup, &DataParallel { devices, ddp: true })
+            let pools = worker_pools(devices.len())?;
+            run_steps(
+                objective,
+                model,
+                setup,
+                &DataParallel {
+                    devices,
+                    ddp: true,
+                    pools,
+                },
+            )
         }
         Strategy::Auto | Strategy::MainDevice => {
-            run_steps(objective, model, setup, &DataParallel { devices, ddp: false })
+            let pools = worker_pools(devices.len())?;
+            run_steps(
+                objective,
+                model,
+                setup,
+                &DataParallel {
+                    devices,
+                    ddp: false,
+                    pools,
+                },
+            )
         }
     }
 }
@@ -238,6 +260,25 @@ where
 struct DataParallel<'a> {
     devices: &'a [Device],
     ddp: bool,
+    /// One thread pool per worker, splitting the current rayon pool between them.
+    pools: Vec<rayon::ThreadPool>,
+}
+
+/// One rayon pool per worker, `max(1, threads / workers)` threads each, out of the current pool's threads. burn-flex
+/// runs its matrix products on the current rayon pool and its element-wise kernels on the calling thread: workers
+/// that shared one pool would queue their products behind each other while their element-wise work left cores idle;
+/// with a pool each, two workers on two cores keep both busy.
+fn worker_pools(workers: usize) -> Result<Vec<rayon::ThreadPool>> {
+    let threads = (rayon::current_num_threads() / workers.max(1)).max(1);
+    (0..workers)
+        .map(|w| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .thread_name(move |i| format!("any4d-worker{w}-{i}"))
+                .build()
+                .map_err(|e| TrainError::Devices(format!("worker {w}: cannot start its {threads}-thread pool: {e}")))
+        })
+        .collect()
 }
 
 impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
@@ -273,19 +314,21 @@ impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {
             let results: Vec<Result<WorkerResult>> = std::thread::scope(|s| {
                 let handles: Vec<_> = jobs
                     .into_iter()
-                    .zip(devices)
+                    .zip(devices.iter().zip(&self.pools))
                     .enumerate()
-                    .map(|(worker, ((idx, mut rng), dev))| {
+                    .map(|(worker, ((idx, mut rng), (dev, pool)))| {
                         let mut worker_model = model.clone().fork(dev);
                         if self.ddp {
                             worker_model = worker_model.map(&mut ModuleSharder);
                         }
                         let keep_grads = !self.ddp || worker == 0;
-                        s.spawn(move || -> Result<WorkerResult> {
-                            // Under DDP the backward pass inside blocks until every device has reached it.
-                            let (micro, grads) = micro_batch(objective, &worker_model, &idx, &mut rng, dev, cfg)?;
-                            let grads = keep_grads.then(|| GradientsParams::from_grads(grads, &worker_model));
-                            Ok((micro, grads))
+                        s.spawn(move || {
+                            pool.install(move || -> Result<WorkerResult> {
+                                // Under DDP the backward pass inside blocks until every device has reached it.
+                                let (micro, grads) = micro_batch(objective, &worker_model, &idx, &mut rng, dev, cfg)?;
+                                let grads = keep_grads.then(|| GradientsParams::from_grads(grads, &worker_model));
+                                Ok((micro, grads))
+                            })
                         })
                     })
                     .collect();

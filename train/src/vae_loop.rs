@@ -216,6 +216,7 @@ pub fn vae_batch(batch: &ClipBatch, tokens: usize, device: &Device) -> Result<Va
         vmask: batch.vmask.clone(),
         fps: batch.fps.clone().narrow(1, 0, tokens),
         edges,
+        noise_seed: None,
     })
 }
 
@@ -317,7 +318,9 @@ impl<V: MeshVae + Module + Clone> Objective for VaeObjective<V> {
             let index = Tensor::<1, Int>::from_data(TensorData::new(frames, [self.train_frames]), device);
             clips.vertices = clips.vertices.select(1, index);
         }
-        let l = model.loss(&vae_batch(&clips, self.tokens, device)?); // (V1)–(V3)
+        let mut batch = vae_batch(&clips, self.tokens, device)?;
+        batch.noise_seed = Some(rand::RngCore::next_u64(rng)); // ξ from the micro-batch's generator
+        let l = model.loss(&batch); // (V1)–(V3)
         Ok(Losses {
             total: l.total,
             terms: vec![l.rec, l.kl],

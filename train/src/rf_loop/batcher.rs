@@ -12,11 +12,11 @@ use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mesh_vae::{self, MeshVae};
 use any4d_model::mmdit::KeyframeConditioning;
+use any4d_model::noise::{self, standard_normal};
 use any4d_model::rectified_flow::RfBatch;
 use any4d_model::text::caption_keep;
 use any4d_model::text::scratch::ScratchTokenizer;
 use burn::prelude::{Device, Tensor, TensorData};
-use burn::tensor::Distribution;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -281,7 +281,7 @@ impl RfBatcher {
         let z = match self.cfg.rf.latent {
             LatentDraw::Sample => {
                 let logvar = Tensor::from_data(TensorData::new(logvar, [b, t, p, c]), device);
-                mesh_vae::sample(mu, logvar) // z = μ + σξ
+                mesh_vae::sample_with(mu, logvar, rng) // z = μ + σξ
             }
             LatentDraw::Mean => mu,
         };
@@ -312,8 +312,8 @@ impl RfBatcher {
             })
             .collect();
         let text = model.encode_text(&self.tokenizer, &captions, self.cfg.text.max_len, device)?;
-        let eps = Tensor::random([b, p, t, c], Distribution::Normal(0.0, 1.0), device);
-        let tau = self.cfg.rf.tau_sampler.sample(b, device);
+        let eps = noise::normal([b, p, t, c], rng, device);
+        let tau = self.cfg.rf.tau_sampler.sample_with(b, rng, device);
         Ok(RfStep {
             batch: RfBatch {
                 z0,
@@ -363,13 +363,6 @@ impl RfBatcher {
         let z_key = self.stats.standardize_motion(enc.mu.swap_dims(1, 2));
         Ok(Tensor::from_data(z_key.into_data(), device))
     }
-}
-
-/// One N(0, 1) draw (Box–Muller).
-pub fn standard_normal(rng: &mut impl Rng) -> f64 {
-    let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]: ln is finite
-    let u2: f64 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 pub(super) fn open_store(data: &Path) -> Result<Store> {
