@@ -383,3 +383,38 @@ pub fn run_devices(device: &DeviceConfig, parallel: Option<&Parallel>) -> Result
         }
     }
 }
+
+/// [`run_devices`] for the VAE and RF loops: without `parallel`, on a CPU backend, one worker per core up to the
+/// step's micro-batches (`train.batch_size / train.micro_batch`), each with its share of the cores
+/// ([`worker_pools`]). Workers train the numbers of one device (host-drawn noise, parameters drawn from the seed),
+/// so the split only changes the speed and the memory (one micro-batch's activations per worker); `--devices flex`
+/// trains on one.
+pub fn worker_devices(device: &DeviceConfig, train: &TrainConfig, parallel: Option<&Parallel>) -> Result<Vec<Device>> {
+    let devices = run_devices(device, parallel)?;
+    if parallel.is_some() || !device.backend.is_cpu() {
+        return Ok(devices);
+    }
+    let workers = rayon::current_num_threads().min(train.accumulation()).max(1);
+    Ok(vec![devices[0].clone(); workers])
+}
+
+/// How a run with `devices` (from [`worker_devices`]) combines its gradients: `None` for one device (the plain
+/// loop), else `parallel`'s strategy, or main-device for automatic CPU workers.
+pub fn run_strategy(devices: &[Device], parallel: Option<&Parallel>) -> Option<Strategy> {
+    match parallel {
+        _ if devices.len() < 2 => None,
+        Some(p) => Some(p.strategy),
+        None => Some(Strategy::MainDevice),
+    }
+}
+
+/// The log line of a data-parallel run.
+pub fn strategy_note(devices: &[Device], parallel: Option<&Parallel>, strategy: Strategy) -> String {
+    match parallel {
+        Some(_) => format!("data-parallel over {} devices ({strategy:?})", devices.len()),
+        None => format!(
+            "{} CPU workers, one per core, each on its own micro-batches (`--devices flex` trains on one)",
+            devices.len()
+        ),
+    }
+}

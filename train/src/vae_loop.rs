@@ -21,7 +21,7 @@ use crate::config::{DeviceConfig, OptimConfig, TrainConfig, to_toml};
 use crate::data_order::WholeClips;
 use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, RunOptions};
-use crate::multi_device::{run_devices, train_data_parallel};
+use crate::multi_device::{run_strategy, strategy_note, train_data_parallel, worker_devices};
 use crate::run_folder::{RunFolder, open_for_resume, write_atomic};
 
 /// File in the VAE run folder with the docs/method.md §3.4 statistics of its final checkpoint.
@@ -376,7 +376,7 @@ pub struct StoredLatentStats {
 /// Starts a new VAE run with `cfg`; returns the run folder and the outcome.
 pub fn train_vae(cfg: &VaeRunConfig, opts: &RunOptions) -> Result<(RunFolder, Outcome)> {
     // Fail before claiming a run folder when a backend or the store is unusable.
-    let devices = run_devices(&cfg.device, opts.parallel.as_ref())?;
+    let devices = worker_devices(&cfg.device, &cfg.train, opts.parallel.as_ref())?;
     check_store_fits(cfg, &open_store(&opts.data, &cfg.vae)?)?;
     let run = RunFolder::create(&opts.runs_dir, &opts.name, &cfg.to_toml()?, &["rec", "kl"])?;
     let outcome = run_vae(cfg, &run, opts, &devices, None)?;
@@ -389,7 +389,7 @@ pub fn resume_vae(run_dir: &Path, backend: Option<backend::Backend>, opts: &RunO
     let (run, cfg, ckpt) = open_for_resume(run_dir, VaeRunConfig::parse, backend, |c: &mut VaeRunConfig| {
         &mut c.device
     })?;
-    let devices = run_devices(&cfg.device, opts.parallel.as_ref())?;
+    let devices = worker_devices(&cfg.device, &cfg.train, opts.parallel.as_ref())?;
     check_store_fits(&cfg, &open_store(&opts.data, &cfg.vae)?)?;
     run_vae(&cfg, &run, opts, &devices, Some(ckpt))
 }
@@ -485,14 +485,11 @@ where
         progress: opts.progress,
         resume,
     };
-    let (model, outcome) = match &opts.parallel {
-        Some(p) => {
-            run.log(&format!(
-                "data-parallel over {} devices ({:?})",
-                devices.len(),
-                p.strategy
-            ))?;
-            train_data_parallel(&objective, model, setup, devices, p.strategy)?
+    let parallel = opts.parallel.as_ref();
+    let (model, outcome) = match run_strategy(devices, parallel) {
+        Some(strategy) => {
+            run.log(&strategy_note(devices, parallel, strategy))?;
+            train_data_parallel(&objective, model, setup, devices, strategy)?
         }
         None => loop_common::train(&objective, model, setup)?,
     };

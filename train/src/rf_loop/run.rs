@@ -12,7 +12,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::backend;
 use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Objective, Outcome, RunOptions};
-use crate::multi_device::{run_devices, train_data_parallel};
+use crate::multi_device::{run_strategy, strategy_note, train_data_parallel, worker_devices};
 use crate::run_folder::{RunFolder, open_for_resume};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 
@@ -38,7 +38,7 @@ pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Ou
         .as_deref()
         .ok_or_else(|| TrainError::Setup("a new RF run needs the VAE run folder (--vae RUN)".into()))?;
     // Fail before claiming a run folder when the backend, the store or the VAE run is unusable.
-    let devices = run_devices(&cfg.device, opts.run.parallel.as_ref())?;
+    let devices = worker_devices(&cfg.device, &cfg.train, opts.run.parallel.as_ref())?;
     let store = open_store(&opts.run.data)?;
     let vae = runs::load_vae_run(vae_dir, &devices[0])?;
     check_compatible(cfg, &store, &vae)?;
@@ -64,7 +64,7 @@ pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRun
         &mut c.device
     })?;
     let record = runs::recorded_vae(run_dir, opts.vae_run.as_deref())?;
-    let devices = run_devices(&cfg.device, opts.run.parallel.as_ref())?;
+    let devices = worker_devices(&cfg.device, &cfg.train, opts.run.parallel.as_ref())?;
     let vae = record.load(&devices[0])?;
     let tokenizer = ScratchTokenizer::load(run_dir)?;
     run_rf(&cfg, &run, opts, &vae, tokenizer, &devices, Some(ckpt))
@@ -125,10 +125,11 @@ fn run_rf(
         progress: opts.run.progress,
         resume,
     };
-    let (_, outcome) = match &opts.run.parallel {
-        Some(p) => {
-            run.log(&format!("data-parallel over {} devices ({:?})", ad.len(), p.strategy))?;
-            train_data_parallel(&objective, model, setup, &ad, p.strategy)?
+    let parallel = opts.run.parallel.as_ref();
+    let (_, outcome) = match run_strategy(devices, parallel) {
+        Some(strategy) => {
+            run.log(&strategy_note(devices, parallel, strategy))?;
+            train_data_parallel(&objective, model, setup, &ad, strategy)?
         }
         None => loop_common::train(&objective, model, setup)?,
     };
