@@ -43,7 +43,7 @@ cell() {
   t1=$(date +%s.%N)
   local dir
   dir=$(ls -d "$RUNS/$name"-* | tail -1)
-  echo "$(basename "$preset" .toml)-$kind,$label,$devices,$micro,$rep,$steps,$(median_sps "$dir/metrics.csv"),$(echo "$t1 - $t0" | bc)" >> "$CSV"
+  echo "$(basename "$preset" .toml)-$kind,$label,${devices//,/+},$micro,$rep,$steps,$(median_sps "$dir/metrics.csv"),$(echo "$t1 - $t0" | bc)" >> "$CSV"
   tail -1 "$CSV"
 }
 
