@@ -59,15 +59,15 @@ mod tests {
         let device = Device::default();
         let a: Vec<f32> = normal([64, 1000], &mut generator(3), &device)
             .into_data()
-            .to_vec()
+            .try_to_vec::<f32>()
             .unwrap();
         let b: Vec<f32> = normal([64, 1000], &mut generator(3), &device)
             .into_data()
-            .to_vec()
+            .try_to_vec::<f32>()
             .unwrap();
         let c: Vec<f32> = normal([64, 1000], &mut generator(4), &device)
             .into_data()
-            .to_vec()
+            .try_to_vec::<f32>()
             .unwrap();
         assert_eq!(a, b, "same seed, same draws");
         assert_ne!(a, c, "another seed, other draws");
@@ -82,7 +82,7 @@ mod tests {
         assert_eq!(normal([3], &mut generator(1), &device).dims(), [3]);
         let u: Vec<f32> = uniform_open(10_000, &mut generator(5), &device)
             .into_data()
-            .to_vec()
+            .try_to_vec::<f32>()
             .unwrap();
         assert!(u.iter().all(|&x| x > 0.0 && x < 1.0));
         let mean_u = u.iter().map(|&x| f64::from(x)).sum::<f64>() / u.len() as f64;
