@@ -209,49 +209,28 @@ where
     };
     crate::loop_common::materialise(&model, main, setup.train.seed);
     let model = model.fork(main);
-    match strategy {
-        Strategy::Ddp => {
-            let accumulation = setup.train.accumulation();
-            if !accumulation.is_multiple_of(devices.len()) {
-                return Err(TrainError::Devices(format!(
-                    "--strategy ddp: batch_size / micro_batch = {accumulation} micro-batches per step is not a \
-                     multiple of the {} devices (every device takes part in every all-reduce)",
-                    devices.len()
-                )));
-            }
-            // Anchors burn's gradient-sync server for the whole run; dropping it tears the server down.
-            let _context = DistributedContext::init(
-                devices.to_vec(),
-                DistributedConfig {
-                    all_reduce_op: ReduceOperation::Sum,
-                },
-            );
-            let pools = worker_pools(devices.len())?;
-            run_steps(
-                objective,
-                model,
-                setup,
-                &DataParallel {
-                    devices,
-                    ddp: true,
-                    pools,
-                },
-            )
+    let ddp = strategy == Strategy::Ddp;
+    // Anchors burn's gradient-sync server for the whole run under DDP; dropping it tears the server down.
+    let _context = if ddp {
+        let accumulation = setup.train.accumulation();
+        if !accumulation.is_multiple_of(devices.len()) {
+            return Err(TrainError::Devices(format!(
+                "--strategy ddp: batch_size / micro_batch = {accumulation} micro-batches per step is not a \
+                 multiple of the {} devices (every device takes part in every all-reduce)",
+                devices.len()
+            )));
         }
-        Strategy::Auto | Strategy::MainDevice => {
-            let pools = worker_pools(devices.len())?;
-            run_steps(
-                objective,
-                model,
-                setup,
-                &DataParallel {
-                    devices,
-                    ddp: false,
-                    pools,
-                },
-            )
-        }
-    }
+        Some(DistributedContext::init(
+            devices.to_vec(),
+            DistributedConfig {
+                all_reduce_op: ReduceOperation::Sum,
+            },
+        ))
+    } else {
+        None
+    };
+    let pools = worker_pools(devices.len())?;
+    run_steps(objective, model, setup, &DataParallel { devices, ddp, pools })
 }
 
 /// The data-parallel step. Main-device (`ddp` false): fork → backward on each device → gradients to the main
