@@ -98,7 +98,9 @@ pub struct RunArgs {
     #[arg(long, value_parser = enum_parser(&Backend::ALL))]
     backend: Option<Backend>,
     /// Train data-parallel over these devices, comma-separated `BACKEND[:INDEX]` (`cuda:0,cuda:1`,
-    /// `flex,flex`); the first holds the model and the optimiser. Replaces `[device] backend`.
+    /// `flex,flex`); the first holds the model and the optimiser. Replaces `[device] backend`. Without it a CPU
+    /// backend starts one worker per core, up to the step's micro-batches (the same numbers as one device);
+    /// `--devices flex` trains on one.
     #[arg(long, conflicts_with = "backend")]
     devices: Option<String>,
     /// How the devices combine gradients: `ddp` (burn's all-reduce, NCCL; cuda only), `main-device` (gradients
