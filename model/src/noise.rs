@@ -8,23 +8,27 @@
 use any4d_data::rng::{DataRng, Rng, SeedableRng};
 use burn::prelude::{Device, Tensor, TensorData};
 
-/// One N(0, 1) draw (Box–Muller, cosine branch).
-pub fn standard_normal(rng: &mut impl Rng) -> f64 {
+/// Box–Muller: two independent N(0, 1) draws (cosine and sine branch) from two uniforms of `rng`.
+fn normal_pair(rng: &mut impl Rng) -> (f64, f64) {
     let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]: ln is finite
     let u2: f64 = rng.random();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    let (r, angle) = ((-2.0 * u1.ln()).sqrt(), std::f64::consts::TAU * u2);
+    (r * angle.cos(), r * angle.sin())
 }
 
-/// A tensor of independent N(0, 1) draws from `rng` (Box–Muller, both branches: two values per pair of uniforms).
+/// One N(0, 1) draw (the cosine branch of [`normal_pair`]).
+pub fn standard_normal(rng: &mut impl Rng) -> f64 {
+    normal_pair(rng).0
+}
+
+/// A tensor of independent N(0, 1) draws from `rng` ([`normal_pair`]: two values per pair of uniforms).
 pub fn normal<const D: usize>(shape: [usize; D], rng: &mut impl Rng, device: &Device) -> Tensor<D> {
     let n: usize = shape.iter().product();
     let mut values = Vec::with_capacity(n + 1);
     while values.len() < n {
-        let u1: f64 = 1.0 - rng.random::<f64>();
-        let u2: f64 = rng.random();
-        let (r, angle) = ((-2.0 * u1.ln()).sqrt(), std::f64::consts::TAU * u2);
-        values.push((r * angle.cos()) as f32);
-        values.push((r * angle.sin()) as f32);
+        let (a, b) = normal_pair(rng);
+        values.push(a as f32);
+        values.push(b as f32);
     }
     values.truncate(n);
     Tensor::from_data(TensorData::new(values, shape), device)
