@@ -5,6 +5,8 @@
 //! Every metric reads f32 vertices and accumulates in f64. Sequences are frame-major `[T, N, 3]` slices
 //! (vertex `v` of frame `f` at `f * N + v`), wrapped in [`Motion`] so frame and vertex counts travel with them.
 
+use std::num::NonZeroUsize;
+
 use any4d_data::preprocess::Normalization;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
@@ -236,16 +238,37 @@ pub fn mean_vertex_error(pred: Motion, gt: Motion, frames: &[usize]) -> Result<f
 /// tree over `to` (the coordinates as stored), its distance computed in f64. Against an f64 search the neighbour can
 /// differ only between points whose squared distances agree to f32 rounding, so each distance is within that
 /// rounding of the exact nearest one (relative 1e-7), far below the metric's decimals.
-fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]]) -> Result<f64> {
+///
+/// `paired`: `from` and `to` are two frames of one mesh (the same vertex count and order), so the point of `to` with
+/// the query's own index bounds its nearest distance from above; the search then only visits the tree's cells within
+/// that bound (a prediction near the truth is a small bound). The neighbour found is the same as without the bound:
+/// the bound is only ever loosened (by a relative 1e-5), never tightened.
+fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]], paired: bool) -> Result<f64> {
     let tree: ImmutableKdTree<f32, 3> = ImmutableKdTree::new_from_slice(to).map_err(|e| EvalError::Parameter {
         name: "nearest-neighbour set",
         reason: e.to_string(),
     })?;
+    let unbounded = |p: &[f32; 3]| tree.query(p).nearest_one::<SquaredEuclidean<f32>>().execute().item as usize;
+    let one = NonZeroUsize::MIN;
     let sum: f64 = from
         .iter()
-        .map(|p| {
-            let nearest = tree.query(p).nearest_one::<SquaredEuclidean<f32>>().execute();
-            norm(sub(*p, to[nearest.item as usize]))
+        .enumerate()
+        .map(|(i, p)| {
+            let nearest = match to.get(i).filter(|_| paired) {
+                Some(same) => {
+                    let d2: f32 = (0..3).map(|k| (p[k] - same[k]) * (p[k] - same[k])).sum();
+                    let bound = d2 * (1.0 + 1e-5) + f32::MIN_POSITIVE;
+                    let within = tree
+                        .query(p)
+                        .nearest_n::<SquaredEuclidean<f32>>(one)
+                        .within(bound)
+                        .execute();
+                    // Empty only if rounding put the same-index point outside its own bound: search unbounded.
+                    within.first().map_or_else(|| unbounded(p), |r| r.item as usize)
+                }
+                None => unbounded(p),
+            };
+            norm(sub(*p, to[nearest]))
         })
         .sum();
     Ok(sum / from.len() as f64)
@@ -275,7 +298,7 @@ fn check_set(name: &'static str, set: &[[f32; 3]]) -> Result<()> {
 pub fn chamfer_sets(p: &[[f32; 3]], g: &[[f32; 3]]) -> Result<f64> {
     check_set("prediction set", p)?;
     check_set("ground-truth set", g)?;
-    Ok(mean_nearest(g, p)? + mean_nearest(p, g)?) // (E2), one frame
+    Ok(mean_nearest(g, p, false)? + mean_nearest(p, g, false)?) // (E2), one frame
 }
 
 /// (E2) Chamfer distance averaged over the listed frames; frames run in parallel (rayon), summed in order.
@@ -287,7 +310,7 @@ pub fn chamfer(pred: Motion, gt: Motion, frames: &[usize]) -> Result<f64> {
     check_frames("scored frame", frames, pred.frames)?;
     let per_frame: Vec<f64> = frames
         .par_iter()
-        .map(|&t| Ok(mean_nearest(gt.frame(t), pred.frame(t))? + mean_nearest(pred.frame(t), gt.frame(t))?))
+        .map(|&t| Ok(mean_nearest(gt.frame(t), pred.frame(t), true)? + mean_nearest(pred.frame(t), gt.frame(t), true)?))
         .collect::<Result<_>>()?;
     Ok(per_frame.iter().sum::<f64>() / frames.len() as f64) // (E2)
 }

@@ -93,6 +93,50 @@ fn chamfer_is_symmetric_and_zero_on_equal_sets() {
     assert_eq!(chamfer_sets(&a, &shuffled).unwrap(), 0.0);
 }
 
+/// Brute-force (E2) for one frame pair in f64: every pair of points compared.
+fn chamfer_brute(p: &[[f32; 3]], g: &[[f32; 3]]) -> f64 {
+    let d = |a: &[f32; 3], b: &[f32; 3]| (0..3).map(|k| (a[k] as f64 - b[k] as f64).powi(2)).sum::<f64>().sqrt();
+    let one_way = |from: &[[f32; 3]], to: &[[f32; 3]]| {
+        from.iter()
+            .map(|a| to.iter().map(|b| d(a, b)).fold(f64::INFINITY, f64::min))
+            .sum::<f64>()
+            / from.len() as f64
+    };
+    one_way(g, p) + one_way(p, g)
+}
+
+#[test]
+fn chamfer_of_frames_is_the_brute_force_nearest_neighbour_distance() {
+    // Frames of one mesh: the search is bounded by the same-index vertex, which must never change the neighbour,
+    // whether the prediction is near the truth (a tight bound), far from it (a loose one), or holds repeated points.
+    let mut rng = Gen(5);
+    let (frames, n) = (3, 400);
+    let gt = rng.points(frames * n, 1.0);
+    for noise in [0.0, 1e-3, 0.05, 2.0] {
+        let mut pred: Vec<[f32; 3]> = gt
+            .iter()
+            .map(|g| [0, 1, 2].map(|k| g[k] + rng.next_f32() * noise))
+            .collect();
+        pred[7] = pred[8]; // a repeated point: two candidates at the same distance
+        let expected: f64 = (0..frames)
+            .map(|t| chamfer_brute(&pred[t * n..(t + 1) * n], &gt[t * n..(t + 1) * n]))
+            .sum::<f64>()
+            / frames as f64;
+        let got = chamfer(motion(&pred, frames), motion(&gt, frames), &[0, 1, 2]).unwrap();
+        assert!(
+            close(got, expected, 1e-6),
+            "noise {noise}: {got} vs brute force {expected}"
+        );
+        // The same sets with each predicted frame's vertices in reverse order: no index correspondence left.
+        let reversed: Vec<[f32; 3]> = pred.chunks(n).flat_map(|f| f.iter().rev().copied()).collect();
+        let got = chamfer(motion(&reversed, frames), motion(&gt, frames), &[0, 1, 2]).unwrap();
+        assert!(
+            close(got, expected, 1e-6),
+            "noise {noise}, reversed order: {got} vs {expected}"
+        );
+    }
+}
+
 #[test]
 fn dtw_by_hand_and_tie_order() {
     let line = |xs: &[f64]| xs.iter().map(|&x| [x, 0.0, 0.0]).collect::<Vec<_>>();
