@@ -241,8 +241,9 @@ pub fn mean_vertex_error(pred: Motion, gt: Motion, frames: &[usize]) -> Result<f
 ///
 /// `paired`: `from` and `to` are two frames of one mesh (the same vertex count and order), so the point of `to` with
 /// the query's own index bounds its nearest distance from above; the search then only visits the tree's cells within
-/// that bound (a prediction near the truth is a small bound). The neighbour found is the same as without the bound:
-/// the bound is only ever loosened (by a relative 1e-5), never tightened.
+/// that bound (a prediction near the truth is a small bound). The nearest distance is the one the unbounded search
+/// finds (the bound is only ever loosened, by a relative 1e-5, never tightened); between candidates tied in f32
+/// either may be chosen, as above.
 fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]], paired: bool) -> Result<f64> {
     let tree: ImmutableKdTree<f32, 3> = ImmutableKdTree::new_from_slice(to).map_err(|e| EvalError::Parameter {
         name: "nearest-neighbour set",
