@@ -5,8 +5,6 @@
 //! Every metric reads f32 vertices and accumulates in f64. Sequences are frame-major `[T, N, 3]` slices
 //! (vertex `v` of frame `f` at `f * N + v`), wrapped in [`Motion`] so frame and vertex counts travel with them.
 
-use std::num::NonZeroUsize;
-
 use any4d_data::preprocess::Normalization;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
@@ -250,7 +248,6 @@ fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]], paired: bool) -> Result<f64>
         reason: e.to_string(),
     })?;
     let unbounded = |p: &[f32; 3]| tree.query(p).nearest_one::<SquaredEuclidean<f32>>().execute().item as usize;
-    let one = NonZeroUsize::MIN;
     let sum: f64 = from
         .iter()
         .enumerate()
@@ -259,13 +256,12 @@ fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]], paired: bool) -> Result<f64>
                 Some(same) => {
                     let d2: f32 = (0..3).map(|k| (p[k] - same[k]) * (p[k] - same[k])).sum();
                     let bound = d2 * (1.0 + 1e-5) + f32::MIN_POSITIVE;
-                    let within = tree
-                        .query(p)
-                        .nearest_n::<SquaredEuclidean<f32>>(one)
-                        .within(bound)
-                        .execute();
+                    let within = tree.query(p).within::<SquaredEuclidean<f32>>(bound).unsorted().execute();
                     // Empty only if rounding put the same-index point outside its own bound: search unbounded.
-                    within.first().map_or_else(|| unbounded(p), |r| r.item as usize)
+                    within
+                        .iter()
+                        .min_by(|a, b| a.distance.total_cmp(&b.distance))
+                        .map_or_else(|| unbounded(p), |r| r.item as usize)
                 }
                 None => unbounded(p),
             };
