@@ -256,7 +256,11 @@ fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]], paired: bool) -> Result<f64>
                 Some(same) => {
                     let d2: f32 = (0..3).map(|k| (p[k] - same[k]) * (p[k] - same[k])).sum();
                     let bound = d2 * (1.0 + 1e-5) + f32::MIN_POSITIVE;
-                    let within = tree.query(p).within::<SquaredEuclidean<f32>>(bound).unsorted().execute();
+                    let within = tree
+                        .query(p)
+                        .within::<SquaredEuclidean<f32>>(bound)
+                        .unsorted()
+                        .execute();
                     // Empty only if rounding put the same-index point outside its own bound: search unbounded.
                     within
                         .iter()
