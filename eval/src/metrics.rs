@@ -5,6 +5,8 @@
 //! Every metric reads f32 vertices and accumulates in f64. Sequences are frame-major `[T, N, 3]` slices
 //! (vertex `v` of frame `f` at `f * N + v`), wrapped in [`Motion`] so frame and vertex counts travel with them.
 
+use std::num::NonZeroUsize;
+
 use any4d_data::preprocess::Normalization;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
@@ -239,9 +241,10 @@ pub fn mean_vertex_error(pred: Motion, gt: Motion, frames: &[usize]) -> Result<f
 ///
 /// `paired`: `from` and `to` are two frames of one mesh (the same vertex count and order), so the point of `to` with
 /// the query's own index bounds its nearest distance from above; the search then only visits the tree's cells within
-/// that bound (a prediction near the truth is a small bound). The nearest distance is the one the unbounded search
-/// finds (the bound is only ever loosened, by a relative 1e-5, never tightened); between candidates tied in f32
-/// either may be chosen, as above.
+/// that bound (a prediction near the truth is a small bound). Any bound gives the unbounded search's distance: the
+/// nearest point lies within every bound that holds a point, and an empty result falls back to the unbounded
+/// search. The bound is loosened (relative 1e-5 plus the smallest normal f32) only so that rounding cannot leave the
+/// same-index point outside it and force that fallback. Between candidates tied in f32 either may be chosen, as above.
 fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]], paired: bool) -> Result<f64> {
     let tree: ImmutableKdTree<f32, 3> = ImmutableKdTree::new_from_slice(to).map_err(|e| EvalError::Parameter {
         name: "nearest-neighbour set",
@@ -256,16 +259,15 @@ fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]], paired: bool) -> Result<f64>
                 Some(same) => {
                     let d2: f32 = (0..3).map(|k| (p[k] - same[k]) * (p[k] - same[k])).sum();
                     let bound = d2 * (1.0 + 1e-5) + f32::MIN_POSITIVE;
+                    // The nearest one within the bound (a k-nearest search with a radius keeps one candidate, where a
+                    // radius search would gather every point of a wide ball when the prediction is far off).
                     let within = tree
                         .query(p)
-                        .within::<SquaredEuclidean<f32>>(bound)
-                        .unsorted()
+                        .nearest_n::<SquaredEuclidean<f32>>(NonZeroUsize::MIN)
+                        .within(bound)
                         .execute();
                     // Empty only if rounding put the same-index point outside its own bound: search unbounded.
-                    within
-                        .iter()
-                        .min_by(|a, b| a.distance.total_cmp(&b.distance))
-                        .map_or_else(|| unbounded(p), |r| r.item as usize)
+                    within.first().map_or_else(|| unbounded(p), |r| r.item as usize)
                 }
                 None => unbounded(p),
             };
