@@ -497,24 +497,32 @@ pub fn motion_energy(motion: Motion) -> Result<f64> {
     Ok(mean_difference_norm(motion, &[-1.0, 1.0], 1.0)) // (E6)
 }
 
-/// (E4) VAE reconstruction error: (E1) and (E2) over all frames.
+/// (E4) VAE reconstruction error: (E1) and (E2) over all frames, and the (E5) jerk of the decoded sequence and of
+/// its input, which says how much frame-to-frame noise the VAE alone adds (a floor for every latent method on it).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Reconstruction {
     pub rmse: f64,
     pub chamfer: f64,
+    /// (E5) mean jerk norm of the decoded sequence (per frame, r = 1); NaN below 4 frames.
+    pub jerk: f64,
+    /// (E5) mean jerk norm of the input; NaN below 4 frames.
+    pub jerk_gt: f64,
 }
 
 /// (E4) RMSE and Chamfer of a decoded sequence against its input over all frames (no keyframes, no normalisation:
-/// both are already in the clip's normalised frame).
+/// both are already in the clip's normalised frame), and both sequences' (E5) jerk.
 ///
 /// # Shapes
 /// `decoded`, `input`: `[T, N, 3]`.
 pub fn vae_reconstruction(decoded: Motion, input: Motion) -> Result<Reconstruction> {
     let all: Vec<usize> = (0..input.frames).collect();
+    let jerk_or_nan = |m: Motion| if m.frames >= 4 { jerk(m, 1.0) } else { Ok(f64::NAN) };
     Ok(Reconstruction {
         rmse: rmse(decoded, input, &all)?,
         chamfer: chamfer(decoded, input, &all)?,
-    }) // (E4)
+        jerk: jerk_or_nan(decoded)?,
+        jerk_gt: jerk_or_nan(input)?,
+    }) // (E4), (E5)
 }
 
 /// Sorted, deduplicated keyframes, checked against `frames`. An empty set is an error: the protocol always keeps

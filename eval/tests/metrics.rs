@@ -310,6 +310,16 @@ fn vae_reconstruction_scores_every_frame() {
     let all = [0, 1, 2, 3, 4];
     assert_eq!(r.rmse, rmse(motion(&pred, 5), motion(&gt, 5), &all).unwrap());
     assert_eq!(r.chamfer, chamfer(motion(&pred, 5), motion(&gt, 5), &all).unwrap());
+    assert_eq!(r.jerk, jerk(motion(&pred, 5), 1.0).unwrap());
+    assert_eq!(r.jerk_gt, jerk(motion(&gt, 5), 1.0).unwrap());
+    assert_ne!(
+        r.jerk, r.jerk_gt,
+        "decoded and input jerk are each their own sequence's"
+    );
+    let three: Vec<[f32; 3]> = gt[..3 * 10].to_vec();
+    let short = vae_reconstruction(motion(&three, 3), motion(&three, 3)).unwrap();
+    assert!(short.jerk.is_nan() && short.jerk_gt.is_nan(), "no jerk below 4 frames");
+    assert_eq!(short.rmse, 0.0);
 }
 
 #[test]

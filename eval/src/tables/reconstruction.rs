@@ -1,12 +1,13 @@
 //! P-Table 5 (docs/method.md §6.2 (E4)): VAE reconstruction of validation clips, every frame encoded and decoded
-//! (posterior mean), RMSE and Chamfer unscaled, one row per VAE.
+//! (posterior mean), RMSE and Chamfer unscaled, one row per VAE; and the decoded sequences' (E5) jerk against the
+//! input's, pooled over the clips: the frame-to-frame noise the VAE alone adds.
 
 use std::path::PathBuf;
 
 use any4d_data::{Clip, DataError};
 
 use super::PAPER_CLIPS;
-use super::summary::{ClipRecord, Layout, MetricColumn, col, csv, markdown, summarize, write_clip_parquet};
+use super::summary::{ClipRecord, Layout, MetricColumn, col, csv, markdown, pooled, summarize, write_clip_parquet};
 use super::{TableOptions, TableReport, header_for, progress_bar, write_text};
 use crate::metrics::{Motion, vae_reconstruction};
 use crate::protocol::{Manifest, ManifestOptions, StoreSource};
@@ -20,7 +21,11 @@ pub const LAYOUT: Layout = Layout {
     k_column: true,
 };
 
-const COLUMNS: &[MetricColumn] = &[col("rmse", "RMSE", 1.0), col("chamfer", "Chamfer", 1.0)];
+const COLUMNS: &[MetricColumn] = &[
+    col("rmse", "RMSE", 1.0),
+    col("chamfer", "Chamfer", 1.0),
+    pooled("jerk_pooled", "jerk", "jerk_gt", "jerk Σ/ΣGT"),
+];
 
 /// A VAE (or any encode → decode pair) for P-Table 5.
 pub trait Reconstructor {
@@ -81,9 +86,14 @@ impl Reconstruction {
                 let err = |e: crate::metrics::EvalError| DataError::new(&gt.id, vae.label(), e.to_string());
                 let decoded = Motion::new(&rec, gt.frames, gt.n_vertices).map_err(err)?;
                 let r = vae_reconstruction(decoded, Motion::from_clip(&gt).map_err(err)?).map_err(err)?; // (E4)
-                let metrics = [("rmse".to_string(), r.rmse), ("chamfer".to_string(), r.chamfer)]
-                    .into_iter()
-                    .collect();
+                let metrics = [
+                    ("rmse".to_string(), r.rmse),
+                    ("chamfer".to_string(), r.chamfer),
+                    ("jerk".to_string(), r.jerk),
+                    ("jerk_gt".to_string(), r.jerk_gt),
+                ]
+                .into_iter()
+                .collect();
                 records.push(ClipRecord {
                     method: vae.label(),
                     placement: "all_frames".into(),
