@@ -95,6 +95,26 @@ fn every_rust_file_opens_with_a_module_doc_line() {
     assert!(missing.is_empty(), "files without a leading `//!` line: {missing:?}");
 }
 
+/// The workspace denies `unsafe` code; one function may set the CPU's floating-point modes, which safe Rust cannot
+/// (model/src/denormals.rs). Any other `allow(unsafe_code)` fails here.
+#[test]
+fn unsafe_code_is_allowed_in_the_denormals_module_only() {
+    let allowed = "model/src/denormals.rs";
+    let needle = ["allow(", "unsafe_code)"].concat();
+    let found: Vec<String> = files(&[".rs"])
+        .iter()
+        .filter(|p| read(p).contains(&needle))
+        .map(|p| relative(p))
+        .filter(|p| p != allowed)
+        .collect();
+    assert!(found.is_empty(), "`unsafe` allowed outside {allowed}: {found:?}");
+    assert_eq!(
+        read(&root().join(allowed)).matches(&needle).count(),
+        1,
+        "{allowed}: one function"
+    );
+}
+
 #[test]
 fn long_files_are_on_the_allow_list_with_a_reason() {
     let mut too_long = Vec::new();

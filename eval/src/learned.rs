@@ -4,7 +4,8 @@
 //!
 //! [`MeshCodec`] turns a normalised window into VAE tensors (FPS on frame 0, edges from faces, padding) and back;
 //! [`LearnedModels`] holds one RF checkpoint with its VAE, latent statistics and text encoder; [`RfSampler`],
-//! [`LatentLerpSampler`] and [`VaeReconstructor`] are the eval crate's [`WindowSampler`] / [`Reconstructor`].
+//! [`LatentLerpSampler`], [`VaeOracleSampler`] and [`VaeReconstructor`] are the eval crate's [`WindowSampler`] /
+//! [`Reconstructor`].
 
 use std::sync::Arc;
 
@@ -787,6 +788,26 @@ impl WindowSampler for LatentLerpSampler {
     fn sample(&self, clip: &Clip, keyframes: &[usize], _caption: &str, _seed: u64) -> Result<Vec<[f32; 3]>> {
         let (enc, z) = self.latents(clip, keyframes)?;
         self.codec.decode(&enc, z)
+    }
+}
+
+/// The `vae_oracle` row (not a completion method): every frame of the ground-truth window encoded (posterior mean)
+/// and decoded, the window's keyframes ignored. It reads the frames a completion method must generate, so it is the
+/// floor of every latent method on this VAE under table 1's scoring.
+pub struct VaeOracleSampler {
+    codec: Arc<MeshCodec>,
+}
+
+impl VaeOracleSampler {
+    /// Any VAE (frame-wise or sequence-wise).
+    pub fn new(codec: Arc<MeshCodec>) -> Self {
+        Self { codec }
+    }
+}
+
+impl WindowSampler for VaeOracleSampler {
+    fn sample(&self, clip: &Clip, _keyframes: &[usize], _caption: &str, _seed: u64) -> Result<Vec<[f32; 3]>> {
+        self.codec.reconstruct(clip)
     }
 }
 

@@ -47,6 +47,10 @@ pub enum MethodKind {
     Lerp,
     /// (L1) between keyframe latents, then decoded (`lerp_space = "latent"`).
     LerpLatent,
+    /// Not a completion method: every ground-truth frame encoded (posterior mean) and decoded by the VAE. It sees
+    /// the frames the others must generate, so its row is the floor of every latent method on that VAE under the
+    /// same scoring: how much of their error and jerk the VAE alone accounts for.
+    VaeOracle,
     /// Hold the nearest keyframe (ties to the earlier one).
     StaticNearest,
     /// The BD-LSTM baseline, latent adaptation (docs/method.md §5.3): both chains per keyframe segment and the
@@ -87,6 +91,7 @@ impl MethodKind {
             }
             MethodKind::Lerp => "lerp".into(),
             MethodKind::LerpLatent => "lerp_latent".into(),
+            MethodKind::VaeOracle => "vae_oracle".into(),
             MethodKind::StaticNearest => "static_nearest".into(),
             MethodKind::Bdlstm => "bdlstm".into(),
             MethodKind::BdlstmAcap => "bdlstm_acap".into(),
@@ -103,6 +108,7 @@ impl MethodKind {
             "replacement_rf" | "baseline" => MethodKind::ReplacementRf,
             "lerp" => MethodKind::Lerp,
             "lerp_latent" => MethodKind::LerpLatent,
+            "vae_oracle" => MethodKind::VaeOracle,
             "static_nearest" => MethodKind::StaticNearest,
             "bdlstm" => MethodKind::Bdlstm,
             "bdlstm_acap" => MethodKind::BdlstmAcap,
@@ -127,7 +133,7 @@ impl MethodKind {
                 let rest = other.strip_prefix("impute_until_").ok_or_else(|| {
                     bad(
                         "unknown method; expected keyframe_rf, keyframe_rf_mean<N>, replacement_rf, lerp, lerp_latent, \
-                         static_nearest, bdlstm, bdlstm_acap, aam or impute_until[_<tau*>[_noisy<level>]]"
+                         vae_oracle, static_nearest, bdlstm, bdlstm_acap, aam or impute_until[_<tau*>[_noisy<level>]]"
                             .into(),
                     )
                 })?;
@@ -270,6 +276,7 @@ impl<S: WindowSampler> RfMethod<S> {
             | MethodKind::ReplacementRf
             | MethodKind::ImputeUntil { .. }
             | MethodKind::LerpLatent
+            | MethodKind::VaeOracle
             | MethodKind::Bdlstm
             | MethodKind::BdlstmAcap
             | MethodKind::Aam => Ok(Self { kind, sampler }),
@@ -421,6 +428,15 @@ pub fn hide_non_keyframes(clip: &Clip, keyframes: &[usize]) -> Clip {
     out
 }
 
+/// What a method is shown of the window: [`hide_non_keyframes`], except for the `vae_oracle` row, whose point is to
+/// read every ground-truth frame (it is the floor of the latent methods, not a completion method).
+fn visible_window(kind: MethodKind, gt: &Clip, keyframes: &[usize]) -> Clip {
+    match kind {
+        MethodKind::VaeOracle => gt.clone(),
+        _ => hide_non_keyframes(gt, keyframes),
+    }
+}
+
 /// SceneMI keyframe noise (docs/method.md §5.4): each interior keyframe's vertices + i.i.d. N(0, (level · 0.02)²),
 /// drawn from
 /// `rng(seed, KEYFRAME_NOISE_STREAM)`; frames 0 and T − 1 stay clean. Box–Muller from uniform draws.
@@ -462,7 +478,7 @@ pub fn complete_and_score(
     caption: &str,
     seed: u64,
 ) -> Result<Scored> {
-    let visible = hide_non_keyframes(gt, keyframes);
+    let visible = visible_window(method.kind(), gt, keyframes);
     let prediction = method.complete(&visible, keyframes, caption, seed)?;
     score(method.kind(), gt, keyframes, prediction)
 }
@@ -475,7 +491,7 @@ pub fn complete_and_score_batch(
     asks: &[(&[usize], u64)],
     caption: &str,
 ) -> Result<Vec<Scored>> {
-    let visible: Vec<Clip> = asks.iter().map(|(k, _)| hide_non_keyframes(gt, k)).collect();
+    let visible: Vec<Clip> = asks.iter().map(|(k, _)| visible_window(method.kind(), gt, k)).collect();
     let requests: Vec<Request<'_>> = asks
         .iter()
         .zip(&visible)

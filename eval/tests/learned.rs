@@ -9,7 +9,9 @@ use any4d_data::Clip;
 use any4d_data::batch::PadTo;
 use any4d_data::fps::farthest_point_sampling;
 use any4d_data::preprocess::edges_from_faces;
-use any4d_eval::learned::{LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor, sampler_noise};
+use any4d_eval::learned::{
+    LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeOracleSampler, VaeReconstructor, sampler_noise,
+};
 use any4d_eval::methods::{
     Method, MethodKind, Request, RfMethod, WindowSampler, complete_and_score, hide_non_keyframes,
 };
@@ -565,6 +567,46 @@ fn latent_lerp_interpolates_keyframe_latents_and_decodes_them() {
     }
     let err = lerp.sample(&visible, &[0, 2], "", 0).unwrap_err();
     assert!(err.to_string().contains("first and last"), "{err}");
+}
+
+#[test]
+fn the_vae_oracle_decodes_every_ground_truth_frame_whatever_the_keyframes() {
+    let device = Device::flex();
+    let codec = frame_codec(&device, PadTo::BatchMax);
+    let oracle = VaeOracleSampler::new(codec.clone());
+    let gt = wave_clip();
+    let expect = codec.reconstruct(&gt).unwrap();
+    let out = oracle.sample(&gt, &[0, T - 1], "", 0).unwrap();
+    assert_eq!(out.len(), T * N);
+    assert!(rows_diff(&out, &expect) < 1e-6, "(E4) of the whole window");
+    let other = oracle.sample(&gt, &[0, 1, T - 1], "a caption", 7).unwrap();
+    assert!(
+        rows_diff(&other, &out) < 1e-6,
+        "keyframes, caption and seed do not enter"
+    );
+    let mut moved = gt.clone();
+    for v in &mut moved.vertices[N..2 * N] {
+        v[0] += 0.5;
+    }
+    let changed = oracle.sample(&moved, &[0, T - 1], "", 0).unwrap();
+    assert!(
+        rows_diff(&changed[N..2 * N], &out[N..2 * N]) > 1e-3,
+        "a non-keyframe's ground truth reaches its decoded frame"
+    );
+    // The scorer shows it the whole window (every other row sees only the keyframes), then assembles as usual.
+    let method = RfMethod::new(MethodKind::VaeOracle, oracle).unwrap();
+    let keys = [0, T - 1];
+    let s = complete_and_score(&method, &gt, &keys, "", 0).unwrap();
+    for f in 1..T - 1 {
+        let err = rows_diff(&s.prediction[f * N..(f + 1) * N], &expect[f * N..(f + 1) * N]);
+        assert!(
+            err < 1e-6,
+            "frame {f} is the decoded ground truth, not the decoded reference; error {err}"
+        );
+    }
+    for &f in &keys {
+        assert_eq!(&s.prediction[f * N..(f + 1) * N], gt.frame(f), "keyframe {f}");
+    }
 }
 
 /// The VAE batch of a whole clip, built by hand from the data crate (the cross-check of the codec).

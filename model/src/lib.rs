@@ -6,6 +6,7 @@ pub mod any_vae;
 pub mod attention;
 pub mod bdlstm;
 pub mod bench;
+pub mod denormals;
 pub mod dymesh_vae;
 pub mod frame_vae;
 pub mod latent_stats;

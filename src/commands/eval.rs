@@ -209,7 +209,8 @@ pub struct RunArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Methods, comma-separated: keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest, bdlstm, bdlstm_acap, aam,
-    /// impute_until_0.98, impute_until_0.98_noisy1, keyframe_rf_mean8 (mean of 8 samples by ours).
+    /// impute_until_0.98, impute_until_0.98_noisy1, keyframe_rf_mean8 (mean of 8 samples by ours), vae_oracle (every
+    /// ground-truth frame through the VAE: the floor of the latent rows, not a completion method).
     #[arg(
         long,
         value_delimiter = ',',

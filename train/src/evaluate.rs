@@ -8,7 +8,8 @@ use std::sync::Arc;
 use any4d_data::batch::PadTo;
 use any4d_eval::acap_bdlstm::{AcapBdlstmSampler, AcapSpace};
 use any4d_eval::learned::{
-    BdlstmSampler, KeyPosterior, LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeReconstructor,
+    BdlstmSampler, KeyPosterior, LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeOracleSampler,
+    VaeReconstructor,
 };
 use any4d_eval::methods::vertex_methods;
 use any4d_eval::methods::{AAM_GUIDANCE, Method, MethodKind, RfMethod, SampleMean};
@@ -226,6 +227,15 @@ pub fn build_methods(
             MethodKind::LerpLatent => {
                 let vae = vae_run_for(runs, device)?;
                 let sampler = LatentLerpSampler::new(codec_of(&vae, sampling.posterior, device)?)?;
+                let method = RfMethod::new(kind, sampler)?;
+                (
+                    Box::new(method) as Box<dyn Method>,
+                    checkpoint_label(&vae.run, vae.step),
+                )
+            }
+            MethodKind::VaeOracle => {
+                let vae = vae_run_for(runs, device)?;
+                let sampler = VaeOracleSampler::new(codec_of(&vae, KeyPosterior::Mean, device)?);
                 let method = RfMethod::new(kind, sampler)?;
                 (
                     Box::new(method) as Box<dyn Method>,

@@ -281,6 +281,11 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
     if len == 0 {
         return Err(TrainError::Loop("the training set is empty".into()));
     }
+    if cfg.flush_denormals {
+        // This thread runs the optimiser, the global pool the single-device steps (docs/method.md §10).
+        any4d_model::denormals::flush_denormals();
+        rayon::broadcast(|_| any4d_model::denormals::flush_denormals());
+    }
     let total_steps = cfg.duration.steps(len, cfg.batch_size);
     let keeps_average = cfg.ema_decay > 0.0;
     let (mut model, mut optim, mut state, mut ema) = match &resume {

@@ -230,6 +230,11 @@ where
         None
     };
     let pools = worker_pools(devices.len())?;
+    if setup.train.flush_denormals {
+        for pool in &pools {
+            pool.broadcast(|_| any4d_model::denormals::flush_denormals()); // docs/method.md §10
+        }
+    }
     run_steps(objective, model, setup, &DataParallel { devices, ddp, pools })
 }
 

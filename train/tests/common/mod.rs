@@ -258,6 +258,7 @@ pub fn toy_configs(steps: u64) -> (TrainConfig, OptimConfig) {
         valid_every: 4,
         progress_every_secs: 5.0,
         ema_decay: 0.0,
+        flush_denormals: true,
     };
     let optim = OptimConfig {
         lr: 1e-2,
