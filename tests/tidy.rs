@@ -96,7 +96,7 @@ fn every_rust_file_opens_with_a_module_doc_line() {
 }
 
 /// The workspace denies `unsafe` code; one function may set the CPU's floating-point modes, which safe Rust cannot
-/// (model/src/denormals.rs). Any other `allow(unsafe_code)` fails here.
+/// (model/src/denormals.rs). An allowance anywhere else fails here.
 #[test]
 fn unsafe_code_is_allowed_in_the_denormals_module_only() {
     let allowed = "model/src/denormals.rs";
