@@ -96,23 +96,51 @@ fn every_rust_file_opens_with_a_module_doc_line() {
 }
 
 /// The workspace denies `unsafe` code; one function may set the CPU's floating-point modes, which safe Rust cannot
-/// (model/src/denormals.rs). An allowance anywhere else fails here.
+/// (model/src/denormals.rs). The lint's name appears in no other source file (no allowance, expectation or module-wide
+/// allowance elsewhere), the workspace denies it, and every crate inherits the workspace's lints.
 #[test]
-fn unsafe_code_is_allowed_in_the_denormals_module_only() {
+fn the_unsafe_lint_is_allowed_for_one_function_of_the_denormals_module_only() {
     let allowed = "model/src/denormals.rs";
-    let needle = ["allow(", "unsafe_code)"].concat();
+    let lint = ["unsafe", "_code"].concat();
     let found: Vec<String> = files(&[".rs"])
         .iter()
-        .filter(|p| read(p).contains(&needle))
+        .filter(|p| read(p).contains(&lint))
         .map(|p| relative(p))
         .filter(|p| p != allowed)
         .collect();
-    assert!(found.is_empty(), "`unsafe` allowed outside {allowed}: {found:?}");
+    assert!(found.is_empty(), "the unsafe lint named outside {allowed}: {found:?}");
+    let module = read(&root().join(allowed));
     assert_eq!(
-        read(&root().join(allowed)).matches(&needle).count(),
+        module.matches(&lint).count(),
         1,
-        "{allowed}: one function"
+        "{allowed}: one function-level allowance"
     );
+    assert!(
+        module.contains(&format!("#[allow({lint})]\npub fn set_flush_denormals")),
+        "{allowed}: on the function"
+    );
+    let workspace = read(&root().join("Cargo.toml"));
+    assert!(
+        workspace.contains(&format!("{lint} = \"deny\"")),
+        "Cargo.toml: the workspace denies it"
+    );
+    for member in [
+        "Cargo.toml",
+        "data/Cargo.toml",
+        "model/Cargo.toml",
+        "eval/Cargo.toml",
+        "train/Cargo.toml",
+    ] {
+        let toml = read(&root().join(member));
+        assert!(
+            toml.contains("[lints]\nworkspace = true"),
+            "{member}: inherits the workspace lints"
+        );
+        assert!(
+            member == "Cargo.toml" || !toml.contains(&lint),
+            "{member}: no lint level of its own"
+        );
+    }
 }
 
 #[test]

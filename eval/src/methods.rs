@@ -175,7 +175,7 @@ pub trait Method {
 
     /// Predict every frame of `clip` from its keyframes. `clip` is in the normalised frame of its frame 0
     /// (docs/method.md §1.5); only the frames listed in `keyframes` may be read (callers pass [`hide_non_keyframes`]
-    /// output).
+    /// output; the `vae_oracle` floor row alone is given the whole window).
     /// `seed` fixes the sampler noise.
     ///
     /// # Shapes
@@ -467,7 +467,7 @@ pub struct Scored {
 }
 
 /// Run `method` on `gt` (normalised) with `keyframes` and score it against `gt`: the method sees only the
-/// keyframes, its output is checked for shape and finiteness, then scored by [`evaluate_clip`].
+/// keyframes (the `vae_oracle` row the whole window), its output is checked for shape and finiteness, then scored by [`evaluate_clip`].
 ///
 /// # Shapes
 /// `gt.vertices`: `[T, N]` rows; `Scored::prediction` the same.

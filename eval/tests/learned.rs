@@ -13,7 +13,8 @@ use any4d_eval::learned::{
     LatentLerpSampler, LearnedModels, MeshCodec, RfSampler, VaeOracleSampler, VaeReconstructor, sampler_noise,
 };
 use any4d_eval::methods::{
-    Method, MethodKind, Request, RfMethod, WindowSampler, complete_and_score, hide_non_keyframes,
+    Method, MethodKind, Request, RfMethod, WindowSampler, complete_and_score, complete_and_score_batch,
+    hide_non_keyframes,
 };
 use any4d_eval::tables::reconstruction::Reconstructor;
 use any4d_model::any_vae::AnyMeshVae;
@@ -606,6 +607,20 @@ fn the_vae_oracle_decodes_every_ground_truth_frame_whatever_the_keyframes() {
     }
     for &f in &keys {
         assert_eq!(&s.prediction[f * N..(f + 1) * N], gt.frame(f), "keyframe {f}");
+    }
+    let inner = [0, 1, T - 1];
+    let asks: [(&[usize], u64); 2] = [(&keys, 0), (&inner, 1)];
+    for (s, (k, _)) in complete_and_score_batch(&method, &gt, &asks, "")
+        .unwrap()
+        .iter()
+        .zip(asks)
+    {
+        let f = T - 2;
+        let err = rows_diff(&s.prediction[f * N..(f + 1) * N], &expect[f * N..(f + 1) * N]);
+        assert!(
+            err < 1e-6 || k.contains(&f),
+            "batched (table 1's path): frame {f} decoded from the truth; error {err}"
+        );
     }
 }
 

@@ -262,6 +262,7 @@ fn method_labels_round_trip() {
         MethodKind::ReplacementRf,
         MethodKind::Lerp,
         MethodKind::LerpLatent,
+        MethodKind::VaeOracle,
         MethodKind::StaticNearest,
         MethodKind::Bdlstm,
         MethodKind::BdlstmAcap,

@@ -161,7 +161,7 @@ fn vae_run_for(runs: &LearnedRuns, device: &Device) -> Result<LoadedVae> {
         return load_rf_run(rf, device)?.load_vae(device);
     }
     Err(TrainError::Setup(
-        "method `lerp_latent` needs a VAE: pass --vae RUN (or --rf RUN to use its VAE)".into(),
+        "methods `lerp_latent` and `vae_oracle` need a VAE: pass --vae RUN (or --rf RUN to use its VAE)".into(),
     ))
 }
 

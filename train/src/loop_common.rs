@@ -255,6 +255,27 @@ impl StepLosses<'_> {
     }
 }
 
+/// Flush-to-zero for the loop's lifetime (docs/method.md §10) on this thread, which runs the optimiser, and on every
+/// thread of the current rayon pool, which runs the single-device steps; dropping it, at the end, on an error or on a
+/// stop, clears both again, so what runs after training in the same process (the quickstart's evaluation) computes
+/// as if the loop had never flushed.
+struct FlushScope;
+
+impl FlushScope {
+    fn begin() -> Self {
+        any4d_model::denormals::set_flush_denormals(true);
+        rayon::broadcast(|_| any4d_model::denormals::set_flush_denormals(true));
+        Self
+    }
+}
+
+impl Drop for FlushScope {
+    fn drop(&mut self) {
+        any4d_model::denormals::set_flush_denormals(false);
+        rayon::broadcast(|_| any4d_model::denormals::set_flush_denormals(false));
+    }
+}
+
 /// The step loop shared by [`train`] and [`crate::multi_device::train_data_parallel`]; `stepper` computes
 /// each step's gradients, `setup.device` is not used.
 pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
@@ -281,11 +302,7 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
     if len == 0 {
         return Err(TrainError::Loop("the training set is empty".into()));
     }
-    if cfg.flush_denormals {
-        // This thread runs the optimiser, the global pool the single-device steps (docs/method.md §10).
-        any4d_model::denormals::flush_denormals();
-        rayon::broadcast(|_| any4d_model::denormals::flush_denormals());
-    }
+    let _flush = cfg.flush_denormals.then(FlushScope::begin);
     let total_steps = cfg.duration.steps(len, cfg.batch_size);
     let keeps_average = cfg.ema_decay > 0.0;
     let (mut model, mut optim, mut state, mut ema) = match &resume {

@@ -232,7 +232,8 @@ where
     let pools = worker_pools(devices.len())?;
     if setup.train.flush_denormals {
         for pool in &pools {
-            pool.broadcast(|_| any4d_model::denormals::flush_denormals()); // docs/method.md §10
+            // docs/method.md §10; the pools end with the call, so their threads need no clearing.
+            pool.broadcast(|_| any4d_model::denormals::set_flush_denormals(true));
         }
     }
     run_steps(objective, model, setup, &DataParallel { devices, ddp, pools })

@@ -184,6 +184,23 @@ pub(crate) fn progress_bar(show: bool, len: usize, what: &str) -> Result<Progres
     Ok(bar)
 }
 
+/// The `vae_oracle` row reads every ground-truth frame, which only the short-horizon scorer hands it
+/// ([`crate::methods::complete_and_score_batch`]); anywhere else it would decode hidden frames and print a row that is
+/// no floor, so it is refused there.
+pub(crate) fn refuse_oracle(methods: &[Box<dyn Method>], where_: &str) -> Result<()> {
+    match methods
+        .iter()
+        .find(|m| m.kind() == crate::methods::MethodKind::VaeOracle)
+    {
+        Some(_) => Err(DataError::new(
+            "eval run",
+            "vae_oracle",
+            format!("runs only on a short-horizon table 1 manifest, not on {where_}"),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// Run the methods over a manifest (tables 1 and 2) and return per-clip records and the kept predictions.
 pub fn evaluate(
     source: &StoreSource,
@@ -194,6 +211,12 @@ pub fn evaluate(
     show_progress: bool,
     caption_mode: CaptionMode,
 ) -> Result<(Vec<ClipRecord>, Vec<Prediction>)> {
+    if manifest.frames > RolloutSpec::paper().window {
+        refuse_oracle(
+            methods,
+            "a long-horizon manifest (the rollout shows each window only its keyframes)",
+        )?;
+    }
     let bar = progress_bar(show_progress, manifest.clips.len(), "evaluating")?;
     let mut records = Vec::new();
     let mut kept = Vec::new();

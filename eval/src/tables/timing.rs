@@ -105,6 +105,7 @@ pub fn timing_clip(n: usize, frames: usize) -> Result<Clip> {
 impl Timing {
     /// Runs the table: every method on [`timing_clip`]s of every size, one warm-up and `reps` timed runs each.
     pub fn run(&self, opts: &TableOptions) -> Result<TableReport> {
+        super::refuse_oracle(&opts.methods, "table 4 (timing)")?;
         if opts.methods.is_empty() || self.reps == 0 {
             return Err(DataError::new(
                 "eval run",

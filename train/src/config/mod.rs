@@ -86,15 +86,11 @@ pub struct TrainConfig {
     /// sampling and saved next to the raw parameters; 0 = off (the paper). Absent from a file means 0.
     #[serde(default)]
     pub ema_decay: f64,
-    /// Flush subnormal floats to zero on the threads that train (docs/method.md §10): CPU steps stay as fast at
-    /// step 5,000 as at step 1. Absent from a file means true; false reproduces, bit for bit, runs made before the
-    /// key existed.
-    #[serde(default = "flush_by_default")]
+    /// Flush subnormal floats to zero on the threads that train (docs/method.md §10): CPU steps keep their speed as
+    /// the network learns. Every preset sets it; absent from a file means false, so a run made before the key
+    /// existed resumes as it trained.
+    #[serde(default)]
     pub flush_denormals: bool,
-}
-
-fn flush_by_default() -> bool {
-    true
 }
 
 /// How the learning rate moves over a run.
