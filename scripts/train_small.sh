@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Trains the small family from scratch, one model after the other, and times each step: the procedural store, the
 # frame-wise VAE (configs/vae/small.toml), ours (configs/rf/small.toml) on that VAE and the replacement Baseline
-# (configs/rf/baseline_small.toml) on the same VAE. This is how weights/small was made, in one command:
+# (configs/rf/baseline_small.toml) on the same VAE. It is the recipe of weights/small in one command (those runs were
+# made by the same commands one at a time, before the presets flushed subnormal floats, docs/method.md §10, so this
+# trains a replicate of them, not a bit-for-bit copy):
 #
 #   scripts/train_small.sh OUT               # ANY4D_BIN=path/to/any4d if not target/release/any4d
 #
@@ -13,6 +15,7 @@ set -euo pipefail
 out=${1:?usage: scripts/train_small.sh OUT}
 root=$(cd "$(dirname "$0")/.." && pwd)
 bin=${ANY4D_BIN:-$root/target/release/any4d}
+[[ "$bin" == /* ]] || bin=$PWD/$bin
 if [[ ! -x "$bin" ]]; then
     echo "error: $bin is not an executable (cargo build --release -p any4d, or set ANY4D_BIN)" >&2
     exit 2
@@ -22,6 +25,7 @@ if [[ -e "$out/times.csv" ]]; then
     exit 2
 fi
 mkdir -p "$out/runs"
+out=$(cd "$out" && pwd)   # the steps run from the repository root
 echo "step,seconds,command" > "$out/times.csv"
 
 # step NAME COMMAND...: runs the command, appends its wall time to times.csv, keeps its output in NAME.log.
