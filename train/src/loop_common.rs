@@ -263,16 +263,19 @@ struct FlushScope;
 
 impl FlushScope {
     fn begin() -> Self {
-        any4d_model::denormals::set_flush_denormals(true);
-        rayon::broadcast(|_| any4d_model::denormals::set_flush_denormals(true));
+        Self::set(true);
         Self
+    }
+
+    fn set(on: bool) {
+        any4d_model::denormals::set_flush_denormals(on);
+        rayon::broadcast(|_| any4d_model::denormals::set_flush_denormals(on));
     }
 }
 
 impl Drop for FlushScope {
     fn drop(&mut self) {
-        any4d_model::denormals::set_flush_denormals(false);
-        rayon::broadcast(|_| any4d_model::denormals::set_flush_denormals(false));
+        Self::set(false);
     }
 }
 

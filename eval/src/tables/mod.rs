@@ -188,17 +188,17 @@ pub(crate) fn progress_bar(show: bool, len: usize, what: &str) -> Result<Progres
 /// ([`crate::methods::complete_and_score_batch`]); anywhere else it would decode hidden frames and print a row that is
 /// no floor, so it is refused there.
 pub(crate) fn refuse_oracle(methods: &[Box<dyn Method>], where_: &str) -> Result<()> {
-    match methods
+    if methods
         .iter()
-        .find(|m| m.kind() == crate::methods::MethodKind::VaeOracle)
+        .any(|m| m.kind() == crate::methods::MethodKind::VaeOracle)
     {
-        Some(_) => Err(DataError::new(
+        return Err(DataError::new(
             "eval run",
             "vae_oracle",
             format!("runs only on a short-horizon table 1 manifest, not on {where_}"),
-        )),
-        None => Ok(()),
+        ));
     }
+    Ok(())
 }
 
 /// Run the methods over a manifest (tables 1 and 2) and return per-clip records and the kept predictions.
