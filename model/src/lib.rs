@@ -9,6 +9,7 @@ pub mod bench;
 pub mod denormals;
 pub mod dymesh_vae;
 pub mod frame_vae;
+pub mod gelu;
 pub mod latent_stats;
 pub mod mesh_vae;
 pub mod mmdit;

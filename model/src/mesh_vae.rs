@@ -3,10 +3,10 @@
 //! interface; the frame-wise VAE (`frame_vae.rs`) and the sequence-wise DyMeshVAE (`dymesh_vae.rs`) differ only in
 //! their motion embedding and output head.
 
+use crate::gelu::gelu;
 use burn::nn::{LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Distribution;
-use burn::tensor::activation::gelu;
 use burn::tensor::module::linear;
 use serde::{Deserialize, Serialize};
 

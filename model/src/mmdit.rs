@@ -4,9 +4,10 @@
 //! Reading order as in DiT's `models.py`: helpers → timestep embedder → block (`pre_attention` / joint attention /
 //! `post_attention`, as in SD3's `mmdit.py`) → model. One token per FPS point; the 16 frames live in the channels.
 
+use crate::gelu::gelu;
 use burn::nn::{Initializer, LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::prelude::*;
-use burn::tensor::activation::{gelu, silu};
+use burn::tensor::activation::silu;
 use burn::tensor::module::attention;
 use burn::tensor::ops::AttentionModuleOptions;
 use serde::{Deserialize, Serialize};

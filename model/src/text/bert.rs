@@ -4,10 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::gelu::gelu;
 use burn::nn::{Embedding, EmbeddingConfig, LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::prelude::*;
 use burn::tensor::Bool;
-use burn::tensor::activation::gelu;
 use serde::{Deserialize, Serialize};
 
 use super::{TextBatch, TextEncoder, TextError, load_safetensors, load_tokenizer, pad_batch, text_self_attention};
