@@ -62,7 +62,8 @@ pub const fn col(key: &'static str, header: &'static str, scale: f64) -> MetricC
     }
 }
 
-/// A pooled ratio column named `key`: Σ `num` / Σ `den` over the clips of a seed ([`Aggregate::Pooled`]).
+/// A pooled ratio column named `key`: Σ `num` / Σ `den` over the clips of a seed ([`Aggregate::Pooled`]) on which
+/// both are defined (a NaN in either leaves the clip out of both sums).
 pub const fn pooled(key: &'static str, num: &'static str, den: &'static str, header: &'static str) -> MetricColumn {
     MetricColumn {
         key,
@@ -181,7 +182,15 @@ pub fn summarize(records: &[ClipRecord], layout: &Layout) -> Result<Vec<SummaryR
         for (c, col) in columns.iter().enumerate() {
             let (num, den) = match col.aggregate {
                 Aggregate::Mean => (get(col.key)?, 1.0),
-                Aggregate::Pooled { num, den } => (get(num)?, get(den)?),
+                Aggregate::Pooled { num, den } => {
+                    let (num, den) = (get(num)?, get(den)?);
+                    // A clip on which the quantity is undefined (NaN: the jerk of a clip under 4 frames) adds
+                    // nothing to either sum; the ratio is over the clips that have it.
+                    if num.is_nan() || den.is_nan() {
+                        continue;
+                    }
+                    (num, den)
+                }
             };
             entry.0[c].0 += num;
             entry.0[c].1 += den;
@@ -498,4 +507,57 @@ pub fn timing_tables(records: &[TimingRecord], header: &TableHeader) -> (String,
         let _ = writeln!(csv, ",{mean},{}", csv_field(&header.device));
     }
     (md, csv)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const COLUMNS: &[MetricColumn] = &[
+        col("rmse", "RMSE", 1.0),
+        pooled("jerk_pooled", "jerk", "jerk_gt", "jerk Σ/ΣGT"),
+    ];
+    const LAYOUT: Layout = Layout {
+        title: "test",
+        columns: COLUMNS,
+        k_column: false,
+    };
+
+    fn record(item: usize, rmse: f64, jerk: f64, jerk_gt: f64) -> ClipRecord {
+        ClipRecord {
+            method: "vae".into(),
+            placement: "all_frames".into(),
+            k_extra: 0,
+            seed: 0,
+            item,
+            clip_id: format!("clip{item}"),
+            metrics: [("rmse", rmse), ("jerk", jerk), ("jerk_gt", jerk_gt)]
+                .into_iter()
+                .map(|(k, v)| (k.to_string(), v))
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn a_clip_without_the_pooled_quantity_is_left_out_of_both_sums_not_the_whole_cell() {
+        let records = [
+            record(0, 1.0, 2.0, 1.0),
+            record(1, 3.0, f64::NAN, f64::NAN),
+            record(2, 2.0, 4.0, 3.0),
+        ];
+        let rows = summarize(&records, &LAYOUT).unwrap();
+        assert_eq!(rows.len(), 1);
+        assert_eq!(rows[0].clips, 3);
+        assert!(
+            (rows[0].values[0].mean - 2.0).abs() < 1e-12,
+            "mean RMSE over all three clips"
+        );
+        assert!(
+            (rows[0].values[1].mean - 1.5).abs() < 1e-12,
+            "pooled (2 + 4) / (1 + 3), got {}",
+            rows[0].values[1].mean
+        );
+        let none = summarize(&[record(0, 1.0, f64::NAN, 1.0)], &LAYOUT).unwrap();
+        assert!(none[0].values[1].mean.is_nan(), "no clip with the quantity: no value");
+    }
 }
