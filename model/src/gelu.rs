@@ -38,7 +38,7 @@ pub fn gelu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
             Err(e) => unreachable!("host_path admits f32 tensors only: {e}"),
         };
         y.par_chunks_mut(CHUNK).for_each(gelu_in_place);
-        return Tensor::from_data(TensorData::new(y, shape), &device);
+        return Tensor::from_data(TensorData::new(y, shape), (&device, DType::F32));
     }
     // x stays in the graph, so its values are copied out; that copy becomes G.
     let mut g = match x.clone().into_data().try_into_vec::<f32>() {
@@ -49,8 +49,8 @@ pub fn gelu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
     g.par_chunks_mut(CHUNK)
         .zip(c.par_chunks_mut(CHUNK))
         .for_each(|(g, c)| slope_offset_in_place(g, c));
-    let g = Tensor::from_data(TensorData::new(g, shape.clone()), &device);
-    let c = Tensor::from_data(TensorData::new(c, shape), &device);
+    let g = Tensor::from_data(TensorData::new(g, shape.clone()), (&device, DType::F32));
+    let c = Tensor::from_data(TensorData::new(c, shape), (&device, DType::F32));
     x * g + c
 }
 
@@ -75,9 +75,11 @@ fn gelu_in_place(xs: &mut [f32]) {
 fn slope_offset_in_place(g: &mut [f32], c: &mut [f32]) {
     for (g, c) in g.iter_mut().zip(c.iter_mut()) {
         let x = *g;
-        let xpdf = x * FRAC_1_SQRT_2PI * (-0.5 * x * x).exp();
+        // x φ(x) is 0 in f32 beyond |x| ≈ 14; clamping keeps it 0 (not ∞ · 0) at x = ±∞.
+        let xc = x.clamp(-16.0, 16.0);
+        let xpdf = xc * FRAC_1_SQRT_2PI * (-0.5 * xc * xc).exp();
         *g = normal_cdf(x) + xpdf;
-        *c = -x * xpdf;
+        *c = -xc * xpdf;
     }
 }
 
@@ -214,5 +216,68 @@ mod tests {
         let (v_burn, g_burn) = grad_of(&|x| burn::tensor::activation::gelu(x));
         let (dv, dg) = (worst(&v_ours, &v_burn), worst(&g_ours, &g_burn));
         assert!(dv < 3e-7 && dg < 1e-6, "value {dv:e}, gradient {dg:e}");
+    }
+
+    #[test]
+    fn host_gelu_gradients_flow_through_intermediate_and_strided_tensors_and_not_into_constants() {
+        let device = Device::flex();
+        let ad = device.clone().autodiff();
+        let values: Vec<f32> = (0..60).map(|i| i as f32 / 6.0 - 5.0).collect();
+        // A non-leaf input, 2-D and transposed (not contiguous), against burn's gelu on the same graph.
+        let grad_of = |f: &dyn Fn(Tensor<2>) -> Tensor<2>| {
+            let leaf = Tensor::<1>::from_data(TensorData::new(values.clone(), [60]), &ad).require_grad();
+            let x = (leaf.clone() * 2.0).reshape([6, 10]).swap_dims(0, 1);
+            let y = f(x);
+            let weights = Tensor::<2>::from_data(
+                TensorData::new((0..60).map(|i| (i % 7) as f32 - 3.0).collect::<Vec<_>>(), [10, 6]),
+                &ad,
+            );
+            let value = y.clone().into_data().try_to_vec::<f32>().unwrap();
+            let grads = (y * weights).sum().backward();
+            (
+                value,
+                leaf.grad(&grads).unwrap().into_data().try_to_vec::<f32>().unwrap(),
+            )
+        };
+        let (v_ours, g_ours) = grad_of(&|x| gelu(x));
+        let (v_burn, g_burn) = grad_of(&|x| burn::tensor::activation::gelu(x));
+        for i in 0..60 {
+            assert!(
+                (v_ours[i] - v_burn[i]).abs() < 3e-6,
+                "value {i}: {} vs {}",
+                v_ours[i],
+                v_burn[i]
+            );
+            assert!(
+                (g_ours[i] - g_burn[i]).abs() < 1e-5,
+                "gradient {i}: {} vs {}",
+                g_ours[i],
+                g_burn[i]
+            );
+        }
+        // A constant on an autodiff device (no gradient asked for) is computed like any untracked tensor.
+        let constant = Tensor::<1>::from_data(TensorData::new(values.clone(), [60]), &ad);
+        assert!(
+            !constant.is_tracked() && !gelu(constant).is_tracked(),
+            "a constant input gives a constant output"
+        );
+    }
+
+    #[test]
+    fn host_gelu_keeps_burns_values_at_infinities_and_nan() {
+        let device = Device::flex();
+        let special = vec![f32::INFINITY, f32::NEG_INFINITY, f32::NAN, 0.0];
+        let plain = gelu(Tensor::<1>::from_data(TensorData::new(special.clone(), [4]), &device));
+        let x = Tensor::<1>::from_data(TensorData::new(special, [4]), &device.autodiff()).require_grad();
+        let tracked = gelu(x);
+        for out in [plain, tracked] {
+            let v = out.into_data().try_to_vec::<f32>().unwrap();
+            assert_eq!(v[0], f32::INFINITY);
+            assert!(
+                v[1].is_nan() && v[2].is_nan(),
+                "−∞ · Φ(−∞) = −∞ · 0 and NaN stay NaN, as in burn: {v:?}"
+            );
+            assert_eq!(v[3], 0.0);
+        }
     }
 }
