@@ -15,12 +15,11 @@ use burn::backend::DispatchDevice;
 use burn::prelude::*;
 use burn::tensor::{DType, TensorData};
 use rayon::prelude::*;
+use std::f32::consts::FRAC_1_SQRT_2;
 
 /// Elements per parallel chunk: below this a second thread costs more than it saves.
 const CHUNK: usize = 1 << 15;
 
-/// `1/√2`.
-const FRAC_1_SQRT_2: f32 = std::f32::consts::FRAC_1_SQRT_2;
 /// `1/√(2π)`.
 const FRAC_1_SQRT_2PI: f32 = 0.398_942_3;
 
@@ -93,7 +92,7 @@ fn normal_cdf(x: f32) -> f32 {
 /// Eigen's minimax coefficients. A NaN input stays NaN.
 #[inline(always)]
 #[allow(clippy::excessive_precision)]
-pub fn erf(x: f32) -> f32 {
+fn erf(x: f32) -> f32 {
     let x = x.clamp(-4.0, 4.0);
     let x2 = x * x;
     let mut p = x2 * -2.726_142_258_013_06e-10 + 2.770_681_424_959_02e-08;
