@@ -7,7 +7,7 @@
 #   scripts/gpu_check.sh --dry-run OUT              # the same sequence on the CPU at tiny sizes (tests use this)
 #
 # Steps, each under a time limit (70 s; 270 s for the Table 4 timing, which runs 32 samplings of 63 midpoint steps:
-# at most 8 minutes in all; on an H200 over Vulkan the steps took about 5 1/2 minutes together,
+# at most 8 minutes in all; on an H200 over Vulkan the steps took about 320 s together, Table 4 about 220 of them,
 # experiments/2026-12-04-gpu-check):
 #   1. the GPU's name and memory (nvidia-smi);
 #   2. `bench model --size paper`: RF forward+backward and VAE encode+decode per clip;
