@@ -6,17 +6,20 @@
 #   scripts/gpu_check.sh OUT                        # ANY4D_BIN=path/to/any4d if not target/release/any4d
 #   scripts/gpu_check.sh --dry-run OUT              # the same sequence on the CPU at tiny sizes (tests use this)
 #
-# Steps, each under a time limit (70 s; 270 s for the Table 4 timing, which runs 32 samplings of 63 midpoint steps:
-# at most 8 minutes in all; on an H200 over Vulkan the steps took about 320 s together, Table 4 about 220 of them,
-# experiments/2026-12-04-gpu-check):
+# Steps, each under a time limit (60 s; 220 s for the Table 4 timing, which runs 24 samplings of 63 midpoint steps):
+# at most 8 minutes in all. Measured on H200s in experiments/2026-12-04-gpu-check and -gpu-half-fusion; burn's
+# kernel fusion (on in GPU builds) adds about 20 s of kernel compilation to each step's start.
 #   1. the GPU's name and memory (nvidia-smi);
-#   2. `bench model --size paper`: RF forward+backward and VAE encode+decode per clip;
+#   2. `bench model --size paper`: RF forward+backward and VAE encode+decode per clip, in f32 and in the backend's
+#      half precision (ANY4D_GPU_HALF: f16 on vulkan, bf16 on cuda; `none` skips it);
 #   3. `bench train` of configs/rf/paper.toml: steps/s, model TFLOP/s and the fraction of the GPU's peak
 #      (ANY4D_PEAK_TFLOPS, default 66.9: the H100/H200 SXM FP32 peak without tensor cores; state which peak);
-#      with ANY4D_GPU_BACKEND=cuda also in bf16 against ANY4D_PEAK_BF16_TFLOPS (default 989, dense);
+#      also in bf16 when that is the half precision, against ANY4D_PEAK_HALF_TFLOPS (default 989: dense bf16 with
+#      tensor cores; training in f16 is refused, see README "Training on a GPU");
 #   4. `bench sample`: P-Table 4, encode → 63-step midpoint sampling → decode, 16 and 31 frames, 512–4096 vertices
-#      (freshly initialised networks: the work does not depend on the weights);
-#   5. `bench train` of configs/rf/small.toml at its P = 128 for 300 steps: the small preset's steps/s.
+#      (freshly initialised networks: the work does not depend on the weights), in ANY4D_TABLE4_PRECISION
+#      (default f32, the paper's);
+#   5. `bench train` of configs/rf/small.toml at its P = 128 for 150 steps: the small preset's steps/s.
 # Output: OUT/gpu_check.csv (check, backend, precision, value, unit, command) and one log per step in OUT/.
 # A step that fails or runs out of time gets a row with value "failed" or "timeout" and the rest still run; the
 # exit status is non-zero if any step failed.
@@ -47,11 +50,14 @@ if ((dry)); then
     vertices=256,512
     grid=4
     reps=1
+    table4_reps=1
     train_steps=3
     small_steps=3
     small_tokens=32
     limit=120
     table4_limit=120
+    half=none # the CPU backends compute in f32 only
+    table4_precision=f32
 else
     backend=${ANY4D_GPU_BACKEND:-vulkan}
     size=paper
@@ -61,14 +67,19 @@ else
     vertices=512,1024,2048,4096
     grid=64
     reps=3
+    table4_reps=2
     train_steps=20
-    small_steps=${ANY4D_SMALL_STEPS:-300}
+    small_steps=${ANY4D_SMALL_STEPS:-150}
     small_tokens=128 # configs/vae/small.toml's P
-    limit=70
-    table4_limit=270
+    limit=60
+    table4_limit=220
+    half_default=f16
+    [[ "$backend" == cuda ]] && half_default=bf16
+    half=${ANY4D_GPU_HALF:-$half_default}
+    table4_precision=${ANY4D_TABLE4_PRECISION:-f32}
 fi
 peak=${ANY4D_PEAK_TFLOPS:-66.9}
-peak_bf16=${ANY4D_PEAK_BF16_TFLOPS:-989}
+peak_half=${ANY4D_PEAK_HALF_TFLOPS:-989}
 status=0
 
 row() { # check precision value unit command
@@ -109,22 +120,28 @@ else
 fi
 
 # 2. Networks per clip.
-cmd=("$bin" bench model --size "$size" --backend "$backend" --iters "$reps")
-if run_step bench_model "${cmd[@]}"; then
-    for net in "RF forward+backward" "frame-wise VAE encode+decode" "sequence-wise DyMeshVAE encode+decode"; do
-        ms=$(grep -F "bench model: $net" "$out/bench_model.log" | sed -nE 's/.* ([0-9.]+) ms\/clip$/\1/p')
-        row "model: $net" f32 "${ms:-parse-error}" "ms/clip" "${cmd[*]}"
-    done
-else
-    failed_row "model: networks" f32 $? "${cmd[*]}"
-fi
+model_rows() { # name precision
+    local name=$1 precision=$2
+    local c=("$bin" bench model --size "$size" --backend "$backend" --precision "$precision" --iters "$reps")
+    if run_step "$name" "${c[@]}"; then
+        for net in "RF forward+backward" "frame-wise VAE encode+decode" "sequence-wise DyMeshVAE encode+decode"; do
+            local ms
+            ms=$(grep -F "bench model: $net" "$out/$name.log" | sed -nE 's/.* ([0-9.]+) ms\/clip$/\1/p')
+            row "model: $net" "$precision" "${ms:-parse-error}" "ms/clip" "${c[*]}"
+        done
+    else
+        failed_row "model: networks" "$precision" $? "${c[*]}"
+    fi
+}
+model_rows bench_model f32
+[[ "$half" != none ]] && model_rows "bench_model_$half" "$half"
 
 # 3. Paper-size training step: steps/s, TFLOP/s, fraction of the peak.
 train_row() { # name precision peak config steps [tokens]
     local name=$1 precision=$2 cpeak=$3 config=$4 steps=$5
     local c=("$bin" bench train --config "$config" --backends "$backend" --steps "$steps" --peak-tflops "$cpeak")
     [[ -n "${6:-}" ]] && c+=(--tokens "$6")
-    [[ "$precision" == bf16 ]] && c+=(--precision bf16)
+    c+=(--precision "$precision")
     if run_step "$name" "${c[@]}"; then
         # The result row: backend micro_batch median_s steps/s samples/s GFLOP/step GFLOP/s of_peak
         local line
@@ -138,18 +155,18 @@ train_row() { # name precision peak config steps [tokens]
     fi
 }
 train_row train_paper f32 "$peak" "$rf_paper" "$train_steps"
-if [[ "$backend" == cuda ]]; then
-    train_row train_paper_bf16 bf16 "$peak_bf16" "$rf_paper" "$train_steps"
-fi
+[[ "$half" == bf16 ]] && train_row "train_paper_$half" "$half" "$peak_half" "$rf_paper" "$train_steps"
+
 
 # 4. P-Table 4 timing.
 cmd=("$bin" bench sample --rf-config "$rf_paper" --vae-config "$vae_paper" --backend "$backend"
-    --vertices "$vertices" --frames 16,31 --reps "$reps" --n-grid "$grid" --out "$out/table4")
+    --precision "$table4_precision" --vertices "$vertices" --frames 16,31 --reps "$table4_reps" --n-grid "$grid"
+    --out "$out/table4")
 if run_step table4 "${cmd[@]}"; then
     # summary.csv: one line per method × frames, a column v<N> per vertex count.
-    python3 - "$out/table4/summary.csv" "$backend" "${cmd[*]}" >>"$csv" <<'EOF' || status=1
+    python3 - "$out/table4/summary.csv" "$backend" "$table4_precision" "${cmd[*]}" >>"$csv" <<'EOF' || status=1
 import csv, sys
-path, backend, command = sys.argv[1:]
+path, backend, precision, command = sys.argv[1:]
 with open(path) as f:
     rows = [r for r in csv.reader(f) if r and not r[0].startswith("#")]
 header, body = rows[0], rows[1:]
@@ -158,12 +175,12 @@ printed = 0
 for r in body:
     for h, v in zip(header, r):
         if h.startswith("v") and h[1:].isdigit():  # v512: seconds per clip at 512 vertices
-            print(f'table4: {r[frames_col]} frames {h[1:]} vertices,{backend},f32,{float(v):.4f},s/clip,"{command}"')
+            print(f'table4: {r[frames_col]} frames {h[1:]} vertices,{backend},{precision},{float(v):.4f},s/clip,"{command}"')
             printed += 1
 sys.exit(0 if printed else f"no timing columns in {path}")
 EOF
 else
-    failed_row "table4" f32 $? "${cmd[*]}"
+    failed_row "table4" "$table4_precision" $? "${cmd[*]}"
 fi
 
 # 5. The small preset's training throughput at its P (ANY4D_SMALL_STEPS steps, default 300).

@@ -1,5 +1,5 @@
 //! `any4d train` and `any4d model summary` through the binary: `--set` overrides reach the parsed config and an
-//! unknown key is refused, and DDP on CPU devices is refused before a run folder exists.
+//! unknown key is refused, and DDP on CPU devices and f16 training are refused before a run folder exists.
 
 use std::path::PathBuf;
 
@@ -64,4 +64,46 @@ fn cli_refuses_ddp_on_cpu_devices_before_creating_a_run_folder() {
     assert!(!out.status.success(), "ddp on flex succeeded: {stderr}");
     assert!(stderr.contains("--strategy ddp needs cuda devices"), "{stderr}");
     assert!(!runs.exists(), "a run folder was created for a run that cannot start");
+}
+
+/// f16 is refused for training (it diverges: parameters and optimiser state in f16) before a run folder exists, by
+/// `train` and by `bench train`, with the reason.
+#[test]
+fn cli_refuses_f16_training_before_creating_a_run_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let runs = dir.path().join("runs");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_any4d"))
+        .args(["train", "vae", "--config"])
+        .arg(preset("configs/vae/tiny.toml"))
+        .args([
+            "--data",
+            "no-store-needed",
+            "--set",
+            "device.precision=\"f16\"",
+            "--runs-dir",
+        ])
+        .arg(&runs)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "f16 training started: {stderr}");
+    assert!(stderr.contains("training in f16 diverges"), "{stderr}");
+    assert!(!runs.exists(), "a run folder was created for a run that cannot start");
+
+    let tiny = preset("configs/rf/tiny.toml");
+    let out = any4d(&[
+        "bench",
+        "train",
+        "--config",
+        tiny.to_str().unwrap(),
+        "--backends",
+        "flex",
+        "--precision",
+        "f16",
+        "--steps",
+        "2",
+    ]);
+    let (_, stderr) = text(&out);
+    assert!(!out.status.success(), "bench train in f16 ran: {stderr}");
+    assert!(stderr.contains("training in f16 diverges"), "{stderr}");
 }

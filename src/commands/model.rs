@@ -96,6 +96,9 @@ pub struct BenchArgs {
     /// Backend (a GPU one needs a binary built with its cargo feature; `--threads` applies to CPU backends).
     #[arg(long, value_parser = super::enum_parser(&Backend::ALL), default_value = "flex")]
     pub backend: Backend,
+    /// Float precision of our networks (f16, bf16: GPU backends only; the reference runs f32).
+    #[arg(long, value_parser = super::enum_parser(&any4d_train::backend::Precision::ALL), default_value = "f32")]
+    pub precision: any4d_train::backend::Precision,
     /// CPU threads for our timings (a rayon pool of this size: burn-flex's gemm and kernels and burn-ndarray
     /// run on the current rayon pool) and for the PyTorch reference (torch.set_num_threads). Default: all cores.
     #[arg(long)]
@@ -196,7 +199,7 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
     let sz = args.size.sizes();
-    let device = any4d_train::backend::device(args.backend, any4d_train::backend::Precision::F32)?;
+    let device = any4d_train::backend::device(args.backend, args.precision)?;
     if cfg!(debug_assertions) {
         println!(
             "note: debug build of our crates (dependencies are optimised); `cargo run --release -- bench model` \
@@ -281,8 +284,8 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
 fn print_ours(args: &BenchArgs, sz: &BenchSizes, ours: &ModelTimings, threads: usize) {
     let per_clip = |t: &StepTiming| t.median_ms / args.batch as f64;
     let common = format!(
-        "{:?}, batch {}, {} iters, {threads} threads",
-        args.backend, args.batch, args.iters
+        "{:?} {}, batch {}, {} iters, {threads} threads",
+        args.backend, args.precision, args.batch, args.iters
     );
     println!(
         "bench model: RF forward+backward, {:?} size (W {}, {} blocks, P {}, L {}), {common}: median {:.1} ms/step, \
@@ -379,6 +382,7 @@ mod tests {
             batch: 2,
             iters: 1,
             backend: Backend::Flex,
+            precision: any4d_train::backend::Precision::F32,
             threads: Some(3),
             torch_reference: None,
             script: script.to_path_buf(),

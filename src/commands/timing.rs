@@ -31,6 +31,9 @@ pub struct SampleBenchArgs {
     /// Frame counts: 16 = one window, 31 = the two-stage rollout.
     #[arg(long, value_delimiter = ',', default_value = "16,31")]
     pub frames: Vec<usize>,
+    /// Float precision of the networks (f16, bf16: GPU backends only; the paper times f32).
+    #[arg(long, value_parser = enum_parser(&Precision::ALL), default_value = "f32")]
+    pub precision: Precision,
     /// Timed repetitions after one warm-up (median reported).
     #[arg(long, default_value_t = 3)]
     pub reps: usize,
@@ -51,7 +54,7 @@ pub fn bench_sample(args: SampleBenchArgs) -> anyhow::Result<ExitCode> {
 
     let rf = RfRunConfig::load(&args.rf_config, &[])?;
     let vae = VaeRunConfig::load(&args.vae_config, &[])?;
-    let device = backend::device(args.backend, Precision::F32)?;
+    let device = backend::device(args.backend, args.precision)?;
     let method = untrained_keyframe_method(&rf, &vae, args.n_grid, &device)?;
     let mut opts = TableOptions::new(PathBuf::from("none"), args.out.clone());
     opts.methods = vec![method];
@@ -67,7 +70,10 @@ pub fn bench_sample(args: SampleBenchArgs) -> anyhow::Result<ExitCode> {
         )]
         .into_iter()
         .collect(),
-        device: format!("{:?}; midpoint sampler on a {}-point grid", args.backend, args.n_grid),
+        device: format!(
+            "{:?} ({}); midpoint sampler on a {}-point grid",
+            args.backend, args.precision, args.n_grid
+        ),
         ..TableHeader::default()
     };
     let protocol = Protocol::Timing(Timing {

@@ -247,7 +247,7 @@ pub struct BenchArgs {
     /// Backends to compare.
     #[arg(long, value_parser = enum_parser(&Backend::ALL), num_args = 1.., default_values = ["flex", "ndarray"])]
     backends: Vec<Backend>,
-    /// Override `[device] precision` (bf16: cuda only).
+    /// Override `[device] precision` (bf16: GPU backends that compute in it; f16 is refused for training).
     #[arg(long, value_parser = enum_parser(&Precision::ALL))]
     precision: Option<Precision>,
     /// Clips per timed step (RF default: the preset's `train.micro_batch`; VAE default: the preset's global batch;
@@ -333,7 +333,7 @@ fn bench_rf(args: &BenchArgs, cfg: &RfRunConfig) -> anyhow::Result<ExitCode> {
         "backend", "micro_batch", "median_s", "steps/s", "samples/s", "GFLOP/step", "GFLOP/s", "of_peak"
     );
     for &b in &args.backends {
-        backend::check(b, precision)?;
+        backend::check_training(b, precision)?;
         let device = backend::device(b, precision)?;
         let secs = time_rf_steps(cfg, shape, args.steps, &device).with_context(|| format!("backend {b}"))?;
         let step_s = median(&secs[1..]);

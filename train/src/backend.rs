@@ -1,6 +1,7 @@
 //! Compute backends picked at run time: burn 0.22 selects the backend through the `Device`
 //! value, so one binary carries the CPU backends (`flex`, `ndarray`) and, behind cargo features, the GPU ones
-//! (`vulkan`, `cuda`). Precision (docs/method.md §3.5, §4.7: FP32) is a device setting; bf16 only on cuda.
+//! (`vulkan`, `cuda`). Precision (docs/method.md §3.5, §4.7: FP32) is a device setting; the half precisions (f16,
+//! bf16) run on the GPU backends only, where the device reports the type usable for arithmetic and products.
 
 use std::fmt;
 
@@ -27,7 +28,9 @@ pub enum Backend {
 pub enum Precision {
     /// 32-bit floats everywhere (docs/method.md §3.5, §4.7).
     F32,
-    /// bfloat16 (cuda only; asked for explicitly).
+    /// IEEE half precision (GPU backends; asked for explicitly). No loss scaling: for timing and inference.
+    F16,
+    /// bfloat16 (GPU backends where the device computes in it, e.g. cuda; asked for explicitly).
     Bf16,
 }
 
@@ -85,13 +88,23 @@ impl std::str::FromStr for Backend {
 
 impl Precision {
     /// Every precision, in the order `--help` lists them.
-    pub const ALL: [Precision; 2] = [Precision::F32, Precision::Bf16];
+    pub const ALL: [Precision; 3] = [Precision::F32, Precision::F16, Precision::Bf16];
+
+    /// The burn float type of a half precision (`None` for f32, the device default).
+    fn half_dtype(self) -> Option<burn::tensor::FloatDType> {
+        match self {
+            Precision::F32 => None,
+            Precision::F16 => Some(burn::tensor::FloatDType::F16),
+            Precision::Bf16 => Some(burn::tensor::FloatDType::BF16),
+        }
+    }
 }
 
 impl fmt::Display for Precision {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {
             Precision::F32 => "f32",
+            Precision::F16 => "f16",
             Precision::Bf16 => "bf16",
         })
     }
@@ -100,12 +113,12 @@ impl fmt::Display for Precision {
 impl std::str::FromStr for Precision {
     type Err = String;
 
-    /// Parses `f32` or `bf16`, case-insensitively.
+    /// Parses `f32`, `f16` or `bf16`, case-insensitively.
     fn from_str(name: &str) -> Result<Self, String> {
         Precision::ALL
             .into_iter()
             .find(|p| p.to_string().eq_ignore_ascii_case(name.trim()))
-            .ok_or_else(|| format!("unknown precision `{name}` (f32, bf16)"))
+            .ok_or_else(|| format!("unknown precision `{name}` (f32, f16, bf16)"))
     }
 }
 
@@ -113,25 +126,44 @@ impl std::str::FromStr for Precision {
 ///
 /// Precision must be configured before the first tensor exists on the device, so call this once, at start-up.
 pub fn device(backend: Backend, precision: Precision) -> Result<Device, BackendError> {
+    check(backend, precision)?;
     let device = base_device(backend)?;
-    match precision {
-        Precision::F32 => Ok(device),
-        Precision::Bf16 => bf16_device(backend, device),
+    match precision.half_dtype() {
+        None => Ok(device),
+        Some(dtype) => half_device(backend, precision, dtype, device),
     }
 }
 
 /// Checks that `backend` at `precision` is available in this binary without touching the device (so that a run
-/// folder is only created for a run that can start).
+/// folder is only created for a run that can start). Whether the GPU itself computes in a half precision is known
+/// only once the device is opened ([`device`]).
 pub fn check(backend: Backend, precision: Precision) -> Result<(), BackendError> {
     base_device(backend)?;
-    if precision == Precision::Bf16 && backend != Backend::Cuda {
+    if precision != Precision::F32 && backend.is_cpu() {
         return Err(BackendError::Precision {
             backend,
             precision,
-            reason: "bf16 training is offered on cuda only".into(),
+            reason: "half precisions are offered on the GPU backends only (vulkan, cuda)".into(),
         });
     }
     Ok(())
+}
+
+/// [`check`] for a training run: f16 is offered for inference and timing only. Training keeps the parameters and
+/// AdamW's moments in the device's float type, with no f32 master copy and no loss scaling, and in f16 that
+/// diverges: the tiny and paper RF presets turned NaN by their second step (CPU, burn-flex in f16) and the paper
+/// preset at its first on an H200 over Vulkan (`experiments/2026-12-04-gpu-half-fusion`).
+pub fn check_training(backend: Backend, precision: Precision) -> Result<(), BackendError> {
+    if precision == Precision::F16 {
+        return Err(BackendError::Precision {
+            backend,
+            precision,
+            reason: "training in f16 diverges (parameters and optimiser state in f16, no f32 master weights or loss \
+                     scaling); train in f32, or in bf16 where the device computes in it"
+                .into(),
+        });
+    }
+    check(backend, precision)
 }
 
 #[allow(deprecated)] // burn-ndarray is deprecated in burn 0.22 but kept working
@@ -156,23 +188,27 @@ fn base_device(backend: Backend) -> Result<Device, BackendError> {
     }
 }
 
-/// bf16 parameters and activations on cuda (`Device::configure`, before any tensor exists on the device). The
-/// call is backend-generic, so this compiles (and is type-checked) in every build; only cuda is offered.
-fn bf16_device(backend: Backend, mut device: Device) -> Result<Device, BackendError> {
-    if backend != Backend::Cuda {
+/// Half-precision parameters and activations (`Device::configure`, before any tensor exists on the device), after
+/// asking the device whether it computes in that type (Vulkan devices often store bf16 without computing in it).
+/// The calls are backend-generic, so this compiles (and is type-checked) in every build.
+fn half_device(
+    backend: Backend,
+    precision: Precision,
+    dtype: burn::tensor::FloatDType,
+    mut device: Device,
+) -> Result<Device, BackendError> {
+    if !device.supports_dtype(dtype) {
         return Err(BackendError::Precision {
             backend,
-            precision: Precision::Bf16,
-            reason: "bf16 training is offered on cuda only".into(),
+            precision,
+            reason: "this device does not compute in it".into(),
         });
     }
-    device
-        .configure(burn::tensor::FloatDType::BF16)
-        .map_err(|err| BackendError::Precision {
-            backend,
-            precision: Precision::Bf16,
-            reason: format!("{err:?}"),
-        })?;
+    device.configure(dtype).map_err(|err| BackendError::Precision {
+        backend,
+        precision,
+        reason: format!("{err:?}"),
+    })?;
     Ok(device)
 }
 
@@ -181,11 +217,29 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cpu_backends_build_devices_and_bf16_is_refused_on_cpu() {
+    fn cpu_backends_build_devices_and_half_precisions_are_refused_on_cpu() {
         assert!(device(Backend::Flex, Precision::F32).is_ok());
         assert!(device(Backend::Ndarray, Precision::F32).is_ok());
-        let err = device(Backend::Flex, Precision::Bf16).unwrap_err();
-        assert!(err.to_string().contains("cuda only"), "{err}");
+        for half in [Precision::F16, Precision::Bf16] {
+            for cpu in [Backend::Flex, Backend::Ndarray] {
+                let err = device(cpu, half).unwrap_err();
+                assert!(err.to_string().contains("GPU backends only"), "{cpu} {half}: {err}");
+                assert!(check(cpu, half).is_err());
+            }
+        }
+    }
+
+    #[test]
+    fn training_refuses_f16_on_every_backend_and_keeps_f32() {
+        for b in Backend::ALL {
+            let err = check_training(b, Precision::F16).unwrap_err();
+            assert!(err.to_string().contains("training in f16 diverges"), "{b}: {err}");
+        }
+        assert!(check_training(Backend::Flex, Precision::F32).is_ok());
+        assert!(
+            check_training(Backend::Flex, Precision::Bf16).is_err(),
+            "half precisions stay GPU-only"
+        );
     }
 
     #[test]
@@ -197,7 +251,7 @@ mod tests {
             assert_eq!(p.to_string().parse::<Precision>(), Ok(p));
         }
         assert!("tpu".parse::<Backend>().unwrap_err().contains("unknown backend `tpu`"));
-        assert!("f16".parse::<Precision>().is_err());
+        assert!("fp8".parse::<Precision>().unwrap_err().contains("f32, f16, bf16"));
     }
 
     #[cfg(not(feature = "cuda"))]

@@ -16,6 +16,7 @@ pub mod config;
 pub mod data_order;
 pub mod error;
 pub mod evaluate;
+pub mod grad_clip;
 pub mod loop_common;
 pub mod multi_device;
 pub mod pack;

@@ -23,6 +23,7 @@ use crate::checkpoint::{self, TrainState};
 use crate::config::{OptimConfig, TrainConfig};
 use crate::data_order::DataOrder;
 use crate::error::{Result, TrainError};
+use crate::grad_clip::clip_global_norm;
 use crate::multi_device::Parallel;
 use crate::plot;
 use crate::progress::{Progress, ProgressMode};
@@ -536,49 +537,4 @@ fn guard(value: f64, step: u64, what: &str, last_good: &Option<PathBuf>) -> Resu
             last_good: last_good.clone(),
         })
     }
-}
-
-/// Scales `grads` so that their global L2 norm over `model`'s parameters is at most `max_norm` (PyTorch's
-/// `clip_grad_norm_`, docs/method.md §3.5/§4.7 "gradient clip 1.0"); returns the clipped gradients and the norm before.
-pub fn clip_global_norm<M: Module>(model: &M, mut grads: GradientsParams, max_norm: f64) -> (GradientsParams, f64) {
-    struct SquaredNorm<'a> {
-        grads: &'a GradientsParams,
-        sum: Option<Tensor<1>>,
-    }
-    impl ModuleVisitor for SquaredNorm<'_> {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            if let Some(g) = self.grads.get::<D>(param.id) {
-                let s = g.square().sum();
-                self.sum = Some(match self.sum.take() {
-                    Some(acc) => acc + s,
-                    None => s,
-                });
-            }
-        }
-    }
-    struct Scale<'a> {
-        grads: &'a mut GradientsParams,
-        factor: f64,
-    }
-    impl ModuleVisitor for Scale<'_> {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            if let Some(g) = self.grads.remove::<D>(param.id) {
-                self.grads.register::<D>(param.id, g.mul_scalar(self.factor));
-            }
-        }
-    }
-    let mut norm = SquaredNorm {
-        grads: &grads,
-        sum: None,
-    };
-    model.visit(&mut norm);
-    let total = norm.sum.map_or(0.0, |s| scalar(s).sqrt());
-    if total > max_norm {
-        let mut scale = Scale {
-            grads: &mut grads,
-            factor: max_norm / (total + 1e-6),
-        };
-        model.visit(&mut scale);
-    }
-    (grads, total)
 }

@@ -361,9 +361,14 @@ fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
 /// claimed when a backend is not in this binary.
 pub fn run_devices(device: &DeviceConfig, parallel: Option<&Parallel>) -> Result<Vec<Device>> {
     match parallel {
-        Some(p) => p.plain_devices(device.precision),
+        Some(p) => {
+            for d in &p.devices {
+                backend::check_training(d.backend, device.precision)?;
+            }
+            p.plain_devices(device.precision)
+        }
         None => {
-            backend::check(device.backend, device.precision)?;
+            backend::check_training(device.backend, device.precision)?;
             Ok(vec![backend::device(device.backend, device.precision)?])
         }
     }

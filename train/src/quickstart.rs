@@ -124,7 +124,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         base_cfg.train.duration = Duration::Steps(n);
     }
     // Every stage runs on the CPU backend that `configs/*/tiny.toml` names; check it before creating anything.
-    backend::check(vae_cfg.device.backend, vae_cfg.device.precision)?;
+    backend::check_training(vae_cfg.device.backend, vae_cfg.device.precision)?;
 
     stage(format!(
         "1/5 synthesising {} procedural clips into {}",
