@@ -5,7 +5,8 @@
 //! the activation about a quarter of a small RF's sampling time. Here Φ comes from a rational approximation of
 //! `erf` on `[-4, 4]` (Eigen's, the one XLA and TVM use; no branch, no `exp`), evaluated over contiguous
 //! slices in a loop the compiler vectorises. Its `erf` is within 3.2e-7 of the exact one after f32 rounding (tested
-//! against a double-precision reference). Other backends and dtypes use burn's own `gelu`.
+//! against a double-precision reference). The loops run under pulp's runtime dispatch (AVX-512 or AVX2 where the CPU
+//! has them). Other backends and dtypes use burn's own `gelu`.
 //!
 //! With autodiff the activation is written as `x ⊙ G + C`, where `G = Φ(x) + x φ(x)` is the exact derivative
 //! and `C = −x² φ(x)`; both are computed on the host as constants, so the value is `x Φ(x)` and the gradient
@@ -36,7 +37,8 @@ pub fn gelu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
             Ok(y) => y,
             Err(e) => unreachable!("host_path admits f32 tensors only: {e}"),
         };
-        y.par_chunks_mut(CHUNK).for_each(gelu_in_place);
+        y.par_chunks_mut(CHUNK)
+            .for_each(|y| pulp::Arch::new().dispatch(Values(y)));
         return Tensor::from_data(TensorData::new(y, shape), (&device, DType::F32));
     }
     // x stays in the graph, so its values are copied out; that copy becomes G.
@@ -47,7 +49,7 @@ pub fn gelu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
     let mut c = vec![0.0f32; g.len()];
     g.par_chunks_mut(CHUNK)
         .zip(c.par_chunks_mut(CHUNK))
-        .for_each(|(g, c)| slope_offset_in_place(g, c));
+        .for_each(|(g, c)| pulp::Arch::new().dispatch(SlopeOffset(g, c)));
     let g = Tensor::from_data(TensorData::new(g, shape.clone()), (&device, DType::F32));
     let c = Tensor::from_data(TensorData::new(c, shape), (&device, DType::F32));
     x * g + c
@@ -63,7 +65,34 @@ fn host_path<const D: usize>(x: &Tensor<D>) -> bool {
         )
 }
 
+// The loops below run through pulp's dispatch: inlined into a function compiled for the widest vector
+// instructions this CPU has (AVX-512 or AVX2+FMA, chosen at run time), where the binary's baseline x86-64 target
+// would give them 4-lane SSE.
+
+/// [`gelu_in_place`] under pulp's dispatch.
+struct Values<'a>(&'a mut [f32]);
+
+impl pulp::WithSimd for Values<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        gelu_in_place(self.0);
+    }
+}
+
+/// [`slope_offset_in_place`] under pulp's dispatch.
+struct SlopeOffset<'a>(&'a mut [f32], &'a mut [f32]);
+
+impl pulp::WithSimd for SlopeOffset<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        slope_offset_in_place(self.0, self.1);
+    }
+}
+
 /// `x ← x Φ(x)`.
+#[inline(always)]
 fn gelu_in_place(xs: &mut [f32]) {
     for x in xs {
         *x *= normal_cdf(*x);
@@ -71,14 +100,47 @@ fn gelu_in_place(xs: &mut [f32]) {
 }
 
 /// `g ← Φ(x) + x φ(x)` (the derivative; g holds x on entry) and `c ← −x² φ(x)`, so that `x g + c = x Φ(x)`.
+#[inline(always)]
 fn slope_offset_in_place(g: &mut [f32], c: &mut [f32]) {
     for (g, c) in g.iter_mut().zip(c.iter_mut()) {
         let x = *g;
         // x φ(x) is 0 in f32 beyond |x| ≈ 14; clamping keeps it 0 (not ∞ · 0) at x = ±∞.
         let xc = x.clamp(-16.0, 16.0);
-        let xpdf = xc * FRAC_1_SQRT_2PI * (-0.5 * xc * xc).exp();
+        let xpdf = xc * FRAC_1_SQRT_2PI * exp_nonpositive(-0.5 * xc * xc);
         *g = normal_cdf(x) + xpdf;
         *c = -xc * xpdf;
+    }
+}
+
+/// `e^y` for `y ≤ 0` in f32 without a call or a branch, so that the loops above vectorise (libm's `expf` is a
+/// scalar call per element): `y = n ln 2 + r` with `|r| ≤ ln 2 / 2` (ln 2 split in two parts, so `r` is exact to
+/// f32), Cephes' minimax polynomial for `e^r` (within 2 ulp), and `2^n` assembled in the exponent bits. Below −87
+/// `2^n` is no longer a normal f32 and the result is 0 (the exact value is under 1.7e-38 there). NaN stays NaN.
+#[inline(always)]
+#[allow(clippy::excessive_precision)]
+fn exp_nonpositive(y: f32) -> f32 {
+    const LOG2_E: f32 = std::f32::consts::LOG2_E;
+    const LN2_HI: f32 = 0.693_359_375; // few mantissa bits: n · LN2_HI is exact
+    const LN2_LO: f32 = -2.121_944_4e-4;
+    const ROUND: f32 = 12_582_912.0; // 1.5 · 2^23: adding and subtracting it rounds to the nearest integer
+    let yc = y.clamp(-87.0, 0.0);
+    let n = (yc * LOG2_E + ROUND) - ROUND;
+    let r = (yc - n * LN2_HI) - n * LN2_LO;
+    let mut p = 1.987_569_150_0e-4f32;
+    p = p * r + 1.398_199_950_7e-3;
+    p = p * r + 8.333_451_907_3e-3;
+    p = p * r + 4.166_579_589_4e-2;
+    p = p * r + 1.666_666_545_9e-1;
+    p = p * r + 5.000_000_120_1e-1;
+    let er = p * r * r + r + 1.0;
+    let scale = f32::from_bits(((n as i32 + 127) as u32) << 23);
+    let e = er * scale;
+    if y < -87.0 {
+        0.0
+    } else if y.is_nan() {
+        y
+    } else {
+        e
     }
 }
 
@@ -147,6 +209,27 @@ mod tests {
         assert_eq!(erf(f32::INFINITY), 1.0);
         assert_eq!(erf(f32::NEG_INFINITY), -1.0);
         assert!(erf(f32::NAN).is_nan());
+    }
+
+    #[test]
+    fn exp_nonpositive_is_within_2_ulp_of_exp_and_zero_below_its_range() {
+        let mut worst = 0.0f64;
+        for i in 0..=2_000_000 {
+            let y = -(i as f32) * 4.4e-5; // 0 down to −88
+            let got = f64::from(exp_nonpositive(y));
+            let want = f64::from(y).exp();
+            if y < -87.0 {
+                assert_eq!(got, 0.0, "e^{y}");
+                continue;
+            }
+            let rel = (got - want).abs() / want;
+            worst = worst.max(rel);
+            assert!(rel <= 2.0 * f64::from(f32::EPSILON), "e^{y}: {got} vs {want} ({rel:e})");
+        }
+        assert!(worst > 0.0, "compared in f64, so f32 results differ somewhere");
+        assert_eq!(exp_nonpositive(0.0), 1.0);
+        assert_eq!(exp_nonpositive(f32::NEG_INFINITY), 0.0);
+        assert!(exp_nonpositive(f32::NAN).is_nan());
     }
 
     #[test]
