@@ -41,54 +41,38 @@ fn set_overrides_change_the_network_and_unknown_keys_fail() {
     );
 }
 
-#[test]
-fn cli_refuses_ddp_on_cpu_devices_before_creating_a_run_folder() {
+/// `train vae` of the tiny preset with `args` must fail before it creates a run folder, saying `reason`.
+fn assert_refused_before_a_run_folder(args: &[&str], reason: &str) {
     let dir = tempfile::tempdir().unwrap();
     let runs = dir.path().join("runs");
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_any4d"))
         .args(["train", "vae", "--config"])
         .arg(preset("configs/vae/tiny.toml"))
-        .args([
-            "--data",
-            "no-store-needed",
-            "--devices",
-            "flex,flex",
-            "--strategy",
-            "ddp",
-            "--runs-dir",
-        ])
+        .args(["--data", "no-store-needed"])
+        .args(args)
+        .arg("--runs-dir")
         .arg(&runs)
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "ddp on flex succeeded: {stderr}");
-    assert!(stderr.contains("--strategy ddp needs cuda devices"), "{stderr}");
+    assert!(!out.status.success(), "{args:?} started: {stderr}");
+    assert!(stderr.contains(reason), "{stderr}");
     assert!(!runs.exists(), "a run folder was created for a run that cannot start");
+}
+
+#[test]
+fn cli_refuses_ddp_on_cpu_devices_before_creating_a_run_folder() {
+    assert_refused_before_a_run_folder(
+        &["--devices", "flex,flex", "--strategy", "ddp"],
+        "--strategy ddp needs cuda devices",
+    );
 }
 
 /// f16 is refused for training (it diverges: parameters and optimiser state in f16) before a run folder exists, by
 /// `train` and by `bench train`, with the reason.
 #[test]
 fn cli_refuses_f16_training_before_creating_a_run_folder() {
-    let dir = tempfile::tempdir().unwrap();
-    let runs = dir.path().join("runs");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_any4d"))
-        .args(["train", "vae", "--config"])
-        .arg(preset("configs/vae/tiny.toml"))
-        .args([
-            "--data",
-            "no-store-needed",
-            "--set",
-            "device.precision=\"f16\"",
-            "--runs-dir",
-        ])
-        .arg(&runs)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "f16 training started: {stderr}");
-    assert!(stderr.contains("training in f16 diverges"), "{stderr}");
-    assert!(!runs.exists(), "a run folder was created for a run that cannot start");
+    assert_refused_before_a_run_folder(&["--set", "device.precision=\"f16\""], "training in f16 diverges");
 
     let tiny = preset("configs/rf/tiny.toml");
     let out = any4d(&[
