@@ -8,7 +8,8 @@
 #
 # Steps, each under a time limit (60 s; 220 s for the Table 4 timing, which runs 24 samplings of 63 midpoint steps):
 # at most 8 minutes in all. Measured on H200s in experiments/2026-12-04-gpu-check and -gpu-half-fusion; burn's
-# kernel fusion (on in GPU builds) adds about 20 s of kernel compilation to each step's start.
+# kernel fusion (on in GPU builds) compiles its kernels at first use: about 20 s more start-up per step in the one
+# comparison made (inferred from two runs' wall times, not timed directly).
 #   1. the GPU's name and memory (nvidia-smi);
 #   2. `bench model --size paper`: RF forward+backward and VAE encode+decode per clip, in f32 and in the backend's
 #      half precision (ANY4D_GPU_HALF: f16 on vulkan, bf16 on cuda; `none` skips it);
@@ -157,7 +158,6 @@ train_row() { # name precision peak config steps [tokens]
 train_row train_paper f32 "$peak" "$rf_paper" "$train_steps"
 [[ "$half" == bf16 ]] && train_row "train_paper_$half" "$half" "$peak_half" "$rf_paper" "$train_steps"
 
-
 # 4. P-Table 4 timing.
 cmd=("$bin" bench sample --rf-config "$rf_paper" --vae-config "$vae_paper" --backend "$backend"
     --precision "$table4_precision" --vertices "$vertices" --frames 16,31 --reps "$table4_reps" --n-grid "$grid"
@@ -183,7 +183,7 @@ else
     failed_row "table4" "$table4_precision" $? "${cmd[*]}"
 fi
 
-# 5. The small preset's training throughput at its P (ANY4D_SMALL_STEPS steps, default 300).
+# 5. The small preset's training throughput at its P (ANY4D_SMALL_STEPS steps, default 150).
 train_row train_small f32 "$peak" "$rf_small" "$small_steps" "$small_tokens"
 
 if command -v column >/dev/null; then column -s, -t <"$csv"; else cat "$csv"; fi
