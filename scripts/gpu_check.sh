@@ -7,7 +7,8 @@
 #   scripts/gpu_check.sh --dry-run OUT              # the same sequence on the CPU at tiny sizes (tests use this)
 #
 # Steps, each under a time limit (60 s; 220 s for the Table 4 timing, which runs 24 samplings of 63 midpoint steps):
-# at most 8 minutes in all on vulkan (cuda adds two bf16 steps: 8 min 40 s). Measured on H200s in experiments/2026-12-04-gpu-check and -gpu-half-fusion; burn's
+# at most 8 minutes in all on vulkan (cuda adds two bf16 steps: 8 min 40 s). Measured on H200s in
+# experiments/2026-12-04-gpu-check and -gpu-half-fusion; burn's
 # kernel fusion (on in GPU builds) compiles its kernels at first use: about 20 s more start-up per step in the one
 # comparison made (inferred from two runs' wall times, not timed directly).
 #   1. the GPU's name and memory (nvidia-smi);
