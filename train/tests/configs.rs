@@ -19,7 +19,8 @@ fn tomls(dir: &Path, out: &mut Vec<PathBuf>) {
         let p = e.expect("readable directory entry").path();
         if p.is_dir() {
             tomls(&p, out);
-        } else if p.extension().is_some_and(|x| x == "toml") {
+        } else if p.extension().is_some_and(|x| x == "toml") && !p.ends_with("Cargo.toml") {
+            // A Cargo.toml is a crate manifest (an experiment's standalone reproducer), not a run config.
             out.push(p);
         }
     }
