@@ -58,7 +58,9 @@ if ((dry)); then
     small_tokens=32
     limit=120
     table4_limit=120
-    half=none # the CPU backends compute in f32 only
+    # The CPU backends compute in f32 only and refuse a half precision after parsing the command line, so setting
+    # ANY4D_GPU_HALF here checks the half-precision steps' command lines (their rows then read "failed").
+    half=${ANY4D_GPU_HALF:-none}
     table4_precision=f32
 else
     backend=${ANY4D_GPU_BACKEND:-vulkan}

@@ -209,9 +209,11 @@ fn complete_benchmark_prints_one_row_per_vertex_count() {
     assert!(!out.status.success() && text(&out).1.contains("--reps"));
 }
 
-/// `scripts/gpu_check.sh --dry-run` runs the GPU check's whole sequence on the CPU at tiny sizes: every check gets a
-/// numeric row in one CSV (networks, training throughput and peak fraction, P-Table 4 per size, the small preset),
-/// so the script is ready for the one short call a lent GPU allows. `bench sample` refuses configs that do not fit.
+/// `scripts/gpu_check.sh --dry-run` runs the GPU check's whole sequence on the CPU at tiny sizes: every f32 check gets
+/// a numeric row in one CSV (networks, training throughput and peak fraction, P-Table 4 per size, the small preset),
+/// so the script is ready for the one short call a lent GPU allows. The bf16 steps (cuda's half precision) reach the
+/// CPU backend, which refuses them only after their command lines parsed: their rows read "failed", the rest still
+/// run, and the exit status says a step failed. `bench sample` refuses configs that do not fit.
 #[test]
 fn the_gpu_check_script_runs_dry_on_the_cpu_and_writes_one_numeric_row_per_check() {
     let dir = tempfile::tempdir().unwrap();
@@ -221,16 +223,19 @@ fn the_gpu_check_script_runs_dry_on_the_cpu_and_writes_one_numeric_row_per_check
         .arg("--dry-run")
         .arg(&out)
         .env("ANY4D_BIN", env!("CARGO_BIN_EXE_any4d"))
+        .env("ANY4D_GPU_HALF", "bf16")
         .output()
         .expect("bash runs the script");
     let (stdout, stderr) = text(&status);
-    assert!(status.status.success(), "{stdout}\n{stderr}");
+    assert_eq!(status.status.code(), Some(1), "{stdout}\n{stderr}");
     let csv = std::fs::read_to_string(out.join("gpu_check.csv")).unwrap();
     let mut checks = Vec::new();
     for line in csv.lines().skip(1) {
         let fields: Vec<&str> = line.splitn(6, ',').collect();
         assert_eq!(fields.len(), 6, "{line}");
-        if fields[0] != "device" {
+        if fields[2] == "bf16" {
+            assert_eq!(fields[3], "failed", "{line}");
+        } else if fields[0] != "device" {
             let value = fields[3].trim_end_matches('%');
             assert!(value.parse::<f64>().is_ok_and(|v| v >= 0.0), "not a number: {line}");
         }
@@ -246,6 +251,11 @@ fn the_gpu_check_script_runs_dry_on_the_cpu_and_writes_one_numeric_row_per_check
         "train_small: steps/s",
     ] {
         assert!(checks.iter().any(|c| c == want), "no `{want}` row in\n{csv}");
+    }
+    for (step, row) in [("bench_model_bf16", "model: networks"), ("train_paper_bf16", "train_paper_bf16")] {
+        assert!(checks.iter().any(|c| c == row), "no `{row}` row in\n{csv}");
+        let log = std::fs::read_to_string(out.join(format!("{step}.log"))).unwrap();
+        assert!(log.contains("precision `bf16` refused on backend `flex`"), "{step}: {log}");
     }
 
     let vae = preset("configs/vae/dymesh_tiny.toml");

@@ -40,8 +40,8 @@ pub enum BackendError {
     /// The binary was built without the cargo feature that carries this backend.
     #[error("backend `{backend}` is not compiled into this binary; rebuild with `--features {feature}`")]
     NotCompiled { backend: Backend, feature: &'static str },
-    /// The precision is not available on this backend.
-    #[error("precision {precision:?} is not supported on backend `{backend}` ({reason})")]
+    /// The precision cannot be used on this backend, or not for this job (the reason says which).
+    #[error("precision `{precision}` refused on backend `{backend}`: {reason}")]
     Precision {
         backend: Backend,
         precision: Precision,
@@ -233,7 +233,8 @@ mod tests {
     fn training_refuses_f16_on_every_backend_and_keeps_f32() {
         for b in Backend::ALL {
             let err = check_training(b, Precision::F16).unwrap_err();
-            assert!(err.to_string().contains("training in f16 diverges"), "{b}: {err}");
+            let msg = err.to_string();
+            assert!(msg.contains("training in f16 diverges") && msg.contains("`f16`"), "{b}: {msg}");
         }
         assert!(check_training(Backend::Flex, Precision::F32).is_ok());
         assert!(
