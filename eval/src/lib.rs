@@ -7,6 +7,7 @@ pub mod bench;
 pub mod learned;
 pub mod methods;
 pub mod metrics;
+mod nearest;
 pub mod plot;
 pub mod protocol;
 pub mod render;

@@ -5,12 +5,11 @@
 //! Every metric reads f32 vertices and accumulates in f64. Sequences are frame-major `[T, N, 3]` slices
 //! (vertex `v` of frame `f` at `f * N + v`), wrapped in [`Motion`] so frame and vertex counts travel with them.
 
-use std::num::NonZeroUsize;
-
 use any4d_data::preprocess::Normalization;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+
+use crate::nearest::mean_nearest;
 
 /// Why a metric could not be computed. Every variant names what differs or what is missing.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -234,49 +233,6 @@ pub fn mean_vertex_error(pred: Motion, gt: Motion, frames: &[usize]) -> Result<f
     Ok(sum / pairs as f64)
 }
 
-/// Mean nearest-neighbour distance from each point of `from` to the set `to`: the neighbour is found in an f32 k-d
-/// tree over `to` (the coordinates as stored), its distance computed in f64. Against an f64 search the neighbour can
-/// differ only between points whose squared distances agree to f32 rounding, so each distance is within that
-/// rounding of the exact nearest one (relative 1e-7), far below the metric's decimals.
-///
-/// `paired`: `from` and `to` are two frames of one mesh (the same vertex count and order), so the point of `to` with
-/// the query's own index bounds its nearest distance from above; the search then only visits the tree's cells within
-/// that bound (a prediction near the truth is a small bound). Any bound gives the unbounded search's distance: the
-/// nearest point lies within every bound that holds a point, and an empty result falls back to the unbounded
-/// search. The bound is loosened (relative 1e-5 plus the smallest normal f32) only so that rounding cannot leave the
-/// same-index point outside it and force that fallback. Between candidates tied in f32 either may be chosen, as above.
-fn mean_nearest(from: &[[f32; 3]], to: &[[f32; 3]], paired: bool) -> Result<f64> {
-    let tree: ImmutableKdTree<f32, 3> = ImmutableKdTree::new_from_slice(to).map_err(|e| EvalError::Parameter {
-        name: "nearest-neighbour set",
-        reason: e.to_string(),
-    })?;
-    let unbounded = |p: &[f32; 3]| tree.query(p).nearest_one::<SquaredEuclidean<f32>>().execute().item as usize;
-    let sum: f64 = from
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            let nearest = match to.get(i).filter(|_| paired) {
-                Some(same) => {
-                    let d2: f32 = (0..3).map(|k| (p[k] - same[k]) * (p[k] - same[k])).sum();
-                    let bound = d2 * (1.0 + 1e-5) + f32::MIN_POSITIVE;
-                    // The nearest one within the bound (a k-nearest search with a radius keeps one candidate, where a
-                    // radius search would gather every point of a wide ball when the prediction is far off).
-                    let within = tree
-                        .query(p)
-                        .nearest_n::<SquaredEuclidean<f32>>(NonZeroUsize::MIN)
-                        .within(bound)
-                        .execute();
-                    // Empty only if rounding put the same-index point outside its own bound: search unbounded.
-                    within.first().map_or_else(|| unbounded(p), |r| r.item as usize)
-                }
-                None => unbounded(p),
-            };
-            norm(sub(*p, to[nearest]))
-        })
-        .sum();
-    Ok(sum / from.len() as f64)
-}
-
 fn check_set(name: &'static str, set: &[[f32; 3]]) -> Result<()> {
     if set.is_empty() {
         return Err(EvalError::EmptySet { name });
@@ -293,8 +249,8 @@ fn check_set(name: &'static str, set: &[[f32; 3]]) -> Result<()> {
 }
 
 /// (E2) for one frame: `mean_{b∈g} min_{a∈p} ‖a − b‖ + mean_{a∈p} min_{b∈g} ‖a − b‖` with exact nearest neighbours
-/// (up to f32 rounding of the distances that choose them, see `mean_nearest`).
-/// The sets may have different sizes.
+/// (up to f32 rounding of the distances that choose them, see the `nearest` module). The sets may have different
+/// sizes; coordinates beyond ±1e18 are refused.
 ///
 /// # Shapes
 /// `p`: `[N_p, 3]`, `g`: `[N_g, 3]`.

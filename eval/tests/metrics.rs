@@ -109,7 +109,8 @@ fn chamfer_brute(p: &[[f32; 3]], g: &[[f32; 3]]) -> f64 {
 fn chamfer_of_frames_is_the_brute_force_nearest_neighbour_distance() {
     // Frames of one mesh: the search is bounded by the same-index vertex, which must never change the nearest
     // distance, whether the prediction is near the truth (a tight bound), far from it (a loose one), or holds
-    // repeated points. (The empty-result fallback is not reached here: the loosened bound always holds that vertex.)
+    // repeated points. (The k-d tree's empty-result fallback is not reached here: the loosened bound always holds that
+    // vertex.)
     let mut rng = Gen(5);
     let (frames, n) = (3, 400);
     let gt = rng.points(frames * n, 1.0);
