@@ -252,10 +252,16 @@ fn the_gpu_check_script_runs_dry_on_the_cpu_and_writes_one_numeric_row_per_check
     ] {
         assert!(checks.iter().any(|c| c == want), "no `{want}` row in\n{csv}");
     }
-    for (step, row) in [("bench_model_bf16", "model: networks"), ("train_paper_bf16", "train_paper_bf16")] {
+    for (step, row) in [
+        ("bench_model_bf16", "model: networks"),
+        ("train_paper_bf16", "train_paper_bf16"),
+    ] {
         assert!(checks.iter().any(|c| c == row), "no `{row}` row in\n{csv}");
         let log = std::fs::read_to_string(out.join(format!("{step}.log"))).unwrap();
-        assert!(log.contains("precision `bf16` refused on backend `flex`"), "{step}: {log}");
+        assert!(
+            log.contains("precision `bf16` refused on backend `flex`"),
+            "{step}: {log}"
+        );
     }
 
     let vae = preset("configs/vae/dymesh_tiny.toml");

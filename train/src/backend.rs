@@ -234,7 +234,10 @@ mod tests {
         for b in Backend::ALL {
             let err = check_training(b, Precision::F16).unwrap_err();
             let msg = err.to_string();
-            assert!(msg.contains("training in f16 diverges") && msg.contains("`f16`"), "{b}: {msg}");
+            assert!(
+                msg.contains("training in f16 diverges") && msg.contains("`f16`"),
+                "{b}: {msg}"
+            );
         }
         assert!(check_training(Backend::Flex, Precision::F32).is_ok());
         assert!(
