@@ -26,29 +26,93 @@ pub fn farthest_point_sampling(points: &[[f32; 3]], p: usize) -> Vec<u32> {
     // Squared distance to the chosen set; chosen points hold −1 so they never win again.
     let mut dist = vec![f32::INFINITY; n];
     let mut out = Vec::with_capacity(p);
-    let mut cur = 0usize;
-    for _ in 0..take {
-        out.push(cur as u32);
-        dist[cur] = -1.0;
-        let (cx, cy, cz) = (xs[cur], ys[cur], zs[cur]);
-        let mut best = 0usize;
-        let mut best_d = f32::NEG_INFINITY;
-        for i in 0..n {
-            let (dx, dy, dz) = (xs[i] - cx, ys[i] - cy, zs[i] - cz);
-            let d = dist[i].min(dx * dx + dy * dy + dz * dz);
-            dist[i] = d;
-            // Strictly greater: the lowest index wins a tie.
-            if d > best_d {
-                best_d = d;
-                best = i;
-            }
-        }
-        cur = best;
-    }
+    pulp::Arch::new().dispatch(Sample {
+        xyz: [&xs, &ys, &zs],
+        dist: &mut dist,
+        take,
+        out: &mut out,
+    });
     for k in take..p {
         out.push(out[k % n]);
     }
     out
+}
+
+/// The sampling loop under pulp's runtime dispatch: inlined into a function compiled for the widest vector
+/// instructions this CPU has (AVX-512 or AVX2, chosen at run time), where the binary's baseline x86-64 target
+/// would give it 4-lane SSE. No fused multiply-add is formed (Rust does not contract), so the distances, and hence
+/// the indices, are the same on every CPU.
+struct Sample<'a> {
+    xyz: [&'a [f32]; 3],
+    dist: &'a mut [f32],
+    take: usize,
+    out: &'a mut Vec<u32>,
+}
+
+impl pulp::WithSimd for Sample<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        let mut cur = 0usize;
+        for _ in 0..self.take {
+            self.out.push(cur as u32);
+            self.dist[cur] = -1.0;
+            let centre = self.xyz.map(|c| c[cur]);
+            cur = update_and_argmax(self.xyz, self.dist, centre);
+        }
+    }
+}
+
+/// Lanes of the running arg-max in [`update_and_argmax`].
+const LANES: usize = 16;
+
+/// Lowers each `dist[i]` to the squared distance from point `i` to `centre` and returns the index of the largest,
+/// the lowest index among equals. Each of [`LANES`] lanes keeps its own running maximum (a strict `>`: its lowest
+/// index) over the points it sees; the lanes are then merged by value, then by index, and the remainder past the
+/// last whole chunk (higher indices) scanned with a strict `>`: the same index as one scan, in a form the compiler
+/// vectorises.
+#[inline(always)]
+fn update_and_argmax(xyz: [&[f32]; 3], dist: &mut [f32], centre: [f32; 3]) -> usize {
+    let n = dist.len();
+    let whole = n - n % LANES;
+    let [xs, ys, zs] = xyz;
+    let (mut lane_max, mut lane_arg) = ([f32::NEG_INFINITY; LANES], [0u32; LANES]);
+    let chunks = xs[..whole]
+        .chunks_exact(LANES)
+        .zip(ys[..whole].chunks_exact(LANES))
+        .zip(zs[..whole].chunks_exact(LANES))
+        .zip(dist[..whole].chunks_exact_mut(LANES));
+    for (chunk, (((x, y), z), d)) in chunks.enumerate() {
+        for l in 0..LANES {
+            let (dx, dy, dz) = (x[l] - centre[0], y[l] - centre[1], z[l] - centre[2]);
+            let v = d[l].min(dx * dx + dy * dy + dz * dz);
+            d[l] = v;
+            let better = v > lane_max[l];
+            lane_max[l] = if better { v } else { lane_max[l] };
+            lane_arg[l] = if better {
+                (chunk * LANES + l) as u32
+            } else {
+                lane_arg[l]
+            };
+        }
+    }
+    let (mut best, mut best_d) = (0usize, f32::NEG_INFINITY);
+    for (&v, &i) in lane_max.iter().zip(&lane_arg) {
+        let i = i as usize;
+        if v > best_d || (v == best_d && i < best) {
+            (best, best_d) = (i, v);
+        }
+    }
+    for i in whole..n {
+        let (dx, dy, dz) = (xs[i] - centre[0], ys[i] - centre[1], zs[i] - centre[2]);
+        let v = dist[i].min(dx * dx + dy * dy + dz * dz);
+        dist[i] = v;
+        // Strictly greater: the lowest index wins a tie.
+        if v > best_d {
+            (best, best_d) = (i, v);
+        }
+    }
+    best
 }
 
 /// [`farthest_point_sampling`] of many point sets in parallel (rayon), `p` indices each.
@@ -125,6 +189,53 @@ mod tests {
         };
         let first: Vec<u32> = (0..16).collect();
         assert!(gap(&a[..16]) > gap(&first));
+    }
+
+    /// The sampling as one plain scan (the definition above), to compare the laned arg-max with.
+    fn one_scan(points: &[[f32; 3]], p: usize) -> Vec<u32> {
+        let n = points.len();
+        let mut dist = vec![f32::INFINITY; n];
+        let (mut out, mut cur) = (Vec::new(), 0usize);
+        for _ in 0..p.min(n) {
+            out.push(cur as u32);
+            dist[cur] = -1.0;
+            let c = points[cur];
+            let (mut best, mut best_d) = (0, f32::NEG_INFINITY);
+            for (i, q) in points.iter().enumerate() {
+                let (dx, dy, dz) = (q[0] - c[0], q[1] - c[1], q[2] - c[2]);
+                dist[i] = dist[i].min(dx * dx + dy * dy + dz * dz);
+                if dist[i] > best_d {
+                    (best, best_d) = (i, dist[i]);
+                }
+            }
+            cur = best;
+        }
+        out
+    }
+
+    #[test]
+    fn the_laned_arg_max_picks_what_one_scan_picks() {
+        // Sizes around the 16 lanes, points on a coarse lattice (many exact ties across lanes), and repeated points.
+        for (n, seed) in [
+            (1, 1),
+            (15, 2),
+            (16, 3),
+            (17, 4),
+            (33, 5),
+            (100, 6),
+            (1000, 7),
+            (4099, 8),
+        ] {
+            let lattice: Vec<[f32; 3]> = cloud(n, seed).iter().map(|q| q.map(|x| (x * 4.0).floor())).collect();
+            let mut repeated = cloud(n, seed + 100);
+            for i in (0..n).step_by(3) {
+                repeated[i] = repeated[0];
+            }
+            for pts in [cloud(n, seed), lattice, repeated] {
+                let p = n.min(300);
+                assert_eq!(farthest_point_sampling(&pts, p), one_scan(&pts, p), "n {n}");
+            }
+        }
     }
 
     #[test]
