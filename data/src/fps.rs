@@ -11,6 +11,7 @@ use rayon::prelude::*;
 /// index. Chosen points are never chosen again, so for `p ≤ N` the indices are distinct even when points
 /// coincide. If `p > N` (the vertex filter rules this out: N ≥ 512 = P) the result is all N indices in FPS order
 /// followed by that same order repeated cyclically until it has `p` entries. `N = 0` gives an empty vector.
+/// Indices are u32, so N must not exceed `u32::MAX`.
 ///
 /// # Shapes
 /// - `points`: `[N]` rows of xyz; returns `[P]` indices
@@ -19,6 +20,7 @@ pub fn farthest_point_sampling(points: &[[f32; 3]], p: usize) -> Vec<u32> {
     if n == 0 || p == 0 {
         return Vec::new();
     }
+    debug_assert!(u32::try_from(n).is_ok(), "{n} points: indices are u32");
     let take = p.min(n);
     let xs: Vec<f32> = points.iter().map(|q| q[0]).collect();
     let ys: Vec<f32> = points.iter().map(|q| q[1]).collect();

@@ -261,6 +261,7 @@ pub fn chamfer_sets(p: &[[f32; 3]], g: &[[f32; 3]]) -> Result<f64> {
 }
 
 /// (E2) Chamfer distance averaged over the listed frames; frames run in parallel (rayon), summed in order.
+/// Coordinates beyond ±1e18 are refused (see the `nearest` module).
 ///
 /// # Shapes
 /// `pred`, `gt`: `[T, N, 3]`; `frames`: `[U]`.
