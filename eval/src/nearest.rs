@@ -38,11 +38,14 @@ fn search_radius(best: f32) -> f64 {
 /// largest value (3.4e38).
 const MAX_COORDINATE: f32 = 1e18;
 
-/// The most cells (a 3 × 3 × 3 block) and points that [`CellGrid::nearest_below`] searches before it leaves the
-/// query to the k-d tree. A prediction near the truth needs one to eight cells of about one point each; a far one,
-/// or a set whose bounding box one outlying vertex stretches so that most points share a few cells, is the tree's
+/// The most cells (a 3 × 3 × 3 block) that [`CellGrid::nearest_below`] searches before it leaves the query to the
+/// k-d tree. A prediction near the truth needs one to eight cells of about one point each; a far one is the tree's
 /// case, whose cost grows with the logarithm of the set rather than with the box.
 const MAX_CELLS: usize = 27;
+
+/// The most points that [`CellGrid::nearest_below`] scans before it leaves the query to the k-d tree: a set whose
+/// bounding box one outlying vertex stretches can put most of its points into a few cells, and scanning those for
+/// every query would be quadratic.
 const MAX_POINTS: usize = 128;
 
 /// A uniform grid over a point set, about one point per cell of its bounding box (a flat axis gets at least
@@ -110,16 +113,17 @@ impl CellGrid {
     }
 
     /// The point nearest to `p` among those whose f32 squared distance is below `best`, else `candidate` (the
-    /// point at `best`). `None` when the cells within [`search_radius`] of `p` are more than [`MAX_CELLS`] or hold
-    /// more than [`MAX_POINTS`].
+    /// point at `best`). `None` when the cells within [`search_radius`] of `p` (widened for rounding, below) are
+    /// more than [`MAX_CELLS`] or hold more than [`MAX_POINTS`].
     pub(crate) fn nearest_below(&self, p: &[f32; 3], mut best: f32, mut candidate: usize) -> Option<usize> {
         if best == 0.0 {
             return Some(candidate);
         }
         let r = search_radius(best);
-        // A point within r of p along axis k lands in a cell of this range: the range's ends are widened by four f64
-        // roundings of the coordinates involved (p − lo, then ± r, against each stored point's own q − lo), and
-        // rounding is monotone from there on.
+        // A point within r of p along axis k lands in a cell of this range. p − lo and each stored point's q − lo
+        // are each rounded once in f64, so they can sit up to about one f64 epsilon of |lo|, |p| and r further
+        // apart than the points; the range's ends are widened by four times that, and rounding (± reach, · inv,
+        // the floor) is monotone from there on.
         let range = |k: usize| {
             let last = (self.dims[k] - 1) as f64;
             let cell = |x: f64| (x * self.inv).clamp(0.0, last) as usize;
@@ -157,7 +161,8 @@ impl CellGrid {
 ///
 /// `paired`: `from` and `to` are two frames of one mesh (the same vertex count and order), so the point of `to` with
 /// the query's own index bounds its nearest distance from above: only points nearer than it are searched for, in a
-/// [`CellGrid`] while they fit a few cells (a prediction near the truth), else in a k-d tree within that bound (a
+/// [`CellGrid`] while they fit a few cells of few points (a prediction near the truth), else in a k-d tree within
+/// that bound (a
 /// k-nearest search with a radius keeps one candidate, where a radius search would gather every point of a wide
 /// ball). Any bound gives the unbounded search's distance: the nearest point lies within every bound that holds a
 /// point. The tree's bound is loosened like [`search_radius`] so that rounding cannot leave the same-index point
@@ -367,6 +372,22 @@ mod tests {
         let expected = from.iter().map(|p| brute(p, &to)).sum::<f64>() / from.len() as f64;
         let got = mean_nearest(&from, &to, false).expect("finite sets");
         assert!((got - expected).abs() <= 1e-6 * expected, "{got} vs {expected}");
+    }
+
+    #[test]
+    fn underflowing_squares_stay_within_the_stated_absolute_error() {
+        // At 1e-25 every squared difference underflows f32 to 0 or a subnormal, so neighbours are chosen among
+        // near-ties. The documented 1e-18 bound is loose at this scale: what this guards against is a NaN, an
+        // infinite distance or a panic from the zero distances and the grid's degenerate cells.
+        let mut g = Gen(17);
+        let to = g.points(300, [1e-25; 3]);
+        let from: Vec<[f32; 3]> = to.iter().map(|q| q.map(|c| c + g.unit() * 1e-25)).collect();
+        let expected = from.iter().map(|p| brute(p, &to)).sum::<f64>() / from.len() as f64;
+        let got = mean_nearest(&from, &to, true).expect("finite sets");
+        assert!(
+            got.is_finite() && (got - expected).abs() <= 1e-18,
+            "{got} vs {expected}"
+        );
     }
 
     #[test]
