@@ -244,9 +244,10 @@ mod tests {
         }
     }
 
-    /// The f64 distance to the nearest point, every pair compared.
-    fn brute(p: &[f32; 3], to: &[[f32; 3]]) -> f64 {
-        to.iter().map(|q| dist(p, q)).fold(f64::INFINITY, f64::min)
+    /// The mean over `from` of the f64 distance to the nearest point of `to`, every pair compared.
+    fn brute_mean(from: &[[f32; 3]], to: &[[f32; 3]]) -> f64 {
+        let nearest = |p: &[f32; 3]| to.iter().map(|q| dist(p, q)).fold(f64::INFINITY, f64::min);
+        from.iter().map(nearest).sum::<f64>() / from.len() as f64
     }
 
     /// Sets of one mesh's frames that a grid handles badly or oddly: flat, a line, one repeated point, two far
@@ -284,7 +285,7 @@ mod tests {
                     .iter()
                     .map(|q| [0, 1, 2].map(|k| q[k] + g.unit() * noise * extent))
                     .collect();
-                let expected = from.iter().map(|p| brute(p, &to)).sum::<f64>() / from.len() as f64;
+                let expected = brute_mean(&from, &to);
                 let got = mean_nearest(&from, &to, true).expect("finite sets");
                 let tolerance = 1e-6 * expected + 1e-30;
                 assert!(
@@ -359,7 +360,7 @@ mod tests {
         let p = to[5].map(|c| c + 1e-3);
         assert_eq!(grid.nearest_below(&p, dist2(&p, &to[5]), 5), None);
         let from: Vec<[f32; 3]> = to.iter().map(|q| q.map(|c| c + g.unit() * 1e-3)).collect();
-        let expected = from.iter().map(|p| brute(p, &to)).sum::<f64>() / from.len() as f64;
+        let expected = brute_mean(&from, &to);
         let got = mean_nearest(&from, &to, true).expect("finite sets");
         assert!((got - expected).abs() <= 1e-6 * expected, "{got} vs {expected}");
     }
@@ -369,7 +370,7 @@ mod tests {
         let mut g = Gen(3);
         let to = g.points(400, [1.0; 3]);
         let from = g.points(250, [1.2; 3]);
-        let expected = from.iter().map(|p| brute(p, &to)).sum::<f64>() / from.len() as f64;
+        let expected = brute_mean(&from, &to);
         let got = mean_nearest(&from, &to, false).expect("finite sets");
         assert!((got - expected).abs() <= 1e-6 * expected, "{got} vs {expected}");
     }
@@ -382,7 +383,7 @@ mod tests {
         let mut g = Gen(17);
         let to = g.points(300, [1e-25; 3]);
         let from: Vec<[f32; 3]> = to.iter().map(|q| q.map(|c| c + g.unit() * 1e-25)).collect();
-        let expected = from.iter().map(|p| brute(p, &to)).sum::<f64>() / from.len() as f64;
+        let expected = brute_mean(&from, &to);
         let got = mean_nearest(&from, &to, true).expect("finite sets");
         assert!(
             got.is_finite() && (got - expected).abs() <= 1e-18,
