@@ -19,7 +19,7 @@ use crate::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, train_bdlstm};
 use crate::config::{Duration, TrainConfig};
 use crate::error::{Result, TrainError};
 use crate::grad_clip::clip_global_norm;
-use crate::loop_common::{RunOptions, StopFlag, scalar, step_seed};
+use crate::loop_common::{FlushScope, RunOptions, StopFlag, scalar, step_seed};
 use crate::progress::ProgressMode;
 use crate::rf_loop::{RfRunConfig, training_mask};
 use crate::run_folder::{METRICS_FILE, RunFolder, read_table};
@@ -112,7 +112,9 @@ fn rf_inputs(cfg: &RfRunConfig, shape: RfShape, rng: &mut ChaCha8Rng, device: &D
 /// (R5) through [`rf_training_loss`] as the RF objective computes it, backward, global-norm clipping and the AdamW
 /// step of the training loop, then a device sync. The model is built at the preset's size with the preset's largest
 /// vocabulary; `impute_until` uses Z as its keyframe latents (the VAE encoding of noisy keyframes is not timed).
+/// Subnormals are flushed as the training loop flushes them (`train.flush_denormals`, docs/method.md §10).
 pub fn time_rf_steps(cfg: &RfRunConfig, shape: RfShape, steps: u64, device: &Device) -> Result<Vec<f64>> {
+    let _flush = cfg.train.flush_denormals.then(FlushScope::begin);
     let ad = device.clone().autodiff();
     ad.seed(cfg.train.seed);
     let mut model = cfg.model_config(cfg.text.vocab_size).init(&ad);

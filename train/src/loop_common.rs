@@ -260,10 +260,10 @@ impl StepLosses<'_> {
 /// thread of the current rayon pool, which runs the single-device steps; dropping it, at the end, on an error or on a
 /// stop, clears both again, so what runs after training in the same process (the quickstart's evaluation) computes
 /// as if the loop had never flushed.
-struct FlushScope;
+pub(crate) struct FlushScope;
 
 impl FlushScope {
-    fn begin() -> Self {
+    pub(crate) fn begin() -> Self {
         Self::set(true);
         Self
     }
