@@ -177,7 +177,8 @@ fn check_frames(what: &'static str, indices: &[usize], frames: usize) -> Result<
     }
 }
 
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
+/// `a − b` in f64.
+pub(crate) fn sub(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
     [
         f64::from(a[0]) - f64::from(b[0]),
         f64::from(a[1]) - f64::from(b[1]),
@@ -185,7 +186,8 @@ fn sub(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
     ]
 }
 
-fn norm(d: [f64; 3]) -> f64 {
+/// The Euclidean norm.
+pub(crate) fn norm(d: [f64; 3]) -> f64 {
     (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
 }
 

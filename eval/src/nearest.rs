@@ -13,7 +13,7 @@ use std::num::NonZeroUsize;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
-use crate::metrics::{EvalError, Result};
+use crate::metrics::{EvalError, Result, norm, sub};
 
 /// Squared distance in f32, the one formula every search here compares with.
 fn dist2(a: &[f32; 3], b: &[f32; 3]) -> f32 {
@@ -21,10 +21,9 @@ fn dist2(a: &[f32; 3], b: &[f32; 3]) -> f32 {
     d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
 }
 
-/// Euclidean distance in f64.
+/// Euclidean distance in f64, as the other metrics compute it.
 fn dist(a: &[f32; 3], b: &[f32; 3]) -> f64 {
-    let d = [0, 1, 2].map(|k| f64::from(a[k]) - f64::from(b[k]));
-    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+    norm(sub(*a, *b))
 }
 
 /// The radius around a query that holds every point whose f32 squared distance is below `best`: f32 rounding of
