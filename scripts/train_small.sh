@@ -2,8 +2,8 @@
 # Trains the small family from scratch, one model after the other, and times each step: the procedural store, the
 # frame-wise VAE (configs/vae/small.toml), ours (configs/rf/small.toml) on that VAE and the replacement Baseline
 # (configs/rf/baseline_small.toml) on the same VAE. It is the recipe of weights/small in one command (those runs were
-# made by the same commands one at a time, the VAE and the Baseline before the presets flushed subnormal floats,
-# docs/method.md §10, so this trains a replicate of them, not a bit-for-bit copy):
+# made by the same presets one at a time, so this trains a replicate of them; it is not claimed to repeat them bit
+# for bit):
 #
 #   scripts/train_small.sh OUT               # ANY4D_BIN=path/to/any4d if not target/release/any4d
 #
