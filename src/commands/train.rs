@@ -41,10 +41,15 @@ pub struct VaeArgs {
 
 #[derive(Args, Debug)]
 pub struct RfArgs {
-    /// The VAE run folder whose newest checkpoint encodes the clips (with `--resume`: optional, must be the
-    /// run's own).
-    #[arg(long, required_unless_present = "resume")]
+    /// The VAE run folder whose newest checkpoint encodes the clips (with `--resume` or `--init`: optional, must
+    /// be that run's own).
+    #[arg(long, required_unless_present_any = ["resume", "init"])]
     vae: Option<PathBuf>,
+    /// Start the new run from the newest checkpoint of this RF run or packed folder (fine-tuning): its
+    /// parameters (and average), caption tokenizer and VAE; `--config` must give the same `[model]` and `[text]`.
+    /// The optimiser, step count, learning-rate schedule and random streams start afresh under `--config`.
+    #[arg(long, conflicts_with = "resume")]
+    init: Option<PathBuf>,
     #[command(flatten)]
     common: RunArgs,
 }
@@ -148,10 +153,17 @@ pub fn exec(cmd: TrainCmd) -> anyhow::Result<ExitCode> {
     }
 }
 
-fn rf(RfArgs { vae, common: args }: RfArgs) -> anyhow::Result<ExitCode> {
+fn rf(
+    RfArgs {
+        vae,
+        init,
+        common: args,
+    }: RfArgs,
+) -> anyhow::Result<ExitCode> {
     let opts = RfRunOptions {
         run: args.options("rf")?,
         vae_run: vae,
+        init,
     };
     let outcome = match &args.resume {
         Some(run_dir) => resume_rf(run_dir, args.backend, &opts)?,

@@ -343,6 +343,7 @@ fn run_acap(
         stop: opts.stop.clone(),
         progress: opts.progress,
         resume,
+        init: None,
     };
     let (_, outcome) = loop_common::train(objective, model, setup)?;
     Ok(outcome)

@@ -509,6 +509,7 @@ fn run_bdlstm(
         stop: opts.stop.clone(),
         progress: opts.progress,
         resume,
+        init: None,
     };
     let (_, outcome) = loop_common::train(&objective, model, setup)?;
     Ok(outcome)

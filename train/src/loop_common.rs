@@ -118,6 +118,11 @@ pub struct LoopSetup<'a> {
     pub progress: ProgressMode,
     /// Continue from this checkpoint folder instead of starting at step 0.
     pub resume: Option<PathBuf>,
+    /// Start at step 0 from the parameters of this checkpoint folder instead of fresh ones (fine-tuning): its
+    /// trained parameters, and its average when it has one and this run keeps one (else the average starts from
+    /// the loaded parameters); the optimiser, the step count, the schedule and every random stream start afresh.
+    /// Not with `resume`.
+    pub init: Option<PathBuf>,
 }
 
 /// Trains `model` with `objective` on `setup.device` until the configured duration, a stop request or a
@@ -296,6 +301,7 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
         stop,
         progress,
         resume,
+        init,
     } = setup;
     let devices = stepper.devices();
     let Some(main) = devices.first() else {
@@ -309,6 +315,11 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
     let _flush = cfg.flush_denormals.then(FlushScope::begin);
     let total_steps = cfg.duration.steps(len, cfg.batch_size);
     let keeps_average = cfg.ema_decay > 0.0;
+    if let (Some(_), Some(_)) = (&resume, &init) {
+        return Err(TrainError::Loop(
+            "a run either resumes or starts from another run's parameters, not both".into(),
+        ));
+    }
     let (mut model, mut optim, mut state, mut ema) = match &resume {
         Some(ckpt) => {
             let (m, o, s) = checkpoint::load(ckpt, model, optim_cfg.init())?;
@@ -326,7 +337,20 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
                 order: DataOrder::new(cfg.seed, len),
                 best_valid: None,
             };
-            let ema = keeps_average.then(|| model.clone());
+            let model = match &init {
+                Some(ckpt) => {
+                    let m = checkpoint::load_model(model, ckpt)?;
+                    run.log(&format!("parameters initialised from {}", ckpt.display()))?;
+                    m
+                }
+                None => model,
+            };
+            let ema = match &init {
+                Some(ckpt) if keeps_average && ckpt.join(checkpoint::EMA_FILE).is_file() => {
+                    Some(checkpoint::load_ema(model.clone(), ckpt)?)
+                }
+                _ => keeps_average.then(|| model.clone()),
+            };
             (model, optim_cfg.init(), state, ema)
         }
     };

@@ -169,6 +169,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
             parallel: None,
         },
         vae_run: Some(vae_run.root().to_path_buf()),
+        init: None,
     };
     stage("3/5 training the tiny keyframe-conditioned RF (ours)".into());
     let (rf_run, outcome) = train_rf(&rf_cfg, &rf_opts("rf"))?;

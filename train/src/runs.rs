@@ -277,13 +277,18 @@ impl LoadedRf {
     }
 }
 
+/// The resolved config of the RF run (or packed folder) `run_dir`.
+pub fn read_rf_config(run_dir: &Path) -> Result<RfRunConfig> {
+    RfRunConfig::parse(
+        &read_run_file(run_dir, CONFIG_FILE, " (not an RF run folder?)")?,
+        &run_dir.join(CONFIG_FILE),
+    )
+}
+
 /// Loads an RF run onto `device`: `config.toml`, `tokenizer.json`, `vae_run.json` and the newest checkpoint.
 pub fn load_rf_run(run_dir: &Path, device: &Device) -> Result<LoadedRf> {
     let run = canonical(run_dir)?;
-    let config = RfRunConfig::parse(
-        &read_run_file(&run, CONFIG_FILE, " (not an RF run folder?)")?,
-        &run.join(CONFIG_FILE),
-    )?;
+    let config = read_rf_config(&run)?;
     if !run.join(TOKENIZER_FILE).is_file() {
         return Err(missing(&run, TOKENIZER_FILE, " (written when an RF run starts)"));
     }

@@ -484,6 +484,7 @@ where
         stop: opts.stop.clone(),
         progress: opts.progress,
         resume,
+        init: None,
     };
     let parallel = opts.parallel.as_ref();
     let (model, outcome) = match run_strategy(devices, parallel) {

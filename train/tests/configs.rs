@@ -164,6 +164,26 @@ fn overlays_are_short_and_resolve_to_their_base_with_the_changed_keys() {
     assert_eq!(seq.train.batch_size, 128);
 }
 
+/// The second-phase preset is `small.toml` with the uniform flow-time law, 1,000 steps and a constant 1e-4, and the
+/// same network and caption encoder, so that `--init` accepts a small run.
+#[test]
+fn the_tail_preset_changes_only_the_tau_law_and_the_schedule() {
+    use any4d_model::rectified_flow::TauSampler;
+    use any4d_train::config::{Duration, LrSchedule};
+    let tail = RfRunConfig::load(&root().join("configs/rf/small_tail.toml"), &[]).unwrap();
+    let mut small = RfRunConfig::load(&root().join("configs/rf/small.toml"), &[]).unwrap();
+    assert_eq!((&tail.model, &tail.text), (&small.model, &small.text));
+    assert_ne!(small.rf.tau_sampler, TauSampler::Uniform);
+    small.rf.tau_sampler = TauSampler::Uniform;
+    small.train.duration = Duration::Steps(1000);
+    small.optim.lr = 1e-4;
+    small.optim.schedule = LrSchedule::Constant;
+    assert_eq!(
+        tail, small,
+        "the preset changes only the flow-time law and the schedule"
+    );
+}
+
 /// docs/method.md §4.10: the anchored preset is `small.toml` (which draws first-last training keyframes) plus the
 /// anchor; the anchor is refused with a sampler that can leave a window without its ends, and with another
 /// conditioning.

@@ -1,7 +1,8 @@
 //! The keyframe RF loop on a tiny frozen VAE (docs/method.md §4.5, §5.4): a short run lowers (R5), keyframe
 //! masks follow the sampler (k ≤ k_max, k = 0 drawn; no keyframes for `none`/`replace_noised`), `impute_until`
 //! trains on noisy keyframes, resume is bitwise equal to straight training (validation sampling on), `load_rf_run`
-//! round-trips (and so do its packed copies, full and half precision), validation sampling writes seeded `samples.csv` rows at its steps for every
+//! round-trips (and so do its packed copies, full and half precision), `--init` starts a new run from another
+//! run's parameters, tokenizer and VAE, validation sampling writes seeded `samples.csv` rows at its steps for every
 //! `conditioning` without touching the training streams, and mismatched configs or incomplete run folders give errors
 //! naming the field or file. One tiny VAE run on
 //! procedural clips is shared by all tests.
@@ -65,6 +66,7 @@ fn rf_opts(name: &str) -> RfRunOptions {
     RfRunOptions {
         run: run_options(&f.store, &f.dir, name),
         vae_run: Some(f.vae_run.clone()),
+        init: None,
     }
 }
 
@@ -590,6 +592,76 @@ fn validation_samples_run_for_every_kf_mode() {
         let b = objective.validation_samples(&model, &dev).unwrap().expect("VAL clips");
         assert_eq!(a, b, "{mode:?}: not seeded");
     }
+}
+
+/// `--init`: a new run starts from another run's parameters, tokenizer and VAE (one step at a vanishing learning
+/// rate leaves the parameters where they were; a fresh run of the same config is elsewhere), and a different network,
+/// caption encoder or VAE, or `--init` on a resume, is refused before a run folder is claimed.
+#[test]
+fn init_starts_a_new_run_from_another_runs_parameters() {
+    let _g = serial();
+    let f = fixture();
+    let (source, source_cfg) = trained_rf();
+    let dev = inference_device();
+    let before = params(&load_rf_run(source, &dev).unwrap().model);
+    let mut cfg = source_cfg.clone();
+    cfg.train.duration = Duration::Steps(1);
+    cfg.train.checkpoint_every = 1;
+    cfg.train.valid_every = 1;
+    cfg.optim.lr = 1e-30;
+    let init_opts = |name: &str, vae_run: Option<PathBuf>| RfRunOptions {
+        init: Some(source.clone()),
+        vae_run,
+        ..rf_opts(name)
+    };
+    let (run, outcome) = train_rf(&cfg, &init_opts("init", None)).unwrap();
+    assert!(matches!(outcome, Outcome::Finished { steps: 1, .. }), "{outcome:?}");
+    let loaded = load_rf_run(run.root(), &dev).unwrap();
+    let max_diff = |a: &[f32], b: &[f32]| {
+        assert_eq!(a.len(), b.len(), "parameter counts differ");
+        a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f32, f32::max)
+    };
+    let moved = max_diff(&before, &params(&loaded.model));
+    assert!(moved < 1e-6, "the initialised run moved its parameters by {moved}");
+    assert_eq!(
+        std::fs::read(run.root().join("tokenizer.json")).unwrap(),
+        std::fs::read(source.join("tokenizer.json")).unwrap(),
+        "the initialised run must keep the source's tokenizer"
+    );
+    assert_eq!(loaded.vae.run, std::fs::canonicalize(&f.vae_run).unwrap());
+    let log = std::fs::read_to_string(run.root().join(LOG_FILE)).unwrap();
+    assert!(log.contains("parameters initialised from"), "{log}");
+    // The same config from scratch is elsewhere: the comparison above can fail.
+    let (fresh, _) = train_rf(&cfg, &rf_opts("init-fresh")).unwrap();
+    let fresh = params(&load_rf_run(fresh.root(), &dev).unwrap().model);
+    assert!(
+        fresh.len() != before.len() || max_diff(&before, &fresh) > 1e-3,
+        "a fresh run landed on the trained parameters"
+    );
+
+    let mut bad = cfg.clone();
+    bad.model.blocks += 1;
+    let err = train_rf(&bad, &init_opts("init-bad", None)).unwrap_err().to_string();
+    assert!(
+        err.contains("--init") && err.contains("[model]") && err.contains("blocks"),
+        "{err}"
+    );
+    let mut bad = cfg.clone();
+    bad.text.layers += 1;
+    let err = train_rf(&bad, &init_opts("init-bad", None)).unwrap_err().to_string();
+    assert!(err.contains("[text]") && err.contains("layers"), "{err}");
+    let err = train_rf(&cfg, &init_opts("init-bad", Some(f.store.clone())))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("differs from the VAE run"), "{err}");
+    assert!(
+        !f.dir.join("runs/init-bad-1").exists(),
+        "a refused start claimed a run folder"
+    );
+    let err = resume_rf(run.root(), None, &init_opts("init-bad", None))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("--init starts a new run"), "{err}");
 }
 
 #[test]

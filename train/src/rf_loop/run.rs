@@ -26,40 +26,147 @@ pub struct RfRunOptions {
     /// Data, run folder, progress, stop flag, devices.
     pub run: RunOptions,
     /// The frozen VAE's run folder (`--vae`): required for a new run; for `--resume` it may be omitted (the run
-    /// folder records it) and must otherwise name the same run.
+    /// folder records it) and must otherwise name the same run; with `init` it may be omitted too (the VAE of
+    /// that run) and must otherwise name it.
     pub vae_run: Option<PathBuf>,
+    /// Start the new run from the newest checkpoint of this RF run or packed folder (`--init`, fine-tuning): its
+    /// parameters (and average), caption tokenizer and VAE; its `[model]` and `[text]` must equal the new config's.
+    /// The optimiser, the step count, the schedule and the random streams start afresh under the new config.
+    pub init: Option<PathBuf>,
+}
+
+/// What a run started with `--init` takes from the run it starts from.
+struct InitFrom {
+    /// The checkpoint folder whose parameters it starts from.
+    checkpoint: PathBuf,
+    /// That run's caption tokenizer (the text encoder's embeddings are indexed by it).
+    tokenizer: ScratchTokenizer,
+    /// That run's VAE.
+    vae: VaeRunRecord,
+}
+
+impl InitFrom {
+    /// Reads `dir` as an RF run and checks that a run of `cfg` can start from it: same network and caption
+    /// encoder (`[model]`, `[text]`), and `--vae`, if given, naming its VAE.
+    fn open(dir: &Path, cfg: &RfRunConfig, vae_run: Option<&Path>) -> Result<Self> {
+        let setup = |reason: String| TrainError::Setup(format!("--init {}: {reason}", dir.display()));
+        let own = runs::read_rf_config(dir)?;
+        if own.model != cfg.model {
+            return Err(setup(format!(
+                "its [model] differs from this config's ({}): a run can only start from a network of the same \
+                 shape and conditioning",
+                differing_keys(&own.model, &cfg.model)
+            )));
+        }
+        if own.text != cfg.text {
+            return Err(setup(format!(
+                "its [text] differs from this config's ({})",
+                differing_keys(&own.text, &cfg.text)
+            )));
+        }
+        let vae = runs::recorded_vae(dir, vae_run)?;
+        let tokenizer = ScratchTokenizer::load(dir)?;
+        let (checkpoint, _) = runs::newest_checkpoint(dir)?;
+        Ok(Self {
+            checkpoint,
+            tokenizer,
+            vae,
+        })
+    }
+}
+
+/// The keys of two config sections that differ, `key: a → b`, for an error message.
+fn differing_keys<T: serde::Serialize>(a: &T, b: &T) -> String {
+    let table = |v: &T| toml::Table::try_from(v).unwrap_or_default();
+    let (a, b) = (table(a), table(b));
+    let mut keys: Vec<&String> = a.keys().chain(b.keys()).collect();
+    keys.sort();
+    keys.dedup();
+    keys.into_iter()
+        .filter(|k| a.get(*k) != b.get(*k))
+        .map(|k| {
+            let show = |v: Option<&toml::Value>| v.map_or("(absent)".to_string(), ToString::to_string);
+            format!("{k}: {} → {}", show(a.get(k)), show(b.get(k)))
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Starts a new RF run with `cfg` on the frozen VAE of `opts.vae_run`; returns the run folder and the outcome.
 /// The run folder gets `vae_run.json` (which VAE run and checkpoint step) and `tokenizer.json`.
+/// With `opts.init` the run starts from that run's parameters, tokenizer and VAE instead.
 pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Outcome)> {
-    let vae_dir = opts
-        .vae_run
-        .as_deref()
-        .ok_or_else(|| TrainError::Setup("a new RF run needs the VAE run folder (--vae RUN)".into()))?;
-    // Fail before claiming a run folder when the backend, the store or the VAE run is unusable.
+    // Fail before claiming a run folder when the backend, the store, the VAE run or the run to start from is
+    // unusable.
     let devices = worker_devices(&cfg.device, &cfg.train, opts.run.parallel.as_ref())?;
     let store = open_store(&opts.run.data)?;
-    let vae = runs::load_vae_run(vae_dir, &devices[0])?;
+    let init = opts
+        .init
+        .as_deref()
+        .map(|dir| InitFrom::open(dir, cfg, opts.vae_run.as_deref()))
+        .transpose()?;
+    let vae = match &init {
+        Some(init) => init.vae.load(&devices[0])?,
+        None => {
+            let vae_dir = opts
+                .vae_run
+                .as_deref()
+                .ok_or_else(|| TrainError::Setup("a new RF run needs the VAE run folder (--vae RUN)".into()))?;
+            runs::load_vae_run(vae_dir, &devices[0])?
+        }
+    };
     check_compatible(cfg, &store, &vae)?;
-    let captions = train_captions(&store)?;
-    let tokenizer = ScratchTokenizer::train(&captions, cfg.text.vocab_size)?;
+    let (tokenizer, note, checkpoint) = match init {
+        Some(init) => {
+            let note = format!(
+                "starts from {}: its parameters, tokenizer ({} tokens) and VAE",
+                init.checkpoint.display(),
+                init.tokenizer.vocab_size()
+            );
+            (init.tokenizer, note, Some(init.checkpoint))
+        }
+        None => {
+            let captions = train_captions(&store)?;
+            let tokenizer = ScratchTokenizer::train(&captions, cfg.text.vocab_size)?;
+            let note = format!(
+                "tokenizer trained on {} TRAIN captions: {} tokens",
+                captions.len(),
+                tokenizer.vocab_size()
+            );
+            (tokenizer, note, None)
+        }
+    };
 
     let run = RunFolder::create(&opts.run.runs_dir, &opts.run.name, &cfg.to_toml()?, &RF_TERMS)?;
     runs::write_vae_record(&run, &VaeRunRecord::of(&vae)?)?;
     tokenizer.save(run.root())?;
-    run.log(&format!(
-        "tokenizer trained on {} TRAIN captions: {} tokens",
-        captions.len(),
-        tokenizer.vocab_size()
-    ))?;
-    let outcome = run_rf(cfg, &run, opts, &vae, tokenizer, &devices, None)?;
+    run.log(&note)?;
+    let start = match checkpoint {
+        Some(ckpt) => Start::Init(ckpt),
+        None => Start::Fresh,
+    };
+    let outcome = run_rf(cfg, &run, opts, &vae, tokenizer, &devices, start)?;
     Ok((run, outcome))
+}
+
+/// Where a run's parameters come from.
+enum Start {
+    /// Fresh, from the seed.
+    Fresh,
+    /// Resumed from this checkpoint of the run itself.
+    Resume(PathBuf),
+    /// Step 0 from this checkpoint of another run (`--init`).
+    Init(PathBuf),
 }
 
 /// Continues the RF run in `run_dir` from its newest checkpoint (config, tokenizer and VAE run from the run
 /// folder; the backend may be overridden).
 pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRunOptions) -> Result<Outcome> {
+    if opts.init.is_some() {
+        return Err(TrainError::Setup(
+            "a resumed run keeps its own parameters: --init starts a new run".into(),
+        ));
+    }
     let (run, cfg, ckpt) = open_for_resume(run_dir, RfRunConfig::parse, backend, |c: &mut RfRunConfig| {
         &mut c.device
     })?;
@@ -67,7 +174,7 @@ pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRun
     let devices = worker_devices(&cfg.device, &cfg.train, opts.run.parallel.as_ref())?;
     let vae = record.load(&devices[0])?;
     let tokenizer = ScratchTokenizer::load(run_dir)?;
-    run_rf(&cfg, &run, opts, &vae, tokenizer, &devices, Some(ckpt))
+    run_rf(&cfg, &run, opts, &vae, tokenizer, &devices, Start::Resume(ckpt))
 }
 
 fn train_captions(store: &Store) -> Result<Vec<String>> {
@@ -85,8 +192,13 @@ fn run_rf(
     vae: &LoadedVae,
     tokenizer: ScratchTokenizer,
     devices: &[Device],
-    resume: Option<PathBuf>,
+    start: Start,
 ) -> Result<Outcome> {
+    let (resume, init) = match start {
+        Start::Fresh => (None, None),
+        Start::Resume(ckpt) => (Some(ckpt), None),
+        Start::Init(ckpt) => (None, Some(ckpt)),
+    };
     let vocab = tokenizer.vocab_size();
     let mut objective = RfObjective::new(cfg, &opts.run.data, vae, tokenizer, &devices[0])?;
     objective.log_validation_samples(run)?;
@@ -124,6 +236,7 @@ fn run_rf(
         stop: opts.run.stop.clone(),
         progress: opts.run.progress,
         resume,
+        init,
     };
     let parallel = opts.run.parallel.as_ref();
     let (_, outcome) = match run_strategy(devices, parallel) {

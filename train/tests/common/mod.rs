@@ -104,6 +104,7 @@ pub fn quiet_setup<'a>(
         stop: StopFlag::new(),
         progress: ProgressMode::Quiet,
         resume,
+        init: None,
     }
 }
 
