@@ -164,13 +164,13 @@ fn overlays_are_short_and_resolve_to_their_base_with_the_changed_keys() {
     assert_eq!(seq.train.batch_size, 128);
 }
 
-/// The second-phase preset is `small.toml` with the uniform flow-time law, 1,000 steps and a constant 1e-4, and the
+/// The second-phase preset of experiments/2026-12-05-tau-finetune is `small.toml` with the uniform flow-time law, 1,000 steps and a constant 1e-4, and the
 /// same network and caption encoder, so that `--init` accepts a small run.
 #[test]
 fn the_tail_preset_changes_only_the_tau_law_and_the_schedule() {
     use any4d_model::rectified_flow::TauSampler;
     use any4d_train::config::{Duration, LrSchedule};
-    let tail = RfRunConfig::load(&root().join("configs/rf/small_tail.toml"), &[]).unwrap();
+    let tail = RfRunConfig::load(&root().join("experiments/2026-12-05-tau-finetune/small_tail.toml"), &[]).unwrap();
     let mut small = RfRunConfig::load(&root().join("configs/rf/small.toml"), &[]).unwrap();
     assert_eq!((&tail.model, &tail.text), (&small.model, &small.text));
     assert_ne!(small.rf.tau_sampler, TauSampler::Uniform);
