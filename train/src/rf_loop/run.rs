@@ -77,8 +77,9 @@ impl InitFrom {
 
 /// The keys of two config sections that differ, `key: a → b`, for an error message.
 fn differing_keys<T: serde::Serialize>(a: &T, b: &T) -> String {
-    let table = |v: &T| toml::Table::try_from(v).unwrap_or_default();
-    let (a, b) = (table(a), table(b));
+    let (Ok(a), Ok(b)) = (toml::Table::try_from(a), toml::Table::try_from(b)) else {
+        return "the differing keys could not be listed".into();
+    };
     let mut keys: Vec<&String> = a.keys().chain(b.keys()).collect();
     keys.sort();
     keys.dedup();
