@@ -45,9 +45,9 @@ pub struct RfArgs {
     /// be that run's own).
     #[arg(long, required_unless_present_any = ["resume", "init"])]
     vae: Option<PathBuf>,
-    /// Start the new run from the newest checkpoint of this RF run or packed folder (fine-tuning): its
-    /// parameters (and average), caption tokenizer and VAE; `--config` must give the same `[model]` and `[text]`.
-    /// The optimiser, step count, learning-rate schedule and random streams start afresh under `--config`.
+    /// Start the new run from the newest checkpoint of this RF run or packed folder (fine-tuning): its trained
+    /// parameters, caption tokenizer and VAE; `--config` must give the same `[model]` and `[text]`. The optimiser,
+    /// step count, learning-rate schedule, random streams and parameter average start afresh under `--config`.
     #[arg(long, conflicts_with = "resume")]
     init: Option<PathBuf>,
     #[command(flatten)]

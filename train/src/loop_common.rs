@@ -118,10 +118,9 @@ pub struct LoopSetup<'a> {
     pub progress: ProgressMode,
     /// Continue from this checkpoint folder instead of starting at step 0.
     pub resume: Option<PathBuf>,
-    /// Start at step 0 from the parameters of this checkpoint folder instead of fresh ones (fine-tuning): its
-    /// trained parameters, and its average when it has one and this run keeps one (else the average starts from
-    /// the loaded parameters); the optimiser, the step count, the schedule and every random stream start afresh.
-    /// Not with `resume`.
+    /// Start at step 0 from the trained parameters of this checkpoint folder instead of fresh ones (fine-tuning);
+    /// the optimiser, the step count, the schedule, every random stream and the parameter average (from the loaded
+    /// parameters, with its usual warm-up) start afresh. Not with `resume`.
     pub init: Option<PathBuf>,
 }
 
@@ -345,12 +344,9 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
                 }
                 None => model,
             };
-            let ema = match &init {
-                Some(ckpt) if keeps_average && ckpt.join(checkpoint::EMA_FILE).is_file() => {
-                    Some(checkpoint::load_ema(model.clone(), ckpt)?)
-                }
-                _ => keeps_average.then(|| model.clone()),
-            };
+            // A loaded average is not carried over: the average's warm-up (`ema_decay_at`) would forget it within
+            // ten steps anyway.
+            let ema = keeps_average.then(|| model.clone());
             (model, optim_cfg.init(), state, ema)
         }
     };

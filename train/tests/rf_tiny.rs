@@ -595,8 +595,9 @@ fn validation_samples_run_for_every_kf_mode() {
 }
 
 /// `--init`: a new run starts from another run's parameters, tokenizer and VAE (one step at a vanishing learning
-/// rate leaves the parameters where they were; a fresh run of the same config is elsewhere), and a different network,
-/// caption encoder or VAE, or `--init` on a resume, is refused before a run folder is claimed.
+/// rate leaves the parameters, and an average started from them, where they were; a fresh run of the same config is
+/// elsewhere), and a different network, caption encoder or VAE, a source checkpoint without parameters, or `--init`
+/// on a resume, is refused before a run folder is claimed.
 #[test]
 fn init_starts_a_new_run_from_another_runs_parameters() {
     let _g = serial();
@@ -631,6 +632,13 @@ fn init_starts_a_new_run_from_another_runs_parameters() {
     assert_eq!(loaded.vae.run, std::fs::canonicalize(&f.vae_run).unwrap());
     let log = std::fs::read_to_string(run.root().join(LOG_FILE)).unwrap();
     assert!(log.contains("parameters initialised from"), "{log}");
+    // A run that keeps an average starts it from the loaded parameters.
+    let mut averaged = cfg.clone();
+    averaged.train.ema_decay = 0.99;
+    let (run_avg, _) = train_rf(&averaged, &init_opts("init-avg", None)).unwrap();
+    assert!(run_avg.root().join("checkpoints/step_1/ema.bpk").is_file());
+    let moved = max_diff(&before, &params(&load_rf_run(run_avg.root(), &dev).unwrap().model));
+    assert!(moved < 1e-6, "the initialised run's average moved by {moved}");
     // The same config from scratch is elsewhere: the comparison above can fail.
     let (fresh, _) = train_rf(&cfg, &rf_opts("init-fresh")).unwrap();
     let fresh = params(&load_rf_run(fresh.root(), &dev).unwrap().model);
@@ -654,6 +662,18 @@ fn init_starts_a_new_run_from_another_runs_parameters() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("differs from the VAE run"), "{err}");
+    // A source checkpoint without its parameters is refused before a run folder is claimed.
+    let hollow = f.dir.join("init-hollow");
+    copy_dir(source, &hollow);
+    for ckpt in std::fs::read_dir(hollow.join("checkpoints")).unwrap() {
+        std::fs::remove_file(ckpt.unwrap().path().join("model.bpk")).unwrap();
+    }
+    let hollow_opts = RfRunOptions {
+        init: Some(hollow.clone()),
+        ..init_opts("init-bad", None)
+    };
+    let err = train_rf(&cfg, &hollow_opts).unwrap_err().to_string();
+    assert!(err.contains("--init") && err.contains("model.bpk"), "{err}");
     assert!(
         !f.dir.join("runs/init-bad-1").exists(),
         "a refused start claimed a run folder"

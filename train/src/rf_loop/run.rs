@@ -10,6 +10,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use crate::backend;
+use crate::checkpoint::MODEL_FILE;
 use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Objective, Outcome, RunOptions};
 use crate::multi_device::{run_strategy, strategy_note, train_data_parallel, worker_devices};
@@ -30,8 +31,9 @@ pub struct RfRunOptions {
     /// that run) and must otherwise name it.
     pub vae_run: Option<PathBuf>,
     /// Start the new run from the newest checkpoint of this RF run or packed folder (`--init`, fine-tuning): its
-    /// parameters (and average), caption tokenizer and VAE; its `[model]` and `[text]` must equal the new config's.
-    /// The optimiser, the step count, the schedule and the random streams start afresh under the new config.
+    /// trained parameters, caption tokenizer and VAE; its `[model]` and `[text]` must equal the new config's. The
+    /// optimiser, the step count, the schedule, the random streams and the parameter average start afresh under the
+    /// new config.
     pub init: Option<PathBuf>,
 }
 
@@ -67,6 +69,9 @@ impl InitFrom {
         let vae = runs::recorded_vae(dir, vae_run)?;
         let tokenizer = ScratchTokenizer::load(dir)?;
         let (checkpoint, _) = runs::newest_checkpoint(dir)?;
+        if !checkpoint.join(MODEL_FILE).is_file() {
+            return Err(setup(format!("{} has no {MODEL_FILE}", checkpoint.display())));
+        }
         Ok(Self {
             checkpoint,
             tokenizer,
@@ -120,7 +125,7 @@ pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Ou
     let (tokenizer, note, checkpoint) = match init {
         Some(init) => {
             let note = format!(
-                "starts from {}: its parameters, tokenizer ({} tokens) and VAE",
+                "starts from {}: its trained parameters, tokenizer ({} tokens) and VAE",
                 init.checkpoint.display(),
                 init.tokenizer.vocab_size()
             );
