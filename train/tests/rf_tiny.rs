@@ -21,8 +21,8 @@ use any4d_train::loop_common::{Objective, Outcome, train};
 use any4d_train::multi_device::{Parallel, Strategy};
 use any4d_train::pack::{Precision as PackPrecision, pack_run};
 use any4d_train::rf_loop::{
-    LatentCache, LatentDraw, RF_TERMS, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS, Subset, TextDropout,
-    resume_rf, train_rf, training_mask,
+    INIT_FILE, LatentCache, LatentDraw, RF_TERMS, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS, Subset,
+    TextDropout, resume_rf, train_rf, training_mask,
 };
 use any4d_train::run_folder::{LOG_FILE, METRICS_FILE, RunFolder, SAMPLES_FILE, VALID_FILE, read_table};
 use any4d_train::runs::{LoadedVae, VAE_RUN_FILE, load_rf_run, load_vae_run};
@@ -632,6 +632,14 @@ fn init_starts_a_new_run_from_another_runs_parameters() {
     assert_eq!(loaded.vae.run, std::fs::canonicalize(&f.vae_run).unwrap());
     let log = std::fs::read_to_string(run.root().join(LOG_FILE)).unwrap();
     assert!(log.contains("parameters initialised from"), "{log}");
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.root().join(INIT_FILE)).unwrap()).unwrap();
+    assert_eq!(record["step"], LOSS_STEPS);
+    let named = std::path::PathBuf::from(record["checkpoint"].as_str().unwrap());
+    assert_eq!(
+        named,
+        std::fs::canonicalize(source.join(format!("checkpoints/step_{LOSS_STEPS}"))).unwrap()
+    );
     // A run that keeps an average starts it from the loaded parameters.
     let mut averaged = cfg.clone();
     averaged.train.ema_decay = 0.99;

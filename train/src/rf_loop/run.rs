@@ -14,7 +14,7 @@ use crate::checkpoint::MODEL_FILE;
 use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Objective, Outcome, RunOptions};
 use crate::multi_device::{run_strategy, strategy_note, train_data_parallel, worker_devices};
-use crate::run_folder::{RunFolder, open_for_resume};
+use crate::run_folder::{RunFolder, open_for_resume, write_atomic};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 
 use super::RF_TERMS;
@@ -37,10 +37,15 @@ pub struct RfRunOptions {
     pub init: Option<PathBuf>,
 }
 
+/// The file of a run started with `--init` that names the checkpoint folder and step it started from.
+pub const INIT_FILE: &str = "init.json";
+
 /// What a run started with `--init` takes from the run it starts from.
 struct InitFrom {
-    /// The checkpoint folder whose parameters it starts from.
+    /// The checkpoint folder whose parameters it starts from (canonical).
     checkpoint: PathBuf,
+    /// Its step.
+    step: u64,
     /// That run's caption tokenizer (the text encoder's embeddings are indexed by it).
     tokenizer: ScratchTokenizer,
     /// That run's VAE.
@@ -68,12 +73,14 @@ impl InitFrom {
         }
         let vae = runs::recorded_vae(dir, vae_run)?;
         let tokenizer = ScratchTokenizer::load(dir)?;
-        let (checkpoint, _) = runs::newest_checkpoint(dir)?;
+        let (checkpoint, step) = runs::newest_checkpoint(dir)?;
+        let checkpoint = std::fs::canonicalize(&checkpoint).unwrap_or(checkpoint);
         if !checkpoint.join(MODEL_FILE).is_file() {
             return Err(setup(format!("{} has no {MODEL_FILE}", checkpoint.display())));
         }
         Ok(Self {
             checkpoint,
+            step,
             tokenizer,
             vae,
         })
@@ -125,11 +132,12 @@ pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Ou
     let (tokenizer, note, checkpoint) = match init {
         Some(init) => {
             let note = format!(
-                "starts from {}: its trained parameters, tokenizer ({} tokens) and VAE",
+                "starts from {} (step {}): its trained parameters, tokenizer ({} tokens) and VAE",
                 init.checkpoint.display(),
+                init.step,
                 init.tokenizer.vocab_size()
             );
-            (init.tokenizer, note, Some(init.checkpoint))
+            (init.tokenizer, note, Some((init.checkpoint, init.step)))
         }
         None => {
             let captions = train_captions(&store)?;
@@ -148,7 +156,12 @@ pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Ou
     tokenizer.save(run.root())?;
     run.log(&note)?;
     let start = match checkpoint {
-        Some(ckpt) => Start::Init(ckpt),
+        Some((ckpt, step)) => {
+            // Where the parameters came from, for provenance: the checkpoint folder and its step.
+            let record = serde_json::json!({ "checkpoint": ckpt.display().to_string(), "step": step });
+            write_atomic(&run.path(INIT_FILE), record.to_string().as_bytes())?;
+            Start::Init(ckpt)
+        }
         None => Start::Fresh,
     };
     let outcome = run_rf(cfg, &run, opts, &vae, tokenizer, &devices, start)?;
