@@ -1,7 +1,8 @@
 //! Reducing a trained run folder to what sampling needs (`any4d model pack`): the resolved config, the newest
 //! checkpoint's sampling parameters (the average of docs/method.md §4.8 when the run keeps one) as `model.bpk`,
 //! its `state.json`, and the run's side files (latent statistics of a VAE; tokenizer and VAE record of an RF; VAE
-//! record of a BD-LSTM). No optimiser state: a packed folder loads everywhere a run folder does (`--vae`, `--rf`,
+//! record of a BD-LSTM; for an RF started with `--init`, its `init.json`, which names the checkpoint its parameters
+//! started from). No optimiser state: a packed folder loads everywhere a run folder does (`--vae`, `--rf`,
 //! `--baseline-rf`, `--aam`, `--bdlstm`) but
 //! cannot resume. Parameters may be stored in half precision; loading casts them back to the model's precision
 //! (`checkpoint::load_model`).
@@ -19,6 +20,7 @@ use crate::bdlstm_acap::{ACAP_FILE, load_acap_bdlstm_run};
 use crate::bdlstm_loop::{BdlstmVariant, load_bdlstm_run, read_bdlstm_config};
 use crate::checkpoint::{MODEL_FILE, STATE_FILE, step_dir_name};
 use crate::error::{Result, TrainError, io_err, run_err};
+use crate::rf_loop::INIT_FILE;
 use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE};
 use crate::runs::{VAE_RUN_FILE, VaeRunRecord, load_rf_run, load_vae_run, newest_checkpoint, read_vae_record};
 use crate::vae_loop::LATENT_STATS_FILE;
@@ -125,6 +127,9 @@ pub fn pack_run(
         let ckpt_out = write_common(&rf.run, &rf.checkpoint, rf.step, &tmp)?;
         copy(&rf.run, &tmp, TOKENIZER_FILE)?;
         write_vae_record(&rf.run, &tmp, vae_at)?;
+        if rf.run.join(INIT_FILE).is_file() {
+            copy(&rf.run, &tmp, INIT_FILE)?;
+        }
         let averaged = rf.checkpoint.join(crate::checkpoint::EMA_FILE).is_file();
         save_params(rf.model, &ckpt_out.join(MODEL_FILE), precision)?;
         finish("RF", rf.step, averaged, &ckpt_out)?

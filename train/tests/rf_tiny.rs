@@ -640,6 +640,18 @@ fn init_starts_a_new_run_from_another_runs_parameters() {
         named,
         std::fs::canonicalize(source.join(format!("checkpoints/step_{LOSS_STEPS}"))).unwrap()
     );
+    // A packed fine-tune keeps the record of where its parameters started; a packed fresh run has none.
+    let packed = f.dir.join("init-packed");
+    let _ = std::fs::remove_dir_all(&packed);
+    pack_run(run.root(), &packed, PackPrecision::Full, None, &dev).unwrap();
+    assert_eq!(
+        std::fs::read(packed.join(INIT_FILE)).unwrap(),
+        std::fs::read(run.root().join(INIT_FILE)).unwrap()
+    );
+    let packed_source = f.dir.join("init-source-packed");
+    let _ = std::fs::remove_dir_all(&packed_source);
+    pack_run(source, &packed_source, PackPrecision::Full, None, &dev).unwrap();
+    assert!(!packed_source.join(INIT_FILE).exists());
     // A run that keeps an average starts it from the loaded parameters.
     let mut averaged = cfg.clone();
     averaged.train.ema_decay = 0.99;
