@@ -65,32 +65,37 @@ def records(path):
         yield cur
 
 
-recs = list(records(sys.argv[1]))
-log = open(sys.argv[2]).read()
-steps = int(re.search(r"(\d+) iters", log).group(1))
-medians = [float(m) / 1000 for m in re.findall(r"median ([0-9.]+) ms/step", log)]
-bounds = []
-for _, fn in PHASES:
-    ts = [t for t, s in recs if any(fn in f for f in s)]
-    bounds.append((min(ts), max(ts)))
-out = csv.writer(sys.stdout)
-out.writerow(["network", "category", "samples", "share"])
+def main():
+    recs = list(records(sys.argv[1]))
+    log = open(sys.argv[2]).read()
+    steps = int(re.search(r"(\d+) iters", log).group(1))
+    medians = [float(m) / 1000 for m in re.findall(r"median ([0-9.]+) ms/step", log)]
+    bounds = []
+    for _, fn in PHASES:
+        ts = [t for t, s in recs if any(fn in f for f in s)]
+        bounds.append((min(ts), max(ts)))
+    out = csv.writer(sys.stdout)
+    out.writerow(["network", "category", "samples", "share"])
 
-for i, (name, _) in enumerate(PHASES):
-    start = bounds[i][0]
-    end = bounds[i + 1][0] if i + 1 < len(PHASES) else recs[-1][0]
-    timed_from = end - steps * medians[i]
-    timed = [s for t, s in recs if max(start, timed_from) <= t < end]
-    counts = {c: 0 for c, _ in CATEGORIES}
-    for s in timed:
-        leaf = s[0] if s else ""
-        for c, test in CATEGORIES:
-            if test(leaf, s):
-                counts[c] += 1
-                break
-    out.writerow([name, "all timed samples", len(timed), "1.0000"])
-    for c, _ in CATEGORIES:
-        out.writerow([name, c, counts[c], f"{counts[c] / max(len(timed), 1):.4f}"])
-    for c, test in ALSO:
-        k = sum(1 for s in timed if test(s))
-        out.writerow([name, c, k, f"{k / max(len(timed), 1):.4f}"])
+    for i, (name, _) in enumerate(PHASES):
+        start = bounds[i][0]
+        end = bounds[i + 1][0] if i + 1 < len(PHASES) else recs[-1][0]
+        timed_from = end - steps * medians[i]
+        timed = [s for t, s in recs if max(start, timed_from) <= t < end]
+        counts = {c: 0 for c, _ in CATEGORIES}
+        for s in timed:
+            leaf = s[0] if s else ""
+            for c, test in CATEGORIES:
+                if test(leaf, s):
+                    counts[c] += 1
+                    break
+        out.writerow([name, "all timed samples", len(timed), "1.0000"])
+        for c, _ in CATEGORIES:
+            out.writerow([name, c, counts[c], f"{counts[c] / max(len(timed), 1):.4f}"])
+        for c, test in ALSO:
+            k = sum(1 for s in timed if test(s))
+            out.writerow([name, c, k, f"{k / max(len(timed), 1):.4f}"])
+
+
+if __name__ == "__main__":
+    main()
