@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# The paper-size networks before and after every CPU speed change of the project, on one machine in one script:
-# OLD, a release build of ebd9d8d (the commit before gemm's AVX-512 kernels, the first of the changes), and NEW, a
-# release build of this commit, each against AnimateAnyMesh's PyTorch modules, alternating.
+# The paper-size networks before and after the CPU speed changes since ebd9d8d, on one machine in one script:
+# OLD, a release build of ebd9d8d (the commit before gemm's AVX-512 kernels), and NEW, a release build of the current
+# code (bf19b4a in the committed run), each against AnimateAnyMesh's PyTorch modules, alternating.
 #   bash ab.sh OLD NEW AAM_DIR
 # Writes logs/ab-{old,new}-t{1,2}-r{1,2,3}.txt and ab.csv (ab_summarise.py). Each binary uses its own copy of
 # scripts/bench_torch_reference.py (the RF, VAE and DyMeshVAE shapes are the same in both).

@@ -45,6 +45,9 @@ ALSO = [  # (name, test on the stack), not exclusive: rows after the categories
      lambda s: any("joint_attention" in f for f in s)),
     ("(also) burn's unfused attention under autodiff, any leaf (stack through attention_fallback)",
      lambda s: any("attention_fallback" in f for f in s)),
+    ("(also) libm expf under burn-flex's float_exp", lambda s: "expf" in s[0] and any("float_exp" in f for f in s)),
+    ("(also) libm expf with attention_fallback in its (possibly cut) stack",
+     lambda s: "expf" in s[0] and any("attention_fallback" in f for f in s)),
 ]
 
 
