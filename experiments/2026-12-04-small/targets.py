@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""The issue's targets across every small-family recipe measured so far, from committed result files only.
+"""The small family's targets (the table of README.md § 10) across every recipe measured so far, from committed
+result files only.
 
 Writes targets.csv (one row per recipe and K_x) and targets.png (three panels: ours / lerp, ours / the Baseline,
 ours' pooled jerk / the ground truth's, each with its target line). The recipes, in the order they were run:
