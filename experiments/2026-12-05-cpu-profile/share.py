@@ -68,6 +68,18 @@ def records(path):
         yield cur
 
 
+def categorise(stacks):
+    """{category: samples}: each stack counted in the first category whose test its leaf (or stack) passes."""
+    counts = {c: 0 for c, _ in CATEGORIES}
+    for s in stacks:
+        leaf = s[0] if s else ""
+        for c, test in CATEGORIES:
+            if test(leaf, s):
+                counts[c] += 1
+                break
+    return counts
+
+
 def main():
     recs = list(records(sys.argv[1]))
     log = open(sys.argv[2]).read()
@@ -79,19 +91,12 @@ def main():
         bounds.append((min(ts), max(ts)))
     out = csv.writer(sys.stdout)
     out.writerow(["network", "category", "samples", "share"])
-
     for i, (name, _) in enumerate(PHASES):
         start = bounds[i][0]
         end = bounds[i + 1][0] if i + 1 < len(PHASES) else recs[-1][0]
         timed_from = end - steps * medians[i]
         timed = [s for t, s in recs if max(start, timed_from) <= t < end]
-        counts = {c: 0 for c, _ in CATEGORIES}
-        for s in timed:
-            leaf = s[0] if s else ""
-            for c, test in CATEGORIES:
-                if test(leaf, s):
-                    counts[c] += 1
-                    break
+        counts = categorise(timed)
         out.writerow([name, "all timed samples", len(timed), "1.0000"])
         for c, _ in CATEGORIES:
             out.writerow([name, c, counts[c], f"{counts[c] / max(len(timed), 1):.4f}"])

@@ -9,16 +9,10 @@ optimiser step.
 import csv
 import sys
 
-from share import CATEGORIES, records
+from share import CATEGORIES, categorise, records
 
 recs = [s for _, s in records(sys.argv[1])]
-counts = {c: 0 for c, _ in CATEGORIES}
-for s in recs:
-    leaf = s[0] if s else ""
-    for c, test in CATEGORIES:
-        if test(leaf, s):
-            counts[c] += 1
-            break
+counts = categorise(recs)
 optim = sum(1 for s in recs if any("burn_optim" in f for f in s))
 out = csv.writer(sys.stdout)
 out.writerow(["category", "samples", "share"])
