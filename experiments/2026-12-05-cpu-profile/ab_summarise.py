@@ -8,16 +8,15 @@ import os
 import re
 import statistics
 
+import summarise
+
 here = os.path.dirname(os.path.abspath(__file__))
-NETS = ["RF forward+backward", "frame-wise VAE encode+decode", "sequence-wise DyMeshVAE enc+dec"]
+NETS = [log_name for log_name, _ in summarise.NETS]
 cells = {}  # (which, threads, round, net) -> (ours, torch, ratio)
 for path in glob.glob(f"{here}/logs/ab-*-t*-r*.txt"):
     which, threads, rnd = re.search(r"ab-(old|new)-t(\d)-r(\d)\.txt", path).groups()
-    for line in open(path):
-        for net in NETS:
-            if line.startswith(net):
-                ours, torch, ratio = (float(x) for x in line[len(net):].split()[:3])
-                cells[(which, int(threads), int(rnd), net)] = (ours, torch, ratio)
+    for net, row in summarise.bench_rows(path).items():
+        cells[(which, int(threads), int(rnd), net)] = row
 rounds = sorted({k[2] for k in cells})
 with open(f"{here}/ab.csv", "w", newline="") as f:
     w = csv.writer(f)

@@ -9,11 +9,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+import summarise
+
 here = os.path.dirname(os.path.abspath(__file__))
 summary = list(csv.DictReader(open(f"{here}/summary.csv")))
-PROF = {"RF forward+backward": "RF forward+backward",
-        "frame-wise VAE encode+decode": "frame-wise VAE encode+decode",
-        "sequence-wise DyMeshVAE enc+dec": "sequence-wise DyMeshVAE encode+decode"}
+PROF = dict(summarise.NETS)  # the bench log's network name -> the profile's
 GROUPS = [("matrix products (gemm)", ("gemm microkernel", "gemm packing and dispatch")),
           ("burn-flex realignment copy", ("burn-flex realignment copy",)),
           ("softmax's scalar exp", ("libm exp",)),
