@@ -8,7 +8,7 @@
 # Packages: redeclipse-data (IQM players, MD5 actors), 0ad-data (PMD/PSA animals and units from public.zip),
 # ufoai-data (MD2 soldiers, aliens, civilians from 0models.pk3), assimp-testmodels (the animated IQM sample),
 # minetest-data and two Minetest mods (B3D player characters and the maid robot; 4 MB together).
-# Never add openarena*, megaglest*, nexuiz*/xonotic* or assimp-testmodels' MD2 files: they are the held-out
+# Never add openarena*, megaglest*, nexuiz*/xonotic*, qt3d* or assimp-testmodels' MD2 files: they are the held-out
 # evaluation (the staging step refuses those packages by name and skips the MD2 files).
 set -euo pipefail
 OUT=${1:?usage: scripts/real_corpus.sh OUT}

@@ -29,6 +29,7 @@ fn user_clip(frames: usize) -> Clip {
         min_vertices: 300,
         max_vertices: 700,
         body: None,
+        family: Default::default(),
     };
     let mut clip = generate_one(&cfg, 0).unwrap();
     for p in &mut clip.vertices {

@@ -367,3 +367,69 @@ fn a_one_body_store_trains_the_acap_bdlstm_from_the_command_line() {
     assert!(out.status.success(), "{stdout}\n{stderr}");
     assert!(stdout.contains("| bdlstm_acap | random | 0 |"), "{stdout}");
 }
+
+#[test]
+fn rigged_characters_add_to_a_store_and_their_choices_are_checked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = tmp.path().join("store");
+    let synth = |extra: &[&str]| {
+        let mut args = vec![
+            "data",
+            "synth",
+            "--out",
+            p(&store),
+            "--clips",
+            "4",
+            "--seed",
+            "5",
+            "--p",
+            "16",
+        ];
+        args.extend_from_slice(extra);
+        any4d(&args)
+    };
+    let out = synth(&[]);
+    assert!(out.status.success(), "{:?}", text(&out));
+    let out = synth(&["--family", "rigged"]);
+    assert!(out.status.success(), "{:?}", text(&out));
+    let out = synth(&["--family", "rigged", "--template", "bird", "--action", "fly"]);
+    assert!(out.status.success(), "{:?}", text(&out));
+    let out = any4d(&["data", "inspect", p(&store), "--format", "json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(
+        json["clips"], 12,
+        "the same seed in three generators adds, it does not replace: {json}"
+    );
+    let families = json["synthetic_families"].as_object().unwrap();
+    assert_eq!(
+        families.get("rigged-bird-fly").and_then(|n| n.as_u64()).unwrap_or(0) >= 4,
+        true,
+        "{families:?}"
+    );
+    let sheet = tmp.path().join("bird.png");
+    let out = any4d(&[
+        "data",
+        "render",
+        p(&store),
+        "--clip",
+        "rigged-bird-fly-5-0_offset0_0-15",
+        "--out",
+        p(&sheet),
+    ]);
+    assert!(out.status.success(), "{:?}", text(&out));
+    for (extra, needle) in [
+        (
+            vec!["--family", "rigged", "--template", "snake", "--action", "jump"],
+            "a snake cannot jump",
+        ),
+        (vec!["--template", "biped"], "--family rigged"),
+        (vec!["--family", "rigged", "--template", "dragon"], "biped, quadruped"),
+        (vec!["--family", "rigged", "--action", "swim"], "slither"),
+        (vec!["--family", "blobs"], "shapes, rigged"),
+        (vec!["--family", "rigged", "--body", "worm"], "body"),
+    ] {
+        let out = synth(&extra);
+        let (_, stderr) = text(&out);
+        assert!(!out.status.success() && stderr.contains(needle), "{extra:?}: {stderr}");
+    }
+}

@@ -62,6 +62,7 @@ fn the_view_page_plays_in_headless_chromium() {
         min_vertices: 300,
         max_vertices: 700,
         body: None,
+        family: Default::default(),
     };
     let gt = generate_one(&cfg, 0).unwrap();
     let mut pred = gt.clone();

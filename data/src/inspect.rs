@@ -229,9 +229,15 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
     s
 }
 
-/// `<shape>-<motion>` of a synthetic id `synth-<shape>-<motion>-<seed>-<index>[_offset…]`.
+/// `<shape>-<motion>` of a synthetic id `synth-<shape>-<motion>-<seed>-<index>[_offset…]`, or
+/// `rigged-<template>-<action>` of a rigged character's `rigged-<template>-<action>-<seed>-<index>[_offset…]`.
 pub fn synthetic_family(id: &str) -> Option<&str> {
-    let rest = object_uid(id).strip_prefix("synth-")?;
+    let uid = object_uid(id);
+    let rest = match uid.strip_prefix("synth-") {
+        Some(rest) => rest,
+        None if uid.starts_with("rigged-") => uid,
+        None => return None,
+    };
     let mut parts = rest.rsplitn(3, '-');
     let (_index, _seed, family) = (parts.next()?, parts.next()?, parts.next()?);
     Some(family)
@@ -460,6 +466,10 @@ mod tests {
     fn synthetic_family_needs_the_synth_form() {
         assert_eq!(synthetic_family("synth-a-b-7-3_offset0_0-15"), Some("a-b"));
         assert_eq!(synthetic_family("cat_offset0_0-15"), None);
+        assert_eq!(
+            synthetic_family("rigged-bird-fly-7-3_offset0_0-15"),
+            Some("rigged-bird-fly")
+        );
         assert_eq!(synthetic_family("synth-x"), None);
     }
 }

@@ -6,6 +6,7 @@
 
 pub mod acap;
 pub mod archive;
+pub mod augment;
 pub mod batch;
 pub mod bench;
 pub mod caption;

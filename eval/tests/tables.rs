@@ -273,6 +273,7 @@ fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
         min_vertices: 512,
         max_vertices: 768,
         body: None,
+        family: Default::default(),
     };
     write_synth_with(&cfg, &store16, 16, None).unwrap();
     let methods = [MethodKind::Lerp, MethodKind::StaticNearest];
@@ -438,6 +439,7 @@ fn the_split_option_draws_items_from_that_split_only() {
         min_vertices: 512,
         max_vertices: 768,
         body: None,
+        family: Default::default(),
     };
     write_synth_with(&cfg, &store, 16, None).unwrap();
     let index = read_index(&store).unwrap();
@@ -538,6 +540,7 @@ fn the_caption_ablation_withholds_every_caption_and_says_so() {
         min_vertices: 512,
         max_vertices: 768,
         body: None,
+        family: Default::default(),
     };
     write_synth_with(&cfg, &store, 16, None).unwrap();
     let table1 = Protocol::ShortHorizon(ShortHorizon {

@@ -29,6 +29,67 @@ pub enum BenchCmd {
     /// ACAP features + reconstruction of one clip (the faithful BD-LSTM's per-clip work) against the numpy/scipy
     /// reference.
     Acap(AcapBenchArgs),
+    /// Procedural clips per second on one thread: the rigged characters against the shape families, same seed,
+    /// same frames and vertex range, alternating.
+    Synth(SynthBenchArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct SynthBenchArgs {
+    /// Clips per family and round.
+    #[arg(long, default_value_t = 200)]
+    pub clips: usize,
+    /// Rounds, alternating the families; the fastest round of each is reported.
+    #[arg(long, default_value_t = 3)]
+    pub repeat: usize,
+    /// Frames per clip.
+    #[arg(long, default_value_t = 16)]
+    pub frames: usize,
+}
+
+/// `any4d bench synth`: clips/s of each generator on one thread (no store, no FPS: the generators alone).
+fn bench_synth(args: SynthBenchArgs) -> anyhow::Result<ExitCode> {
+    use any4d_data::synth::{Family, SynthConfig, generate_one};
+    if args.repeat == 0 || args.clips == 0 {
+        bail!("--clips and --repeat must be at least 1");
+    }
+    let mut best = [f64::INFINITY; 2];
+    let mut vertices = [0usize; 2];
+    for _ in 0..args.repeat {
+        for (k, family) in Family::ALL.into_iter().enumerate() {
+            let cfg = SynthConfig {
+                clips: args.clips,
+                frames: args.frames,
+                family,
+                ..SynthConfig::default()
+            };
+            cfg.validate()?;
+            let start = std::time::Instant::now();
+            let mut n = 0;
+            for i in 0..args.clips {
+                n += generate_one(&cfg, i)?.n_vertices;
+            }
+            best[k] = best[k].min(start.elapsed().as_secs_f64());
+            vertices[k] = n;
+        }
+    }
+    println!(
+        "synth bench: {} clips of {} frames per generator, one thread, fastest of {} alternating rounds",
+        args.clips, args.frames, args.repeat
+    );
+    println!("| generator | clips/s | mean vertices | s |");
+    println!("|---|---|---|---|");
+    for (k, family) in Family::ALL.into_iter().enumerate() {
+        println!(
+            "| {} | {:.1} | {:.0} | {:.3} |",
+            family.name(),
+            args.clips as f64 / best[k],
+            vertices[k] as f64 / args.clips as f64,
+            best[k]
+        );
+    }
+    println!("rigged / shapes time per clip: {:.2}×", best[1] / best[0]);
+    Ok(ExitCode::SUCCESS)
 }
 
 #[derive(Args, Debug)]
@@ -131,5 +192,6 @@ pub fn exec(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
         BenchCmd::Complete(args) => super::complete::bench(args),
         BenchCmd::Sample(args) => super::timing::bench_sample(args),
         BenchCmd::Acap(args) => bench_acap(args),
+        BenchCmd::Synth(args) => bench_synth(args),
     }
 }

@@ -17,7 +17,8 @@ use any4d_data::inspect;
 use any4d_data::preprocess::{self, VertexFilter};
 use any4d_data::render::{RenderOptions, render_contact_sheet};
 use any4d_data::store::{self, DEFAULT_P, ImportOptions, Store, Weld};
-use any4d_data::synth::{ShapeFamily, SynthConfig};
+use any4d_data::synth::rigged::{Action, Template};
+use any4d_data::synth::{Family, RiggedKinds, ShapeFamily, SynthConfig};
 
 use crate::reference::{PythonReference, Skipped};
 
@@ -131,6 +132,38 @@ pub struct SynthArgs {
     /// worm, helix): a single-topology store, what `train bdlstm --variant acap` needs.
     #[arg(long, value_parser = parse_body)]
     pub body: Option<ShapeFamily>,
+    /// The generator: `shapes` (shape families deformed by motion families) or `rigged` (skinned characters on
+    /// random skeletons — biped, quadruped, insect, bird, snake, multi-armed — performing actions).
+    #[arg(long, default_value = "shapes", value_parser = parse_family)]
+    pub family: Family,
+    /// With `--family rigged`: every clip of this skeleton (biped, quadruped, insect, bird, snake, multiarm).
+    #[arg(long, value_parser = parse_template)]
+    pub template: Option<Template>,
+    /// With `--family rigged`: every clip performs this action (walk, run, jump, turn, attack, wave, fall, idle,
+    /// fly, slither), on the skeletons that can.
+    #[arg(long, value_parser = parse_action)]
+    pub action: Option<Action>,
+}
+
+fn parse_template(name: &str) -> Result<Template, String> {
+    Template::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = Template::ALL.iter().map(|t| t.name()).collect();
+        format!("unknown skeleton template {name:?}; one of {}", names.join(", "))
+    })
+}
+
+fn parse_action(name: &str) -> Result<Action, String> {
+    Action::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = Action::ALL.iter().map(|a| a.name()).collect();
+        format!("unknown action {name:?}; one of {}", names.join(", "))
+    })
+}
+
+fn parse_family(name: &str) -> Result<Family, String> {
+    Family::from_name(name).ok_or_else(|| {
+        let names: Vec<&str> = Family::ALL.iter().map(|f| f.name()).collect();
+        format!("unknown generator {name:?}; one of {}", names.join(", "))
+    })
 }
 
 fn parse_body(name: &str) -> Result<ShapeFamily, String> {
@@ -302,6 +335,11 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
         min_vertices: a.min_vertices.unwrap_or(default.min_vertices),
         max_vertices: a.max_vertices.unwrap_or(default.max_vertices),
         body: a.body,
+        family: match (a.family, a.template, a.action) {
+            (Family::Rigged(_), template, action) => Family::Rigged(RiggedKinds { template, action }),
+            (Family::Shapes, None, None) => Family::Shapes,
+            (Family::Shapes, _, _) => bail!("--template and --action choose rigged characters: add --family rigged"),
+        },
     };
     cfg.validate()?;
     let bar = progress_bar("synth");

@@ -138,6 +138,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         min_vertices: 512,
         max_vertices: opts.max_vertices,
         body: None,
+        family: Default::default(),
     };
     let report = write_synth(&synth, &data)?;
     stage(format!(

@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use any4d_data::augment::Augment;
 use any4d_data::batch::{ClipBatch, ClipBatcher, PadTo};
 use any4d_data::store::{Split, Store, StoredClip};
 use any4d_model::any_vae::{AnyMeshVaeConfig, VaeKind};
@@ -41,6 +42,9 @@ pub struct VaeSection {
     /// FPS tokens P per clip (docs/method.md §2.5: 512): the first P entries of the store's FPS order. Farthest-point
     /// sampling is greedy, so they are exactly the FPS of P points, and one store serves every P up to its own.
     pub tokens: usize,
+    /// Training-time augmentation of each example (docs/method.md §2.9); off when absent, as in every paper preset.
+    #[serde(default, skip_serializing_if = "Augment::is_off")]
+    pub augment: Augment,
 }
 
 /// A whole `configs/vae/*.toml` run config.
@@ -132,6 +136,7 @@ impl VaeRunConfig {
         if t.vae.tokens == 0 {
             return Err(bad("vae.tokens: P must be positive".into()));
         }
+        t.vae.augment.validate("vae.augment").map_err(bad)?;
         match (t.vae.kind, t.vae.train_frames) {
             (_, 0) => {}
             (VaeKind::Sequencewise, _) => return Err(frames_bad("the sequence-wise VAE encodes whole clips; use 0")),
@@ -187,10 +192,26 @@ fn model_table<C: serde::de::DeserializeOwned>(model: toml::Table, file: &Path) 
 
 /// Reads clips `indices` of `store` and stacks them (padded to the batch's largest N_v).
 pub fn load_clips(store: &Store, indices: &[usize], device: &Device) -> Result<(ClipBatch, Vec<StoredClip>)> {
-    let items = indices
+    load_augmented(store, indices, None, device)
+}
+
+/// [`load_clips`], each clip augmented in order with draws from the generator when one is given
+/// (docs/method.md §2.9).
+pub fn load_augmented(
+    store: &Store,
+    indices: &[usize],
+    augment: Option<(&Augment, &mut ChaCha8Rng)>,
+    device: &Device,
+) -> Result<(ClipBatch, Vec<StoredClip>)> {
+    let mut items = indices
         .iter()
         .map(|&i| store.get(i))
         .collect::<std::result::Result<Vec<_>, _>>()?;
+    if let Some((augment, rng)) = augment {
+        for item in &mut items {
+            augment.apply(item, rng);
+        }
+    }
     let batch = ClipBatcher::new(PadTo::BatchMax).try_batch(&items, device)?;
     Ok((batch, items))
 }
@@ -232,6 +253,8 @@ pub struct VaeObjective<V> {
     train_frames: usize,
     /// `vae.tokens`.
     tokens: usize,
+    /// `vae.augment`, applied to training examples only.
+    augment: Augment,
     _vae: std::marker::PhantomData<V>,
 }
 
@@ -252,6 +275,7 @@ impl<V> VaeObjective<V> {
             micro_batch,
             train_frames,
             tokens,
+            augment: vae.augment.clone(),
             _vae: std::marker::PhantomData,
         })
     }
@@ -310,7 +334,7 @@ impl<V: MeshVae + Module + Clone> Objective for VaeObjective<V> {
             .into_iter()
             .map(|w| self.train[w])
             .collect();
-        let (mut clips, _) = load_clips(&self.store, &ids, device)?;
+        let (mut clips, _) = load_augmented(&self.store, &ids, Some((&self.augment, &mut *rng)), device)?;
         let t = clips.vertices.dims()[1];
         if self.train_frames != 0 && self.train_frames < t {
             let frames = training_frames(t, self.train_frames, rng);

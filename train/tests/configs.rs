@@ -413,3 +413,73 @@ fn fuzz_configs_for_a_long_time() {
     let (inputs, accepted) = mutate_presets(seed, usize::MAX, Some(deadline));
     println!("config: {inputs} inputs in {secs}s, {accepted} accepted, none panicked");
 }
+
+#[test]
+fn augmentation_keys_are_off_in_the_presets_set_by_override_and_checked_at_load() {
+    let set = |s: &[&str]| -> Vec<Override> { s.iter().map(|s| s.parse().unwrap()).collect() };
+    for preset in [
+        "configs/vae/paper.toml",
+        "configs/vae/small.toml",
+        "configs/vae/tiny.toml",
+    ] {
+        let cfg = VaeRunConfig::load(&root().join(preset), &[]).unwrap();
+        assert!(cfg.vae.augment.is_off(), "{preset}");
+        assert!(
+            !cfg.to_toml().unwrap().contains("augment"),
+            "{preset}: an off augmentation is not written"
+        );
+    }
+    for preset in [
+        "configs/rf/paper.toml",
+        "configs/rf/small.toml",
+        "configs/rf/baseline_paper.toml",
+    ] {
+        assert!(
+            RfRunConfig::load(&root().join(preset), &[])
+                .unwrap()
+                .rf
+                .augment
+                .is_off(),
+            "{preset}"
+        );
+    }
+    let vae = root().join("configs/vae/tiny.toml");
+    let on = VaeRunConfig::load(
+        &vae,
+        &set(&[
+            "vae.augment.yaw_degrees=180.0",
+            "vae.augment.mirror=0.5",
+            "vae.augment.scale=[0.8, 1.25]",
+        ]),
+    )
+    .unwrap();
+    assert_eq!(on.vae.augment.yaw_degrees, 180.0);
+    assert_eq!(on.vae.augment.scale, [0.8, 1.25]);
+    let text = on.to_toml().unwrap();
+    let back = VaeRunConfig::from_table(toml::from_str(&text).unwrap(), &vae).unwrap();
+    assert_eq!(
+        back.vae.augment, on.vae.augment,
+        "the run folder's config keeps the keys"
+    );
+    for (bad, needle) in [
+        ("vae.augment.scale=[1.5, 0.5]", "vae.augment.scale"),
+        ("vae.augment.scale=[-1.0, 2.0]", "vae.augment.scale"),
+        ("vae.augment.mirror=2.0", "vae.augment.mirror"),
+        ("vae.augment.yaw_degrees=nan", "finite"),
+        ("vae.augment.speed=[0.5, 2.0]", "vae.augment.speed"),
+        ("vae.augment.sped=[0.5, 1.0]", "sped"),
+    ] {
+        let err = VaeRunConfig::load(&vae, &set(&[bad])).unwrap_err().to_string();
+        assert!(err.contains(needle), "{bad}: {err}");
+    }
+    let rf = root().join("configs/rf/tiny.toml");
+    let err = RfRunConfig::load(
+        &rf,
+        &set(&["rf.latent_cache=\"memory\"", "rf.augment.yaw_degrees=90.0"]),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("per_batch"), "{err}");
+    let ok = RfRunConfig::load(&rf, &set(&["rf.latent_cache=\"per_batch\"", "rf.augment.reverse=0.5"])).unwrap();
+    assert_eq!(ok.rf.augment.reverse, 0.5);
+}

@@ -46,6 +46,7 @@ pub fn bench_clip(vertices: usize, frames: usize) -> Result<Clip> {
         min_vertices: vertices - 128,
         max_vertices: vertices + 128,
         body: None,
+        family: Default::default(),
     };
     generate_with(&cfg, 0, ShapeFamily::Tube, MotionFamily::Twist)
 }

@@ -163,7 +163,7 @@ pub fn write_synth_windows(
     let existing = prepare_out(out, window, p)?;
     let jobs: Vec<Job> = (0..cfg.clips)
         .map(|index| Job::Synth {
-            source: format!("synth:{}:{index}", cfg.seed),
+            source: cfg.source(index),
             index,
         })
         .collect();

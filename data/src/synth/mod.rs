@@ -6,6 +6,7 @@
 //! right", +y "upward", +z "toward the viewer" (the camera of [`crate::render`] looks from the front-right-top).
 
 mod motions;
+pub mod rigged;
 mod shapes;
 
 use rayon::prelude::*;
@@ -123,6 +124,45 @@ impl MotionFamily {
     }
 }
 
+/// Which generator makes the clips.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Family {
+    /// Shape families deformed by motion families (blobs, tubes, a humanoid, …; [`ShapeFamily`] × [`MotionFamily`]).
+    #[default]
+    Shapes,
+    /// Skinned characters on random skeletons performing actions ([`rigged`]), optionally of one template or action.
+    Rigged(RiggedKinds),
+}
+
+/// What a rigged run may draw: `None` draws the template (among those that can perform the action, if that is
+/// fixed) or the action (among the template's).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RiggedKinds {
+    pub template: Option<rigged::Template>,
+    pub action: Option<rigged::Action>,
+}
+
+impl Family {
+    pub const ALL: [Family; 2] = [
+        Family::Shapes,
+        Family::Rigged(RiggedKinds {
+            template: None,
+            action: None,
+        }),
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::Shapes => "shapes",
+            Family::Rigged(_) => "rigged",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|f| f.name() == name)
+    }
+}
+
 /// Settings of `any4d data synth`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SynthConfig {
@@ -140,6 +180,8 @@ pub struct SynthConfig {
     /// faithful BD-LSTM trains on); only the motions differ. The mesh depends on the family and the vertex range,
     /// not on the seed ([`ONE_BODY_SEED`]), so synth runs with other seeds add clips of the same mesh to a store.
     pub body: Option<ShapeFamily>,
+    /// The generator.
+    pub family: Family,
 }
 
 /// Seed of the shared rest mesh of [`SynthConfig::body`] (stream: the family's index).
@@ -154,6 +196,7 @@ impl Default for SynthConfig {
             min_vertices: 512,
             max_vertices: 4096,
             body: None,
+            family: Family::Shapes,
         }
     }
 }
@@ -209,12 +252,49 @@ impl SynthConfig {
                 ),
             );
         }
+        if let Family::Rigged(kinds) = self.family {
+            if self.body.is_some() {
+                return err(
+                    "body",
+                    "one shared rest mesh is a shape-family option; rigged characters each have their own".into(),
+                );
+            }
+            if let (Some(t), Some(a)) = (kinds.template, kinds.action)
+                && !t.actions().contains(&a)
+            {
+                let can: Vec<&str> = t.actions().iter().map(|a| a.name()).collect();
+                return err(
+                    "action",
+                    format!("a {} cannot {}; it can {}", t.name(), a.name(), can.join(", ")),
+                );
+            }
+        }
         Ok(())
+    }
+
+    /// The source of clip `index` (its key in a store: a run with the same seed and generator replaces it).
+    pub fn source(&self, index: usize) -> String {
+        match self.family {
+            Family::Shapes => format!("synth:{}:{index}", self.seed),
+            Family::Rigged(RiggedKinds {
+                template: None,
+                action: None,
+            }) => format!("synth-rigged:{}:{index}", self.seed),
+            Family::Rigged(k) => format!(
+                "synth-rigged-{}-{}:{}:{index}",
+                k.template.map_or("any", |t| t.name()),
+                k.action.map_or("any", |a| a.name()),
+                self.seed
+            ),
+        }
     }
 }
 
 /// Clip `index` of the dataset: families, sizes and motion drawn from stream `index` of `cfg.seed`.
 pub fn generate_one(cfg: &SynthConfig, index: usize) -> Result<Clip> {
+    if let Family::Rigged(kinds) = cfg.family {
+        return rigged::generate_one(cfg, kinds, index);
+    }
     let mut r = rng(cfg.seed, index as u64);
     let shape = ShapeFamily::ALL[r.random_range(0..ShapeFamily::ALL.len())];
     let motion = MotionFamily::ALL[r.random_range(0..MotionFamily::ALL.len())];
@@ -271,7 +351,7 @@ fn build(
     r: &mut crate::rng::DataRng,
 ) -> Result<Clip> {
     cfg.validate()?;
-    let source = format!("synth:{}:{index}", cfg.seed);
+    let source = cfg.source(index);
     let target = r.random_range(cfg.min_vertices..=cfg.max_vertices);
     let body = shapes::build(shape, target, cfg.min_vertices, cfg.max_vertices, r).map_err(|e| e.at(&source))?;
     animate(cfg, index, shape, &body, motion, r)
@@ -286,7 +366,7 @@ fn animate(
     motion: MotionFamily,
     r: &mut crate::rng::DataRng,
 ) -> Result<Clip> {
-    let source = format!("synth:{}:{index}", cfg.seed);
+    let source = cfg.source(index);
     let geo = motions::Geometry::of(body);
     let (drawn, phrase) = motions::draw(motion, body, &geo, r);
     let n = body.pos.len();

@@ -50,9 +50,9 @@ pub(super) struct Body {
 
 /// Triangle mesh under construction.
 #[derive(Default)]
-struct Mesh {
-    pos: Vec<V3>,
-    faces: Vec<[u32; 3]>,
+pub(super) struct Mesh {
+    pub pos: Vec<V3>,
+    pub faces: Vec<[u32; 3]>,
 }
 
 impl Mesh {
@@ -101,7 +101,7 @@ impl Mesh {
     }
 
     /// A capsule from `p0` (radius `r0`) to `p1` (radius `r1`) with hemispherical-ish ends, rings spaced by arc.
-    fn capsule(&mut self, (rings, segs): (usize, usize), p0: V3, p1: V3, r0: f32, r1: f32) -> Range<usize> {
+    pub(super) fn capsule(&mut self, (rings, segs): (usize, usize), p0: V3, p1: V3, r0: f32, r1: f32) -> Range<usize> {
         let d = sub(p1, p0);
         let len = norm(d).max(1e-6);
         let a = scale(d, 1.0 / len);
@@ -128,7 +128,7 @@ impl Mesh {
     }
 
     /// An ellipsoid with centre `c` and radii `r` along x, y, z, poles on the y axis.
-    fn ellipsoid(&mut self, res: (usize, usize), c: V3, r: V3) -> Range<usize> {
+    pub(super) fn ellipsoid(&mut self, res: (usize, usize), c: V3, r: V3) -> Range<usize> {
         self.sphere_part(res.0, res.1, |_, t, phi| {
             let u = sphere_dir(t, phi);
             [c[0] + r[0] * u[0], c[1] + r[1] * u[1], c[2] + r[2] * u[2]]
@@ -184,7 +184,7 @@ fn sphere_dir(t: f32, phi: f32) -> V3 {
 
 /// Ring and segment counts of parts with given (length, girth) so that the total vertex count is as close to
 /// `target` as one ring allows and inside `lo..=hi`.
-fn allocate(target: usize, lo: usize, hi: usize, parts: &[(f32, f32)]) -> Result<Vec<(usize, usize)>> {
+pub(super) fn allocate(target: usize, lo: usize, hi: usize, parts: &[(f32, f32)]) -> Result<Vec<(usize, usize)>> {
     let area: f32 = parts.iter().map(|(l, g)| l * g).sum();
     let mut res: Vec<(usize, usize)> = parts
         .iter()
@@ -525,7 +525,7 @@ pub(super) fn cross(a: V3, b: V3) -> V3 {
 pub(super) fn norm(a: V3) -> f32 {
     dot(a, a).sqrt()
 }
-fn unit(a: V3) -> V3 {
+pub(super) fn unit(a: V3) -> V3 {
     scale(a, 1.0 / norm(a).max(1e-6))
 }
 /// Two unit vectors completing `a` to a right-handed frame (a, e1, e2 = a × e1).

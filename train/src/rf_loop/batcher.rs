@@ -25,7 +25,7 @@ use crate::runs::LoadedVae;
 use crate::vae_loop::{load_clips, vae_batch};
 
 use super::config::{LatentCache, LatentDraw, RfRunConfig, RfSection};
-use super::latents::{LatentSet, encode_latents};
+use super::latents::{LatentSet, encode_augmented, encode_latents};
 use super::network::RfModel;
 
 /// Whether a batch applies the CFG caption dropout.
@@ -253,12 +253,16 @@ impl RfBatcher {
             Some(set) => (set, indices.to_vec()),
             None => {
                 let inference = device.clone().without_autodiff();
-                encoded = encode_latents(
+                // Training examples are augmented (docs/method.md §2.9) with draws from the micro-batch's generator.
+                let augment = &self.cfg.rf.augment;
+                let augment = (subset == Subset::Train && !augment.is_off()).then_some((augment, &mut *rng));
+                encoded = encode_augmented(
                     &self.vae,
                     &self.store,
                     &store_ids,
                     store_ids.len(),
                     self.tokens,
+                    augment,
                     &inference,
                 )?;
                 (&encoded, (0..store_ids.len()).collect())

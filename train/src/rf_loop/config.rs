@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use any4d_data::augment::Augment;
 use any4d_data::keyframes::TrainingKeyframes;
 use any4d_model::mmdit::{Anchor, KeyframeConditioning, MmditConfig};
 use any4d_model::rectified_flow::{KeyframeLoss, RfLossOptions, TauSampler};
@@ -66,6 +67,11 @@ pub struct RfSection {
     pub valid_sample_clips: usize,
     /// Grid points over [0, 1] of the validation sampler (docs/method.md §4.6: 64, midpoint solver).
     pub valid_sample_grid: usize,
+    /// Training-time augmentation of each example before the frozen VAE encodes it (docs/method.md §2.9); needs
+    /// `latent_cache = "per_batch"` (cached latents are of the stored clips). Off when absent, as in the paper
+    /// presets.
+    #[serde(default, skip_serializing_if = "Augment::is_off")]
+    pub augment: Augment,
 }
 
 /// Which caption encoder the RF trains with (docs/method.md §4.4).
@@ -190,6 +196,23 @@ impl RfRunConfig {
                 VALID_SAMPLE_KEYFRAMES
                     .check(cfg.model.frames)
                     .map_err(|e| bad(format!("rf.valid_sample_every > 0 needs model.frames ≥ 3: {e}")))?;
+            }
+        }
+        rf.augment.validate("rf.augment").map_err(bad)?;
+        if !rf.augment.is_off() {
+            if rf.latent_cache != LatentCache::PerBatch {
+                return Err(bad(
+                    "rf.augment needs rf.latent_cache = \"per_batch\": latents cached at the start are of the stored, \
+                     unaugmented clips"
+                        .into(),
+                ));
+            }
+            if cfg.model.conditioning == KeyframeConditioning::ImputeUntil {
+                return Err(bad(
+                    "rf.augment cannot be combined with model.conditioning = \"impute_until\" (its noisy keyframes \
+                     are re-read from the store, unaugmented)"
+                        .into(),
+                ));
             }
         }
         let t = &cfg.text;

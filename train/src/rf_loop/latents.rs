@@ -1,13 +1,15 @@
 //! Frozen-VAE latents of the clips (docs/method.md §3.4, §4.1): encoded once into host memory or per micro-batch.
 
+use any4d_data::augment::Augment;
 use any4d_data::store::Store;
 use any4d_model::any_vae::AnyMeshVae;
 use burn::prelude::{Device, Tensor};
+use rand_chacha::ChaCha8Rng;
 
 use any4d_model::mesh_vae::MeshVae;
 
 use crate::error::{Result, TrainError};
-use crate::vae_loop::{load_clips, vae_batch};
+use crate::vae_loop::{load_augmented, vae_batch};
 
 /// Frozen-VAE encoding of one clip, kept in host memory in the VAE's layout.
 #[derive(Clone, Debug)]
@@ -62,11 +64,26 @@ pub fn encode_latents(
     tokens: usize,
     device: &Device,
 ) -> Result<LatentSet> {
+    encode_augmented(vae, store, store_indices, micro_batch, tokens, None, device)
+}
+
+/// [`encode_latents`] of the clips augmented in order with draws from the generator, when one is given
+/// (docs/method.md §2.9).
+pub fn encode_augmented(
+    vae: &AnyMeshVae,
+    store: &Store,
+    store_indices: &[usize],
+    micro_batch: usize,
+    tokens: usize,
+    mut augment: Option<(&Augment, &mut ChaCha8Rng)>,
+    device: &Device,
+) -> Result<LatentSet> {
     let frames = if vae.clip_frames().is_some() { 1 } else { store.frames() };
     let mut clips = Vec::with_capacity(store_indices.len());
     let mut channels = 0;
     for chunk in store_indices.chunks(micro_batch.max(1)) {
-        let (batch, _) = load_clips(store, chunk, device)?;
+        let aug = augment.as_mut().map(|(a, rng)| (*a, &mut **rng));
+        let (batch, _) = load_augmented(store, chunk, aug, device)?;
         let enc = vae.encode_vae_batch(&vae_batch(&batch, tokens, device)?);
         let [b, t, p, c] = enc.mu.dims();
         if (t, p) != (frames, tokens) {

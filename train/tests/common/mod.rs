@@ -63,6 +63,7 @@ pub fn synth_store(dir: &Path, seed: u64) -> PathBuf {
         min_vertices: 256,
         max_vertices: 512,
         body: None,
+        family: Default::default(),
     };
     write_synth_with(&synth, &store, 32, None).expect("synthetic store");
     store
