@@ -44,7 +44,7 @@ pub struct Summary {
     pub val: usize,
     /// Distinct object uids among the stored clips.
     pub objects: usize,
-    /// Stored clips whose caption is empty (unconditional).
+    /// Stored clips whose caption is empty or only whitespace (unconditional).
     pub empty_captions: usize,
     /// Stored clips whose index row has a checksum (0 for a store written before checksums: re-import to add
     /// them); `data verify` checks them.
@@ -204,7 +204,7 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
                 if !r.licence.is_empty() {
                     *s.licences.entry(r.licence.clone()).or_default() += 1;
                 }
-                s.empty_captions += usize::from(r.caption.is_empty());
+                s.empty_captions += usize::from(r.caption.trim().is_empty());
                 s.checksums += usize::from(r.checksum.is_some());
                 if let Some(t) = r.frames {
                     *s.frames.entry(t).or_default() += 1;
@@ -437,6 +437,10 @@ mod tests {
         assert_eq!(s.licences.get("CC-BY-SA-3.0"), Some(&2));
         assert_eq!(s.licences.len(), 1);
         assert_eq!((s.empty_captions, s.checksums), (1, 6));
+        // A caption of spaces conditions on nothing, like an empty one (docs/method.md §4.4).
+        let mut spaced = rows.clone();
+        spaced[0].caption = " \t".into();
+        assert_eq!(summarize_rows(Path::new("d"), &spaced).empty_captions, 2);
         assert_eq!(s.vertex_histogram.len(), 8);
         assert_eq!(
             s.vertex_histogram[0],

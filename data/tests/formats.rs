@@ -7,7 +7,7 @@ use any4d_data::Clip;
 use any4d_data::formats::dymesh_bin::{read_bin, write_bin};
 use any4d_data::formats::gltf::{GltfReadOptions, read_gltf, write_gltf};
 use any4d_data::formats::obj::{read_obj_seq, write_obj_seq};
-use any4d_data::formats::{read_clip, write_clip};
+use any4d_data::formats::{read_clip, write_clip, write_clip_at};
 
 fn fixture(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(rel)
@@ -324,6 +324,22 @@ fn read_and_write_clip_dispatch_by_path() {
         assert_close(&back.vertices, &clip.vertices, 1e-6);
     }
     assert_eq!(read_clip(&dir.path().join("c.blend")).unwrap_err().field, "format");
+}
+
+#[test]
+fn a_take_rate_travels_into_gltf_and_bad_rates_fall_back_to_the_default() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = sample_clip();
+    // Four frames at 10 fps last 0.3 s: read back at the reader's 30 fps, that is 10 frames (at 30 fps, 4).
+    let frames_at = |fps: Option<f32>| {
+        let path = dir.path().join("c.glb");
+        write_clip_at(&path, &clip, fps).unwrap();
+        read_gltf(&path, &GltfReadOptions::default()).unwrap().frames
+    };
+    assert_eq!(frames_at(Some(10.0)), 10);
+    for fallback in [None, Some(0.0), Some(f32::NAN), Some(-10.0), Some(f32::INFINITY)] {
+        assert_eq!(frames_at(fallback), 4, "{fallback:?}");
+    }
 }
 
 /// The Khronos sample files that Debian's `assimp-testmodels` installs; not copied into the repository.

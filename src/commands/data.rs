@@ -261,11 +261,14 @@ fn weld(eps: Option<f32>) -> Weld {
 }
 
 fn convert(a: ConvertArgs) -> anyhow::Result<ExitCode> {
-    let mut clip = weld(a.weld).apply(read_file(&a.input, a.take.as_deref())?)?;
+    let taken = read_taken(&a.input, a.take.as_deref())?;
+    // The take's own rate travels into formats that keep one (glTF); 0 = the file does not say.
+    let fps = taken.take.as_ref().map(|t| t.fps).filter(|&f| f > 0.0);
+    let mut clip = weld(a.weld).apply(taken.clip)?;
     if a.normalize {
         clip = preprocess::normalize(&clip).0;
     }
-    formats::write_clip(&a.output, &clip)?;
+    formats::write_clip_at(&a.output, &clip, fps)?;
     println!(
         "{} → {}: {} frames, {} vertices, {} faces",
         a.input.display(),
@@ -279,11 +282,15 @@ fn convert(a: ConvertArgs) -> anyhow::Result<ExitCode> {
 
 /// A clip file, at take `take` (name or index) when given.
 fn read_file(path: &Path, take: Option<&str>) -> anyhow::Result<Clip> {
+    Ok(read_taken(path, take)?.clip)
+}
+
+fn read_taken(path: &Path, take: Option<&str>) -> anyhow::Result<formats::Taken> {
     let opts = formats::skeletal::ReadOptions {
         take: take.map_or(formats::skeletal::TakeSel::First, formats::skeletal::TakeSel::parse),
         ..Default::default()
     };
-    Ok(formats::read_take(path, &opts)?.clip)
+    Ok(formats::read_take(path, &opts)?)
 }
 
 fn progress_bar(what: &str) -> ProgressBar {
@@ -378,7 +385,13 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
         read_file(&a.path, a.take.as_deref())?
     };
     render_contact_sheet(&clip, &a.out, &RenderOptions::default())?;
-    println!("{} ({}) → {}", clip.id, a.path.display(), a.out.display());
+    println!(
+        "{} ({}) → {}: {:?}",
+        clip.id,
+        a.path.display(),
+        a.out.display(),
+        clip.caption
+    );
     Ok(ExitCode::SUCCESS)
 }
 

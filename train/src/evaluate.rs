@@ -252,8 +252,8 @@ pub fn build_methods(
 /// Reconstructors in order, with label → checkpoint lines for the table header.
 pub type BuiltReconstructors = (Vec<Box<dyn Reconstructor>>, Vec<(String, String)>);
 
-/// Table 5 rows: `--vae` (and `--vae-b`) as reconstructors labelled by their VAE kind, decoding the `posterior`
-/// latent.
+/// Table 5 rows: `--vae` (and `--vae-b`) as reconstructors labelled by their VAE kind (`--vae-b`'s with `_b`
+/// added when both are of one kind, so that their rows stay apart), decoding the `posterior` latent.
 pub fn build_reconstructors(
     runs: &LearnedRuns,
     posterior: KeyPosterior,
@@ -263,11 +263,16 @@ pub fn build_reconstructors(
     let mut ckpts = Vec::new();
     for run in [&runs.vae, &runs.vae_b].into_iter().flatten() {
         let vae = load_vae_run(run, device)?;
-        let label = match vae.model.kind() {
+        let kind = match vae.model.kind() {
             VaeKind::Framewise => "framewise",
             VaeKind::Sequencewise => "sequencewise",
         };
-        ckpts.push((label.to_string(), checkpoint_label(&vae.run, vae.step)));
+        let label = if ckpts.iter().any(|(l, _): &(String, String)| l == kind) {
+            format!("{kind}_b")
+        } else {
+            kind.to_string()
+        };
+        ckpts.push((label.clone(), checkpoint_label(&vae.run, vae.step)));
         out.push(Box::new(VaeReconstructor::new(
             label,
             codec_of(&vae, posterior, device)?,

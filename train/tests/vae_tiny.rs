@@ -1,5 +1,6 @@
 //! A short tiny frame-wise VAE run on procedural clips lowers its loss, writes latent statistics, and resumes
-//! exactly (n steps + resume + n steps = 2n steps straight, bitwise on the CPU backend); a store of windows cut
+//! exactly (n steps + resume + n steps = 2n steps straight, bitwise on the CPU backend, with training-time
+//! augmentation on); a store of windows cut
 //! from longer clips trains on one example per whole clip.
 
 mod common;
@@ -49,6 +50,20 @@ fn tiny_vae_run_lowers_its_loss_and_stores_latent_stats() {
         serde_json::from_str(&std::fs::read_to_string(run.path(LATENT_STATS_FILE)).unwrap()).unwrap();
     assert_eq!(stats.step, 30);
     assert!(stats.stats.motion_std > 0.0 && stats.stats.shape_std > 0.0, "{stats:?}");
+    // Two frame-wise VAEs in one table 5 keep apart: the second row is `framewise_b`.
+    let runs = any4d_train::evaluate::LearnedRuns {
+        vae: Some(run.root().to_path_buf()),
+        vae_b: Some(run.root().to_path_buf()),
+        ..Default::default()
+    };
+    let dev = device(Backend::Flex, Precision::F32).unwrap();
+    let (rows, ckpts) = any4d_train::evaluate::build_reconstructors(&runs, Default::default(), &dev).unwrap();
+    let labels: Vec<String> = rows.iter().map(|r| r.label()).collect();
+    assert_eq!(labels, ["framewise", "framewise_b"]);
+    assert_eq!(
+        ckpts.iter().map(|c| c.0.as_str()).collect::<Vec<_>>(),
+        ["framewise", "framewise_b"]
+    );
 }
 
 #[test]
@@ -89,17 +104,28 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
     let dir = tempfile::tempdir().unwrap();
     let data = synth_store(dir.path(), 3);
     let n = 3;
-    let go = |run: &RunFolder, steps: u64, resume: Option<std::path::PathBuf>| {
-        let cfg = tiny(steps);
-        let AnyMeshVaeConfig::Framewise(m) = &cfg.model else {
-            panic!("tiny is frame-wise")
-        };
-        let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
-        dev.seed(cfg.train.seed);
-        let model = m.init(&dev);
-        let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch, &cfg.vae).unwrap();
-        train(&objective, model, quiet_setup(run, &cfg.train, &cfg.optim, dev, resume)).unwrap()
+    // With every augmentation on (docs/method.md §2.9): its draws come from the checkpointed generator.
+    let augment = any4d_data::augment::Augment {
+        yaw_degrees: 180.0,
+        mirror: 0.5,
+        scale: [0.8, 1.25],
+        reverse: 0.5,
+        speed: [0.5, 1.0],
     };
+    let go_with =
+        |augment: &any4d_data::augment::Augment, run: &RunFolder, steps: u64, resume: Option<std::path::PathBuf>| {
+            let mut cfg = tiny(steps);
+            cfg.vae.augment = augment.clone();
+            let AnyMeshVaeConfig::Framewise(m) = &cfg.model else {
+                panic!("tiny is frame-wise")
+            };
+            let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
+            dev.seed(cfg.train.seed);
+            let model = m.init(&dev);
+            let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch, &cfg.vae).unwrap();
+            train(&objective, model, quiet_setup(run, &cfg.train, &cfg.optim, dev, resume)).unwrap()
+        };
+    let go = |run: &RunFolder, steps: u64, resume: Option<std::path::PathBuf>| go_with(&augment, run, steps, resume);
     let runs = dir.path().join("runs");
     let straight_run = RunFolder::create(&runs, "straight", "", &["rec", "kl"]).unwrap();
     let (straight, _) = go(&straight_run, 2 * n, None);
@@ -113,6 +139,13 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
         params(&straight),
         params(&resumed),
         "resumed VAE differs from straight training"
+    );
+    let plain_run = RunFolder::create(&runs, "plain", "", &["rec", "kl"]).unwrap();
+    let (plain, _) = go_with(&Default::default(), &plain_run, 2 * n, None);
+    assert_ne!(
+        params(&plain),
+        params(&straight),
+        "the augmentation changed what the VAE saw"
     );
 }
 

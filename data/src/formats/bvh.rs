@@ -347,8 +347,14 @@ pub fn parse(path: &Path, max_frames: usize, motion: bool) -> Result<Bvh> {
     t.expect("Frame", "Frame Time")?;
     t.expect("Time:", "Frame Time")?;
     let dt = t.float("Frame Time")?;
-    if dt <= 0.0 {
-        return Err(t.err("Frame Time", format!("{dt} s is not a positive frame time")));
+    if !(dt.is_finite() && dt > 0.0 && 1.0 / dt <= super::skeletal::MAX_FPS) {
+        return Err(t.err(
+            "Frame Time",
+            format!(
+                "{dt} s is not a positive, finite frame time of at most {} fps",
+                super::skeletal::MAX_FPS
+            ),
+        ));
     }
     let step = ((1.0 / dt / TARGET_FPS).round() as usize).max(1);
     let channels: usize = joints.iter().map(|j| j.channels.len()).sum();

@@ -176,6 +176,15 @@ fn parse(path: &Path, data: &[u8]) -> Result<Iqm> {
         let first = b.usize(&f)?;
         let count = b.usize(&f)?;
         let fps = b.f32(&f)?;
+        if !(fps.is_finite() && (0.0..=super::skeletal::MAX_FPS as f32).contains(&fps)) {
+            return Err(b.err(
+                &f,
+                format!(
+                    "frame rate {fps}: must be finite, not negative and at most {}",
+                    super::skeletal::MAX_FPS
+                ),
+            ));
+        }
         let _flags = b.u32(&f)?;
         if first.checked_add(count).is_none_or(|end| end > num_frames) {
             return Err(b.err(
@@ -703,6 +712,28 @@ mod tests {
             "{v:?}"
         );
         assert_eq!(clip.frame(0)[0], [0.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn non_finite_and_negative_frame_rates_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let (pos, faces) = quad();
+        let joints = [("root", -1, [0.0; 3])];
+        let frames = vec![vec![[0.0f32; 3]]; 3];
+        let bytes = write_test_iqm(&pos, &faces, &[0; 4], &joints, "slide", &frames, true);
+        let rate = 24.0f32.to_le_bytes();
+        let at: Vec<usize> = (0..bytes.len() - 3).filter(|&i| bytes[i..i + 4] == rate).collect();
+        assert_eq!(at.len(), 1, "the writer's 24 fps is the only such float in this file");
+        for bad in [f32::NAN, f32::INFINITY, -24.0, 1e9] {
+            let mut b = bytes.clone();
+            b[at[0]..at[0] + 4].copy_from_slice(&bad.to_le_bytes());
+            let path = dir.path().join("thing.iqm");
+            std::fs::write(&path, b).unwrap();
+            let e = list_takes(&path).unwrap_err();
+            // NaN and infinity already fail the reader's finite-float check; the rate check adds the rest.
+            let why = if bad.is_finite() { "frame rate" } else { "non-finite" };
+            assert!(e.field == "anims[0]" && e.reason.contains(why), "{bad}: {e}");
+        }
     }
 
     #[test]

@@ -119,7 +119,8 @@ fn ranges(path: &Path, m: &mut Md2) -> Result<Vec<(String, usize, usize, f32)>> 
                 return Err(bad());
             };
             let (s, e): (usize, usize) = (s.parse().map_err(|_| bad())?, e.parse().map_err(|_| bad())?);
-            let fps: f32 = fps.parse().map_err(|_| bad())?;
+            let fps: f64 = fps.parse().map_err(|_| bad())?;
+            let fps = skeletal::check_fps(&anm, &format!("line {}", i + 1), fps)?;
             if e >= m.num_frames || s > e {
                 return Err(DataError::new(
                     &anm,
@@ -297,6 +298,11 @@ mod tests {
         assert_eq!((t[0].name.as_str(), t[0].frames, t[0].fps), ("walk0", 4, 24.0));
         std::fs::write(dir.path().join("guy.anm"), "walk 1 40 24\n").unwrap();
         assert!(list_takes(&path).unwrap_err().reason.contains("outside"));
+        for rate in ["nan", "inf", "-3", "1e9"] {
+            std::fs::write(dir.path().join("guy.anm"), format!("walk0 1 4 {rate}\n")).unwrap();
+            let e = list_takes(&path).unwrap_err();
+            assert!(e.field == "line 1" && e.reason.contains("frame rate"), "{rate}: {e}");
+        }
     }
 
     #[test]

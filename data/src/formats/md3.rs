@@ -183,9 +183,11 @@ fn cfg_ranges(cfg: &Path, text: &str, part: &str, frames: usize) -> Result<Vec<R
             .parse()
             .map_err(|_| err(&format!("{:?} is not a frame rate", tokens[3])))?;
         let (start, count, _looping) = (int(tokens[0])?, int(tokens[1])?, int(tokens[2])?);
-        if start < 0 || !(fps.is_finite() && fps > 0.0) {
+        if start < 0 || !(fps.is_finite() && fps >= 0.0) {
             return Err(err(&format!("first frame {start} at {fps} fps")));
         }
+        // Quake III plays an animation listed at 0 fps at 1 fps (real players list unused ones as `0 0 0 0`).
+        let fps = if fps == 0.0 { 1.0 } else { fps };
         if rows.len() == ANIMATIONS.len() {
             return Err(err(&format!(
                 "more than the {} animations a player has",
@@ -207,7 +209,11 @@ fn cfg_ranges(cfg: &Path, text: &str, part: &str, frames: usize) -> Result<Vec<R
         if !mine || len < 2 {
             continue;
         }
-        let first = if legs { start - skip } else { start };
+        let first = if legs {
+            i128::from(start) - i128::from(skip)
+        } else {
+            i128::from(start)
+        };
         let end = usize::try_from(first).ok().and_then(|f| f.checked_add(len));
         let Some(end) = end.filter(|&e| e <= frames) else {
             return Err(DataError::new(
@@ -215,7 +221,7 @@ fn cfg_ranges(cfg: &Path, text: &str, part: &str, frames: usize) -> Result<Vec<R
                 *name,
                 format!(
                     "frames {first}..{} for the {part} body, but its .md3 has {frames}",
-                    first + len as i64
+                    first + len as i128
                 ),
             ));
         };
@@ -433,5 +439,35 @@ mod tests {
         std::fs::write(dir.path().join("Animation.CFG"), "0 3 x 20\n").unwrap();
         let e = list_takes(&upper).unwrap_err();
         assert!(e.field == "line 1" && e.reason.contains("\"x\""), "{e}");
+    }
+
+    #[test]
+    fn an_animation_at_0_fps_plays_at_1_and_huge_first_frames_are_refused_without_overflow() {
+        let dir = tempfile::tempdir().unwrap();
+        let lower = dir.path().join("lower.md3");
+        std::fs::write(&lower, frames_md3(12)).unwrap();
+        // A real player's unused LEGS_TURN line: `192 0 0 0`; and a 2-frame LEGS_WALKCR listed at 0 fps.
+        let cfg = CFG.replace("22 2 2 25\n", "22 2 2 0\n") + "192 0 0 0 // LEGS_TURN\n";
+        std::fs::write(dir.path().join("animation.cfg"), cfg).unwrap();
+        let takes = list_takes(&lower).unwrap();
+        let walkcr = takes.iter().find(|t| t.name == "LEGS_WALKCR").unwrap();
+        assert_eq!((walkcr.frames, walkcr.fps), (2, 1.0));
+        for (line, needle) in [
+            (format!("{} 2 0 20\n", i64::MAX), "frames"),
+            ("0 2 0 -5\n".to_string(), "-5 fps"),
+            ("0 2 0 NaN\n".to_string(), "NaN fps"),
+            ("0 2 0 inf\n".to_string(), "inf fps"),
+        ] {
+            // BOTH_DEATH1 gets the hostile line; the legs' skip is computed from rows that are all present.
+            let cfg = CFG.replacen("0 3 0 20 // BOTH_DEATH1\n", &line, 1);
+            std::fs::write(dir.path().join("animation.cfg"), &cfg).unwrap();
+            let e = list_takes(&lower).unwrap_err();
+            assert!(e.to_string().contains(needle), "{line:?}: {e}");
+        }
+        // A legs line whose first frame lies below the torso's skip: refused, not wrapped around.
+        let cfg = CFG.replace("24 -2 2 25", "5 -2 2 25");
+        std::fs::write(dir.path().join("animation.cfg"), cfg).unwrap();
+        let e = list_takes(&lower).unwrap_err();
+        assert!(e.field == "LEGS_WALK" && e.reason.contains("frames -9..-7"), "{e}");
     }
 }

@@ -248,6 +248,7 @@ struct Anim {
 }
 
 /// What an `.md5anim` says about itself before its frames.
+#[derive(Debug)]
 struct AnimHeader {
     /// Joint names and parents.
     joints: Vec<(String, i32)>,
@@ -273,7 +274,8 @@ fn anim_head(t: &mut Tokens) -> Result<(Hierarchy, usize, f32, usize)> {
     header(t)?;
     let num_frames: usize = t.keyed("numFrames")?;
     let num_joints: usize = t.keyed("numJoints")?;
-    let fps: f32 = t.keyed("frameRate")?;
+    let fps: f64 = t.keyed("frameRate")?;
+    let fps = super::skeletal::check_fps(t.path, "frameRate", fps)?;
     let comps: usize = t.keyed("numAnimatedComponents")?;
     t.expect("hierarchy", "hierarchy")?;
     t.expect("{", "hierarchy")?;
@@ -528,6 +530,19 @@ mesh {
             (v[0] - 1.0).abs() < 1e-6 && (v[1] - 1.5).abs() < 1e-6 && v[2].abs() < 1e-6,
             "{v:?}"
         );
+    }
+
+    #[test]
+    fn an_animation_whose_frame_rate_is_not_finite_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.md5anim");
+        for rate in ["nan", "inf", "-24"] {
+            std::fs::write(&path, anim(3).replace("frameRate 24", &format!("frameRate {rate}"))).unwrap();
+            let e = anim_header(&path).unwrap_err();
+            assert!(e.field == "frameRate" && e.reason.contains("frame rate"), "{rate}: {e}");
+        }
+        std::fs::write(&path, anim(3)).unwrap();
+        assert_eq!(anim_header(&path).unwrap().fps, 24.0);
     }
 
     #[test]

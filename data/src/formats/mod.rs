@@ -323,11 +323,20 @@ fn list_takes_unguarded(path: &Path, format: Format) -> Result<Option<Vec<TakeIn
 /// Write a clip in the format of its path (glTF at [`gltf::DEFAULT_FPS`]). The clip is validated first, so no
 /// file is written that the readers would refuse.
 pub fn write_clip(path: &Path, clip: &Clip) -> Result<()> {
+    write_clip_at(path, clip, None)
+}
+
+/// [`write_clip`] keeping a frame rate where the format has one (glTF's key times): `Some(fps)` with a rate
+/// that [`skeletal::check_fps`] accepts and that is positive (a take's rate), else [`gltf::DEFAULT_FPS`].
+pub fn write_clip_at(path: &Path, clip: &Clip, fps: Option<f32>) -> Result<()> {
     clip.validate()?;
+    let fps = fps
+        .filter(|&f| f > 0.0 && skeletal::check_fps(path, "fps", f64::from(f)).is_ok())
+        .unwrap_or(gltf::DEFAULT_FPS);
     match Format::from_path(path)? {
         Format::Bin => dymesh_bin::write_bin(path, clip),
         Format::ObjSeq => obj::write_obj_seq(path, clip),
-        Format::Gltf | Format::Glb => gltf::write_gltf(path, clip, gltf::DEFAULT_FPS),
+        Format::Gltf | Format::Glb => gltf::write_gltf(path, clip, fps),
         Format::Anime => write_atomic_bytes(path, &anime::write_anime(clip)),
         other => Err(DataError::new(
             path,

@@ -100,6 +100,7 @@ fn parse_pmd(path: &Path) -> Result<Pmd> {
     })
 }
 
+#[derive(Debug)]
 struct Psa {
     fps: f32,
     bones: usize,
@@ -126,8 +127,28 @@ fn psa_header(b: &mut Bytes) -> Result<Psa> {
         .checked_mul(frames)
         .ok_or_else(|| b.err("num_frames", "bones × frames overflows"))?;
     b.check_count(keys, 28, "keys")?;
+    if !(frame_ms.is_finite() && frame_ms >= 0.0) {
+        return Err(b.err(
+            "frame_length",
+            format!("{frame_ms} ms per frame: must be finite and not negative"),
+        ));
+    }
+    let fps = if frame_ms > 0.0 {
+        1000.0 / f64::from(frame_ms)
+    } else {
+        0.0
+    };
+    if super::skeletal::check_fps(Path::new(""), "", fps).is_err() {
+        return Err(b.err(
+            "frame_length",
+            format!(
+                "{frame_ms} ms per frame is {fps} frames per second, more than {}",
+                super::skeletal::MAX_FPS
+            ),
+        ));
+    }
     Ok(Psa {
-        fps: if frame_ms > 0.0 { 1000.0 / frame_ms } else { 0.0 },
+        fps: fps as f32,
         bones,
         frames,
         keys_at: b.pos(),
@@ -271,6 +292,27 @@ mod tests {
         assert_eq!((clip.frames, info.name.as_str(), stats.vertices), (4, "walk", 3));
         assert_eq!(clip.frame(3)[2], [0.0, 4.0, 0.0]);
         assert_eq!(clip.frame(3)[1], [1.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn a_psa_frame_length_that_is_not_a_finite_rate_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let pos = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let mesh = write_test_pmd(&pos, &[[0, 1, 2]], &[0, 0, 1], &[[0.0; 3], [0.0, 1.0, 0.0]]);
+        std::fs::write(dir.path().join("deer.pmd"), mesh).unwrap();
+        let keys: Vec<Vec<[f32; 3]>> = (0..4).map(|f| vec![[0.0; 3], [0.0, 1.0 + f as f32, 0.0]]).collect();
+        let good = write_test_psa(&keys);
+        let ms = (1000.0f32 / 30.0).to_le_bytes();
+        let at = good.windows(4).position(|w| w == ms).unwrap();
+        for bad in [f32::NAN, f32::INFINITY, -5.0, 1e-30] {
+            let mut b = good.clone();
+            b[at..at + 4].copy_from_slice(&bad.to_le_bytes());
+            let psa = dir.path().join("walk.psa");
+            std::fs::write(&psa, b).unwrap();
+            let data = std::fs::read(&psa).unwrap();
+            let e = psa_header(&mut Bytes::new("walk.psa", &data)).unwrap_err();
+            assert!(e.field.contains("frame_length"), "{bad}: {e}");
+        }
     }
 
     #[test]

@@ -232,6 +232,33 @@ pub fn axis_rotation(axis: usize, deg: f64) -> Mat {
     m
 }
 
+/// Highest frame rate a file may state.
+pub const MAX_FPS: f64 = 100_000.0;
+
+/// A frame rate a file states (or that its times imply): finite, not negative and at most [`MAX_FPS`]; 0 means the
+/// file does not say. Every reader passes its rates through here, so no clip carries a NaN or infinite rate.
+pub fn check_fps(path: &Path, field: &str, fps: f64) -> Result<f32> {
+    if fps.is_finite() && (0.0..=MAX_FPS).contains(&fps) {
+        Ok(fps as f32)
+    } else {
+        Err(DataError::new(
+            path,
+            field,
+            format!("frame rate {fps}: must be finite, not negative and at most {MAX_FPS} (0 = not given)"),
+        ))
+    }
+}
+
+/// A rate implied by a file's numbers where a bad one cannot be refused on its own (a take still reads): the
+/// rate when [`check_fps`] accepts it, else 0 (not given).
+pub fn fps_or_unknown(fps: f64) -> f32 {
+    if fps.is_finite() && (0.0..=MAX_FPS).contains(&fps) {
+        fps as f32
+    } else {
+        0.0
+    }
+}
+
 /// Unit quaternion `(x, y, z, w)`; a zero quaternion becomes the identity.
 pub fn normalize_quat(q: [f64; 4]) -> [f64; 4] {
     let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();

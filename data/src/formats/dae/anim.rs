@@ -203,7 +203,7 @@ fn take(name: String, list: Vec<(usize, Channel)>, span: Option<(f64, f64)>) -> 
             } else {
                 usize::MAX
             },
-            fps: fps as f32,
+            fps: crate::formats::skeletal::fps_or_unknown(fps),
             file: None,
         },
         channels,

@@ -204,7 +204,7 @@ fn takes(scene: &Scene, model_index: &HashMap<i64, usize>) -> Result<Vec<Take>> 
                 } else {
                     frames as usize
                 },
-                fps: fps as f32,
+                fps: super::skeletal::fps_or_unknown(fps),
                 file: None,
             },
             channels,

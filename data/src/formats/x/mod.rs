@@ -353,7 +353,7 @@ fn takes(file: &XFile) -> Vec<(usize, TakeInfo)> {
             TakeInfo {
                 name: set.name.clone(),
                 frames: usize::try_from(frames).unwrap_or(usize::MAX),
-                fps: (file.ticks_per_second / step as f64) as f32,
+                fps: super::skeletal::fps_or_unknown(file.ticks_per_second / step as f64),
                 file: None,
             },
         ));

@@ -101,16 +101,16 @@ pub(super) fn draw(action: Action, rig: &Rig, r: &mut DataRng) -> Motion {
             (c, 0.0, c * 2.0 * size * (0.45 * amp).sin())
         }
         Action::Run => {
-            let c = pace * r.random_range(1.4f32..2.4);
-            (c, 0.0, c * 2.6 * size * (0.7 * amp).sin())
+            let c = pace * r.random_range(1.0f32..1.6);
+            (c, 0.0, c * 2.6 * size * (0.6 * amp).sin())
         }
         Action::Jump => {
             let forward = r.random_bool(0.5);
             (
                 1.0,
-                r.random_range(0.25f32..0.6) * size * amp,
+                r.random_range(0.2f32..0.5) * size * amp,
                 if forward {
-                    r.random_range(0.5f32..1.5) * size
+                    r.random_range(0.4f32..1.0) * size
                 } else {
                     0.0
                 },
@@ -242,7 +242,7 @@ pub(super) fn pose(m: &Motion, rig: &Rig, tau: f32) -> Pose {
             p.shift[0] = m.travel * tau;
         }
         Action::Run => {
-            gait(&mut p, rig, m.cycles, tau, 40.0 * a, 70.0 * a);
+            gait(&mut p, rig, m.cycles, tau, 35.0 * a, 60.0 * a);
             set(&mut p, rig.spine.get(1), q(2, -12.0 * a));
             for arm in &rig.arms {
                 set(&mut p, arm.bones.get(1), q(2, 40.0));
@@ -251,19 +251,19 @@ pub(super) fn pose(m: &Motion, rig: &Rig, tau: f32) -> Pose {
             p.ground = Some(0.08 * rig.leg * a * (TAU * 2.0 * m.cycles * tau).sin().max(0.0));
         }
         Action::Jump => {
-            let crouch = bump(tau, 0.0, 0.32) + 0.7 * bump(tau, 0.78, 1.0);
-            let u = ((tau - 0.3) / 0.5).clamp(0.0, 1.0);
+            let crouch = bump(tau, 0.0, 0.35) + 0.5 * bump(tau, 0.8, 1.0);
+            let u = ((tau - 0.3) / 0.55).clamp(0.0, 1.0);
             let air = 4.0 * u * (1.0 - u);
             for leg in &rig.legs {
-                set(&mut p, leg.bones.first(), q(2, 45.0 * crouch + 20.0 * air));
-                set(&mut p, leg.bones.get(1), q(2, -90.0 * crouch - 30.0 * air));
-                set(&mut p, leg.bones.get(2), q(2, 45.0 * crouch + 10.0 * air));
+                set(&mut p, leg.bones.first(), q(2, 35.0 * crouch + 20.0 * air));
+                set(&mut p, leg.bones.get(1), q(2, -70.0 * crouch - 30.0 * air));
+                set(&mut p, leg.bones.get(2), q(2, 35.0 * crouch + 10.0 * air));
             }
             for arm in &rig.arms {
                 set(
                     &mut p,
                     arm.bones.first(),
-                    q(2, -40.0 * crouch + 140.0 * a.min(1.0) * air),
+                    q(2, -30.0 * crouch + 90.0 * a.min(1.0) * air),
                 );
             }
             set(&mut p, rig.spine.get(1), q(2, -20.0 * crouch));
@@ -474,126 +474,4 @@ fn fall(p: &mut Pose, m: &Motion, rig: &Rig, tau: f32) {
             set(p, rig.neck.first(), q(2, 25.0 * down));
         }
     }
-}
-
-/// The caption: the rig's words, then what it does, how, and which way it travels (`travel`: the centroid's
-/// world displacement in x and z over the clip, viewer-relative as the procedural shapes' captions).
-pub(super) fn caption(rig: &Rig, m: &Motion, travel: [f32; 2]) -> String {
-    let t = rig.template;
-    let side = if m.side > 0.0 { "right" } else { "left" };
-    let pace = if m.pace < 0.85 {
-        Some("slowly")
-    } else if m.pace > 1.2 {
-        Some("quickly")
-    } else {
-        None
-    };
-    let force = if m.amp < 0.85 {
-        Some("gently")
-    } else if m.amp > 1.2 {
-        Some("wildly")
-    } else {
-        None
-    };
-    let (verb, manner): (String, Option<&str>) = match m.action {
-        Action::Walk => (
-            match t {
-                Template::Insect => "scuttling",
-                Template::Quadruped => "trotting",
-                Template::Bird => "strutting",
-                _ => "walking",
-            }
-            .into(),
-            pace,
-        ),
-        Action::Run => (
-            match t {
-                Template::Quadruped => "galloping",
-                Template::Insect => "scurrying",
-                _ => "running",
-            }
-            .into(),
-            pace,
-        ),
-        Action::Jump => (
-            if m.travel > 0.0 {
-                "leaping forward"
-            } else {
-                "jumping in place"
-            }
-            .into(),
-            None,
-        ),
-        Action::Turn => {
-            let way = if m.side > 0.0 { "right" } else { "left" };
-            let around = if m.extent > 150.0 { " around" } else { "" };
-            (format!("turning{around} to its {way}"), pace)
-        }
-        Action::Attack => (
-            match t {
-                Template::Biped | Template::MultiArm => format!("swinging its {side} arm in an attack"),
-                Template::Quadruped => "lunging forward to bite".into(),
-                Template::Insect => "striking with its front legs".into(),
-                Template::Bird => "pecking at the ground".into(),
-                Template::Snake => "rearing up and striking".into(),
-            },
-            force,
-        ),
-        Action::Wave => (
-            match t {
-                Template::Biped | Template::MultiArm => format!("waving its {side} hand"),
-                Template::Quadruped => "wagging its tail".into(),
-                Template::Insect => "waving its antennae".into(),
-                Template::Bird => "flapping its wings in place".into(),
-                Template::Snake => "swaying its head".into(),
-            },
-            force,
-        ),
-        Action::Fall => (
-            match (t, m.extent as u32) {
-                (Template::Insect, _) => "collapsing with its legs curling up".into(),
-                (Template::Quadruped, _) => "collapsing onto its side".into(),
-                (_, 0) => "falling forward".into(),
-                (_, 1) => "falling over backward".into(),
-                _ => format!("toppling over to its {}", if m.side > 0.0 { "left" } else { "right" }),
-            },
-            None,
-        ),
-        Action::Idle => (
-            match t {
-                Template::Snake => "lying still, swaying slightly",
-                _ => "standing idle, breathing and looking around",
-            }
-            .into(),
-            None,
-        ),
-        Action::Fly => ("flying".into(), pace),
-        Action::Slither => ("slithering".into(), pace),
-    };
-    let moving = matches!(m.action, Action::Walk | Action::Run | Action::Fly | Action::Slither)
-        || (m.action == Action::Jump && m.travel > 0.0);
-    let dist = travel[0].hypot(travel[1]);
-    let direction = if moving && dist > 0.1 * rig.length.max(rig.leg) {
-        Some(if travel[0].abs() >= travel[1].abs() {
-            if travel[0] > 0.0 { "to the right" } else { "to the left" }
-        } else if travel[1] > 0.0 {
-            "toward the viewer"
-        } else {
-            "away from the viewer"
-        })
-    } else {
-        None
-    };
-    let words = rig.words.join(" ");
-    let article = if words.starts_with(['a', 'e', 'i', 'o', 'u']) {
-        "an"
-    } else {
-        "a"
-    };
-    let mut out = format!("{article} {words} {verb}");
-    for w in [manner, direction].into_iter().flatten() {
-        out.push(' ');
-        out.push_str(w);
-    }
-    out
 }

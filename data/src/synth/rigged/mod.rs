@@ -7,6 +7,7 @@
 //! it hangs from); a skin vertex follows the bone nearest to it and, close to that bone's head, half its parent.
 
 mod actions;
+mod caption;
 mod skeletons;
 
 use super::shapes::{Mesh, allocate, dot, norm, sub};
@@ -401,7 +402,7 @@ fn build(cfg: &SynthConfig, index: usize, template: Template, action: Action, r:
         cfg.seed,
         cfg.frames - 1
     );
-    let caption = actions::caption(&rig, &motion, travel);
+    let caption = caption::caption(&rig, &motion, travel);
     Clip::new(id, vertices, cfg.frames, n, skin.faces, caption, source)
 }
 
