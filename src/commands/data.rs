@@ -145,32 +145,28 @@ pub struct SynthArgs {
     pub action: Option<Action>,
 }
 
-fn parse_template(name: &str) -> Result<Template, String> {
-    Template::from_name(name).ok_or_else(|| {
-        let names: Vec<&str> = Template::ALL.iter().map(|t| t.name()).collect();
-        format!("unknown skeleton template {name:?}; one of {}", names.join(", "))
+/// The one of `all` called `name`, else an error listing the names.
+fn parse_named<T: Copy>(name: &str, what: &str, all: &[T], name_of: fn(T) -> &'static str) -> Result<T, String> {
+    all.iter().copied().find(|&x| name_of(x) == name).ok_or_else(|| {
+        let names: Vec<&str> = all.iter().map(|&x| name_of(x)).collect();
+        format!("unknown {what} {name:?}; one of {}", names.join(", "))
     })
+}
+
+fn parse_template(name: &str) -> Result<Template, String> {
+    parse_named(name, "skeleton template", &Template::ALL, Template::name)
 }
 
 fn parse_action(name: &str) -> Result<Action, String> {
-    Action::from_name(name).ok_or_else(|| {
-        let names: Vec<&str> = Action::ALL.iter().map(|a| a.name()).collect();
-        format!("unknown action {name:?}; one of {}", names.join(", "))
-    })
+    parse_named(name, "action", &Action::ALL, Action::name)
 }
 
 fn parse_family(name: &str) -> Result<Family, String> {
-    Family::from_name(name).ok_or_else(|| {
-        let names: Vec<&str> = Family::ALL.iter().map(|f| f.name()).collect();
-        format!("unknown generator {name:?}; one of {}", names.join(", "))
-    })
+    parse_named(name, "generator", &Family::ALL, Family::name)
 }
 
 fn parse_body(name: &str) -> Result<ShapeFamily, String> {
-    ShapeFamily::from_name(name).ok_or_else(|| {
-        let names: Vec<&str> = ShapeFamily::ALL.iter().map(|f| f.name()).collect();
-        format!("unknown shape family {name:?}; one of {}", names.join(", "))
-    })
+    parse_named(name, "shape family", &ShapeFamily::ALL, ShapeFamily::name)
 }
 
 /// Output format of `inspect`.

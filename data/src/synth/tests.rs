@@ -17,7 +17,8 @@ fn centroid(frame: &[[f32; 3]]) -> [f32; 3] {
     [0, 1, 2].map(|k| frame.iter().map(|p| p[k]).sum::<f32>() / n)
 }
 
-fn extent(frame: &[[f32; 3]]) -> f32 {
+/// The largest axis-aligned extent of a frame (shared with the rigged characters' tests).
+pub(super) fn extent(frame: &[[f32; 3]]) -> f32 {
     (0..3)
         .map(|k| {
             let (lo, hi) = frame.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), p| {

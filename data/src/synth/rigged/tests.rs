@@ -4,6 +4,7 @@
 use std::collections::{HashMap, HashSet};
 
 use super::*;
+use crate::synth::tests::extent;
 use crate::synth::{Family, generate_one as synth_one};
 
 fn cfg(seed: u64) -> SynthConfig {
@@ -13,17 +14,6 @@ fn cfg(seed: u64) -> SynthConfig {
         family: Family::Rigged(Default::default()),
         ..SynthConfig::default()
     }
-}
-
-fn extent(frame: &[V3]) -> f32 {
-    (0..3)
-        .map(|k| {
-            let (lo, hi) = frame.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), p| {
-                (l.min(p[k]), h.max(p[k]))
-            });
-            hi - lo
-        })
-        .fold(0.0, f32::max)
 }
 
 /// Every undirected edge in exactly two faces, once in each direction: closed, consistently oriented surfaces.
