@@ -106,10 +106,9 @@ impl Augment {
             }
         }
         if self.reverse > 0.0 && rng.random_bool(f64::from(self.reverse)) {
-            let old = clip.vertices.clone();
-            for (i, frame) in clip.vertices.chunks_exact_mut(n).enumerate() {
-                frame.copy_from_slice(&old[(t - 1 - i) * n..(t - i) * n]);
-            }
+            // In place: reversing every row, then each frame's rows back, reverses the frame order only.
+            clip.vertices.reverse();
+            clip.vertices.chunks_exact_mut(n).for_each(<[_]>::reverse);
         }
         let mirror = self.mirror > 0.0 && rng.random_bool(f64::from(self.mirror));
         let s: [f32; 3] = if self.scale == [1.0, 1.0] {

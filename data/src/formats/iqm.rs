@@ -176,7 +176,7 @@ fn parse(path: &Path, data: &[u8]) -> Result<Iqm> {
         let first = b.usize(&f)?;
         let count = b.usize(&f)?;
         let fps = b.f32(&f)?;
-        if !(fps.is_finite() && (0.0..=super::skeletal::MAX_FPS as f32).contains(&fps)) {
+        if !super::skeletal::fps_in_range(f64::from(fps)) {
             return Err(b.err(
                 &f,
                 format!(

@@ -331,7 +331,7 @@ pub fn write_clip(path: &Path, clip: &Clip) -> Result<()> {
 pub fn write_clip_at(path: &Path, clip: &Clip, fps: Option<f32>) -> Result<()> {
     clip.validate()?;
     let fps = fps
-        .filter(|&f| f > 0.0 && skeletal::check_fps(path, "fps", f64::from(f)).is_ok())
+        .filter(|&f| f > 0.0 && skeletal::fps_in_range(f64::from(f)))
         .unwrap_or(gltf::DEFAULT_FPS);
     match Format::from_path(path)? {
         Format::Bin => dymesh_bin::write_bin(path, clip),

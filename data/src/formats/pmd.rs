@@ -138,7 +138,7 @@ fn psa_header(b: &mut Bytes) -> Result<Psa> {
     } else {
         0.0
     };
-    if super::skeletal::check_fps(Path::new(""), "", fps).is_err() {
+    if !super::skeletal::fps_in_range(fps) {
         return Err(b.err(
             "frame_length",
             format!(

@@ -238,7 +238,7 @@ pub const MAX_FPS: f64 = 100_000.0;
 /// A frame rate a file states (or that its times imply): finite, not negative and at most [`MAX_FPS`]; 0 means the
 /// file does not say. Every reader passes its rates through here, so no clip carries a NaN or infinite rate.
 pub fn check_fps(path: &Path, field: &str, fps: f64) -> Result<f32> {
-    if fps.is_finite() && (0.0..=MAX_FPS).contains(&fps) {
+    if fps_in_range(fps) {
         Ok(fps as f32)
     } else {
         Err(DataError::new(
@@ -252,11 +252,12 @@ pub fn check_fps(path: &Path, field: &str, fps: f64) -> Result<f32> {
 /// A rate implied by a file's numbers where a bad one cannot be refused on its own (a take still reads): the
 /// rate when [`check_fps`] accepts it, else 0 (not given).
 pub fn fps_or_unknown(fps: f64) -> f32 {
-    if fps.is_finite() && (0.0..=MAX_FPS).contains(&fps) {
-        fps as f32
-    } else {
-        0.0
-    }
+    if fps_in_range(fps) { fps as f32 } else { 0.0 }
+}
+
+/// The one rule of [`check_fps`] and [`fps_or_unknown`]: finite, not negative, at most [`MAX_FPS`].
+pub fn fps_in_range(fps: f64) -> bool {
+    fps.is_finite() && (0.0..=MAX_FPS).contains(&fps)
 }
 
 /// Unit quaternion `(x, y, z, w)`; a zero quaternion becomes the identity.

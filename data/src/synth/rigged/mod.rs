@@ -140,12 +140,14 @@ impl Rig {
     }
 }
 
-/// A rig's skin: the rest mesh and two influences (bone, weight) per vertex.
+/// A rig's skin: the rest mesh and each vertex's influences (bone, weight > 0), in the form the readers' linear
+/// blend skinning takes (`skeletal::skin_frame`).
 #[derive(Debug, Clone)]
 pub(super) struct Skin {
     pub pos: Vec<V3>,
     pub faces: Vec<[u32; 3]>,
-    pub weights: Vec<[(usize, f32); 2]>,
+    bind: Vec<[f64; 3]>,
+    influences: skeletal::Influences,
 }
 
 /// The skeleton's own checks: at least one bone and at most [`MAX_BONES`], one root (bone 0), parents before
@@ -253,10 +255,20 @@ fn skin(rig: &Rig, target: usize, lo: usize, hi: usize) -> Result<Skin> {
         weights.extend(m.pos[range].iter().map(|&p| weigh(&rig.bones, &part.bones, p)));
     }
     check_weights(&weights, rig.bones.len())?;
+    let influences = weights
+        .iter()
+        .map(|w| {
+            w.iter()
+                .filter(|(_, x)| *x > 0.0)
+                .map(|&(b, x)| (b, f64::from(x)))
+                .collect()
+        })
+        .collect();
     Ok(Skin {
+        bind: m.pos.iter().map(|p| p.map(f64::from)).collect(),
         pos: m.pos,
         faces: m.faces,
-        weights,
+        influences,
     })
 }
 
@@ -320,22 +332,10 @@ fn transforms(bones: &[Bone], pose: &Pose, heading: f64) -> Vec<Mat> {
         .collect()
 }
 
-/// The posed skin of one frame into `out`, put on the ground as the pose asks.
-fn pose_frame(skin: &Skin, bones: &[Bone], pose: &Pose, heading: f64, out: &mut [V3]) {
-    let g = transforms(bones, pose, heading);
-    for ((o, &p), w) in out.iter_mut().zip(&skin.pos).zip(&skin.weights) {
-        let p = p.map(f64::from);
-        let mut acc = [0.0f64; 3];
-        for &(b, x) in w {
-            if x > 0.0 {
-                let q = skeletal::apply(&g[b], p);
-                for k in 0..3 {
-                    acc[k] += f64::from(x) * q[k];
-                }
-            }
-        }
-        *o = acc.map(|x| x as f32);
-    }
+/// The posed skin of one frame into `out` (replacing what it held), put on the ground as the pose asks.
+fn pose_frame(skin: &Skin, bones: &[Bone], pose: &Pose, heading: f64, out: &mut Vec<V3>) {
+    out.clear();
+    skeletal::skin_frame(&skin.bind, &skin.influences, &transforms(bones, pose, heading), out);
     if let Some(h) = pose.ground {
         let low = out.iter().map(|p| p[1]).fold(f32::INFINITY, f32::min);
         for p in out.iter_mut() {
@@ -385,11 +385,13 @@ fn build(cfg: &SynthConfig, index: usize, template: Template, action: Action, r:
     let motion = actions::draw(action, &rig, r);
     let heading = f64::from(r.random_range(0.0f32..360.0));
     let n = skin.pos.len();
-    let mut vertices = vec![[0.0f32; 3]; cfg.frames * n];
-    for (f, frame) in vertices.chunks_exact_mut(n).enumerate() {
+    let mut vertices = Vec::with_capacity(cfg.frames * n);
+    let mut frame = Vec::with_capacity(n);
+    for f in 0..cfg.frames {
         let tau = f as f32 / (cfg.frames - 1) as f32;
         let pose = actions::pose(&motion, &rig, tau);
-        pose_frame(&skin, &rig.bones, &pose, heading, frame);
+        pose_frame(&skin, &rig.bones, &pose, heading, &mut frame);
+        vertices.extend_from_slice(&frame);
     }
     let travel = {
         let (a, b) = (centroid(&vertices[..n]), centroid(&vertices[(cfg.frames - 1) * n..]));

@@ -132,9 +132,11 @@ fn a_bone_moves_its_own_vertices_rigidly() {
     let rig = skeletons::build(Template::Biped, &mut r);
     let skin = skin(&rig, 1500, 512, 4096).unwrap();
     let motion = actions::draw(Action::Walk, &rig, &mut r);
-    let whole: Vec<usize> = (0..skin.pos.len()).filter(|&v| skin.weights[v][0].1 == 1.0).collect();
+    let whole: Vec<usize> = (0..skin.pos.len())
+        .filter(|&v| skin.influences[v].len() == 1 && skin.influences[v][0].1 == 1.0)
+        .collect();
     let by_bone: HashMap<usize, Vec<usize>> = whole.iter().fold(HashMap::new(), |mut m, &v| {
-        m.entry(skin.weights[v][0].0).or_insert_with(Vec::new).push(v);
+        m.entry(skin.influences[v][0].0).or_insert_with(Vec::new).push(v);
         m
     });
     assert!(
