@@ -7,15 +7,17 @@
 #
 # Packages: redeclipse-data (IQM players, MD5 actors), 0ad-data (PMD/PSA animals and units from public.zip),
 # ufoai-data (MD2 soldiers, aliens, civilians from 0models.pk3), assimp-testmodels (the animated IQM sample),
-# minetest-data and two Minetest mods (B3D player characters and the maid robot; 4 MB together).
+# minetest-data and two Minetest mods (B3D player characters and the maid robot; 4 MB together), cube2-data (Cube 2:
+# Sauerbraten's IQM player, squirrel, hands and guns, MD5 flag; 173 MB).
 # Never add openarena*, megaglest*, nexuiz*/xonotic*, qt3d* or assimp-testmodels' MD2 files: they are the held-out
 # evaluation (the staging step refuses those packages by name and skips the MD2 files).
 set -euo pipefail
 OUT=${1:?usage: scripts/real_corpus.sh OUT}
-PACKAGES=(redeclipse-data 0ad-data ufoai-data assimp-testmodels minetest-data minetest-mod-3d-armor minetest-mod-maidroid)
+PACKAGES=(redeclipse-data 0ad-data ufoai-data assimp-testmodels minetest-data minetest-mod-3d-armor minetest-mod-maidroid
+  cube2-data)
 # Import settings: 16-frame windows every 8 frames, P = 512 FPS tokens (the paper's); the low-poly game meshes
 # go down to 128 vertices (the paper's lower bound is 512, which would drop most 0 A.D. animals and UFO:AI
-# models).
+# models). Takes shorter than the window are played round when they loop (--loop-short, docs/method.md §2.6).
 FRAMES=${FRAMES:-16}
 STRIDE=${STRIDE:-8}
 P=${P:-512}
@@ -49,7 +51,7 @@ any4d data stage-real "$OUT/extracted" --out "$OUT/staged"
 echo "staged in $(($(date +%s) - start)) s"
 rm -rf "$OUT/store"
 any4d data import "$OUT/staged" --out "$OUT/store" --frames "$FRAMES" --stride "$STRIDE" --p "$P" \
-  --min-vertices "$MIN_VERTICES" --max-vertices "$MAX_VERTICES" >"$OUT/import.log" || rc=$?
+  --min-vertices "$MIN_VERTICES" --max-vertices "$MAX_VERTICES" --loop-short >"$OUT/import.log" || rc=$?
 # Exit code 2 means some takes were rejected (listed in import.log); the store is written.
 if [[ ${rc:-0} -ne 0 && ${rc:-0} -ne 2 ]]; then cat "$OUT/import.log"; exit "$rc"; fi
 grep -v "^  rejected" "$OUT/import.log"

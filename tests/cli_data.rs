@@ -267,6 +267,22 @@ fn size_limits_are_named_in_refusals_and_adjustable_within_their_ceilings() {
     );
     let out = any4d(&["data", "inspect", p(&obj)]);
     assert!(out.status.success(), "{:?}", text(&out));
+    // Every reader applies the frame limit: a pickle of 101 frames and an OBJ folder of 3 frames over limits of
+    // 100 and 2.
+    let long = tmp.path().join("long.bin");
+    formats::write_clip(&long, &grid_clip("long", 101, 4)).unwrap();
+    let folder = tmp.path().join("seq");
+    formats::obj::write_obj_seq(&folder, &grid_clip("seq", 3, 4)).unwrap();
+    for (path, limit, frames) in [(&long, "100", "101 frames"), (&folder, "2", "3 .obj frames")] {
+        let out = any4d(&["--limit-frames", limit, "data", "inspect", p(path)]);
+        let (stdout, err) = text(&out);
+        let all = format!("{stdout}{err}");
+        assert!(
+            all.contains(frames) && all.contains("(raise with --limit-frames)"),
+            "{all}"
+        );
+        assert!(any4d(&["data", "inspect", p(path)]).status.success());
+    }
 }
 
 #[test]

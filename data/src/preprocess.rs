@@ -185,6 +185,68 @@ impl VertexFilter {
     }
 }
 
+/// Fewest frames a take needs before [`loop_to`] treats it as a cycle: two or three frames are a pose change, not
+/// a loop.
+pub const LOOP_MIN_FRAMES: usize = 4;
+
+/// Largest closing gap, as a multiple of the take's median frame-to-frame step, that still counts as a loop
+/// (docs/method.md §2.6): the jump from the last frame back to the first is no larger than an ordinary step.
+pub const LOOP_CLOSE: f32 = 1.5;
+
+/// A closing gap below this multiple of the median step means the last frame repeats the first (many exporters
+/// store a cycle with its first pose at both ends): the repeat is dropped from the cycle.
+pub const LOOP_REPEAT: f32 = 0.25;
+
+/// Root-mean-square distance between frames `a` and `b` of `clip`.
+fn frame_distance(clip: &Clip, a: usize, b: usize) -> f32 {
+    let (fa, fb) = (clip.frame(a), clip.frame(b));
+    let sum: f64 = fa
+        .iter()
+        .zip(fb)
+        .map(|(p, q)| (0..3).map(|k| f64::from(p[k] - q[k]).powi(2)).sum::<f64>())
+        .sum();
+    (sum / fa.len().max(1) as f64).sqrt() as f32
+}
+
+/// A take shorter than `len` frames played as a cycle until it is `len` frames long (docs/method.md §2.6), or
+/// `None` when it does not loop: fewer than [`LOOP_MIN_FRAMES`] frames, or a jump from its last frame back to
+/// its first larger than [`LOOP_CLOSE`] × its median step. A last frame that repeats the first (gap below
+/// [`LOOP_REPEAT`] × the median step) is played once per cycle, not twice. A still take (every step zero) loops.
+/// The id gains `_loop` so that stored windows say where they came from; a clip of `len` frames or more is
+/// returned unchanged.
+pub fn loop_to(clip: &Clip, len: usize) -> Option<Clip> {
+    if clip.frames >= len {
+        return Some(clip.clone());
+    }
+    if clip.frames < LOOP_MIN_FRAMES {
+        return None;
+    }
+    let mut steps: Vec<f32> = (1..clip.frames).map(|f| frame_distance(clip, f - 1, f)).collect();
+    steps.sort_by(f32::total_cmp);
+    let median = steps[steps.len() / 2];
+    let gap = frame_distance(clip, clip.frames - 1, 0);
+    // NaN distances (non-finite frames) fail this test and do not loop.
+    if gap.is_nan() || gap > LOOP_CLOSE * median {
+        return None;
+    }
+    let period = if gap <= LOOP_REPEAT * median {
+        clip.frames - 1
+    } else {
+        clip.frames
+    };
+    let n = clip.n_vertices;
+    let vertices = (0..len)
+        .flat_map(|f| clip.frame(f % period).iter().copied())
+        .collect::<Vec<_>>();
+    debug_assert_eq!(vertices.len(), len * n);
+    Some(Clip {
+        id: format!("{}_loop", clip.id),
+        vertices,
+        frames: len,
+        ..clip.clone()
+    })
+}
+
 /// Windows of `len` frames every `stride` frames (docs/method.md §2.6). An id in the AAM form
 /// `<uid>_offset<k>_<s>-<e>` keeps that form with the window's own frame range
 /// (`<uid>_offset<k>_<s+start>-<s+start+len−1>`, so consecutive windows sharing a frame pair up for the long-horizon
@@ -402,6 +464,41 @@ mod tests {
         assert_eq!(windows(&plain, 3, 2)[1].id, "plain_w2");
         assert_eq!(windows(&c, 5, 1), vec![c.clone()]);
         assert!(windows(&c, 6, 1).is_empty());
+    }
+
+    /// A vertex on a circle at `k` of `period` equal steps, as frame `k` of a cycle.
+    fn circle_frames(period: usize, frames: usize) -> Vec<Vec<[f32; 3]>> {
+        (0..frames)
+            .map(|k| {
+                let a = std::f32::consts::TAU * k as f32 / period as f32;
+                vec![[a.cos(), a.sin(), 0.0], [0.0, 0.0, 1.0], [1.0, 1.0, 1.0]]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn loops_play_cycles_and_refuse_takes_that_do_not_loop() {
+        // Six frames of a six-step cycle: the last frame leads back to the first in one ordinary step.
+        let open = clip(circle_frames(6, 6), vec![[0, 1, 2]]);
+        let l = loop_to(&open, 16).expect("a cycle loops");
+        assert_eq!((l.frames, l.id.as_str()), (16, "obj_offset0_0-1_loop"));
+        assert_eq!(l.object_uid(), "obj");
+        for f in 0..16 {
+            assert_eq!(l.frame(f), open.frame(f % 6), "frame {f}");
+        }
+        // Seven frames whose last repeats the first: the repeat is played once per cycle.
+        let closed = clip(circle_frames(6, 7), vec![[0, 1, 2]]);
+        let l = loop_to(&closed, 16).unwrap();
+        for f in 0..16 {
+            assert_eq!(l.frame(f), closed.frame(f % 6), "frame {f}");
+        }
+        // Half a turn ends far from where it began: not a loop.
+        assert!(loop_to(&clip(circle_frames(12, 7), vec![[0, 1, 2]]), 16).is_none());
+        // Too short to call a cycle; a still take loops; a long take is unchanged.
+        assert!(loop_to(&clip(circle_frames(3, 3), vec![[0, 1, 2]]), 16).is_none());
+        let still = clip(vec![vec![[0.5; 3]; 3]; 5], vec![[0, 1, 2]]);
+        assert_eq!(loop_to(&still, 8).unwrap().frames, 8);
+        assert_eq!(loop_to(&open, 6).unwrap(), open);
     }
 
     #[test]

@@ -14,6 +14,9 @@
 //! - `ufoai-data`: from `base/0models.pk3`, every `.md2` model with an `.anm` animation table beside it;
 //! - `assimp-testmodels`: the animated `.iqm` sample and the two skinned, animated DirectX `.x` files. Its MD2
 //!   models are never staged;
+//! - `cube2-data` (Cube 2: Sauerbraten): every model folder with a mesh and its animation files (`.iqm` with
+//!   animation-only `.iqm`, `.md5mesh` with `.md5anim`): the snoutx10k player, the Frankie squirrel,
+//!   first-person hands and guns, a flag;
 //! - `minetest-data` and `minetest-mod-*`: every `.b3d` under `usr/share/games/minetest` that has node keys (the
 //!   player character, mobs), one folder per file, the asset named after the file;
 //! - both of the last two (folder [`MOCAP_FOLDER`]): the `.bvh` motion capture of `assimp-testmodels` beside
@@ -74,6 +77,7 @@ pub fn stage(extracted: &Path, out: &Path) -> Result<StageReport> {
             "0ad-data" => stage_0ad(&dir, &dest, &package, &copyright, &mut report)?,
             "ufoai-data" => stage_ufoai(&dir, &dest, &package, &copyright, &mut report)?,
             "assimp-testmodels" => stage_assimp(&dir, &dest, &package, &copyright)?,
+            "cube2-data" => stage_cube2(&dir, &dest, &package, &copyright)?,
             p if p == "minetest-data" || p.starts_with("minetest-mod-") => {
                 stage_minetest(&dir, &dest, &package, &copyright, &mut report)?
             }
@@ -265,24 +269,49 @@ fn stage_redeclipse(dir: &Path, dest: &Path, package: &str, c: &Dep5) -> Result<
         write_provenance(&to, package, &c.licence(&rel(dir, &mesh)), &format!("{who} player"))?;
         n += 1;
     }
+    Ok(n + stage_model_folders(dir, &data, dest, package, c)?)
+}
+
+/// Every folder under `root` holding a mesh with its animation files — `.md5mesh` with `.md5anim`, or two or more
+/// `.iqm` (a mesh and animation-only files) — staged whole as `dest/<path below root, '/' → '_'>`.
+fn stage_model_folders(dir: &Path, root: &Path, dest: &Path, package: &str, c: &Dep5) -> Result<usize> {
     let mut dirs = Vec::new();
-    walk_dirs(&data, &mut dirs);
+    walk_dirs(root, &mut dirs);
+    let mut n = 0;
     for d in dirs {
-        let anims = files_with(&d, "md5anim");
-        let meshes = files_with(&d, "md5mesh");
-        if anims.is_empty() || meshes.is_empty() {
+        let (anims, meshes, iqms) = (
+            files_with(&d, "md5anim"),
+            files_with(&d, "md5mesh"),
+            files_with(&d, "iqm"),
+        );
+        // The files to copy and the mesh that names the asset.
+        let (files, mesh): (Vec<&PathBuf>, &PathBuf) = if !anims.is_empty() && !meshes.is_empty() {
+            (meshes.iter().chain(&anims).collect(), &meshes[0])
+        } else if let (true, Some(mesh)) = (iqms.len() >= 2, iqms.iter().find(|f| crate::formats::is_source(f))) {
+            (iqms.iter().collect(), mesh)
+        } else {
             continue;
-        }
-        let name = rel(&data, &d).replace('/', "_");
+        };
+        let name = rel(root, &d).replace('/', "_");
         let to = dest.join(&name);
-        for f in meshes.iter().chain(&anims) {
+        for f in files {
             copy(f, &to.join(f.file_name().expect("file")))?;
         }
-        let asset = caption::asset_of_path(&meshes[0]);
-        write_provenance(&to, package, &c.licence(&rel(dir, &meshes[0])), &asset)?;
+        let asset = caption::asset_of_path(mesh);
+        write_provenance(&to, package, &c.licence(&rel(dir, mesh)), &asset)?;
         n += 1;
     }
     Ok(n)
+}
+
+/// Cube 2: Sauerbraten's model folders ([`stage_model_folders`] under `packages/models`): the snoutx10k player
+/// and the Frankie squirrel with their moves, first-person hands and guns, a waving flag.
+fn stage_cube2(dir: &Path, dest: &Path, package: &str, c: &Dep5) -> Result<usize> {
+    let models = dir.join("usr/share/games/cube2/packages/models");
+    if !models.is_dir() {
+        return Ok(0);
+    }
+    stage_model_folders(dir, &models, dest, package, c)
 }
 
 /// Mesh and animation files named by an 0 A.D. actor (following `variant file=` references).

@@ -285,6 +285,38 @@ fn gltf_skin_fixture_bakes_joints() {
     assert_close(clip.frame(30), &end, 1e-5);
 }
 
+/// One animation per channel (COLLADA2GLTF's layout: one per joint) bakes as the single animation does; two
+/// animations of the same channel are alternatives, and the first is read.
+#[test]
+fn gltf_animations_on_disjoint_channels_play_together() {
+    let path = fixture("gltf/skin_strip.gltf");
+    let whole = read_gltf(&path, &GltfReadOptions::default()).unwrap();
+    let mut doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let anim = doc["animations"][0].clone();
+    let channels = anim["channels"].as_array().unwrap().clone();
+    assert!(channels.len() >= 2, "the fixture moves two joints");
+    let split: Vec<serde_json::Value> = channels
+        .iter()
+        .map(|ch| {
+            let sampler = anim["samplers"][ch["sampler"].as_u64().unwrap() as usize].clone();
+            let mut ch = ch.clone();
+            ch["sampler"] = 0.into();
+            serde_json::json!({ "channels": [ch], "samplers": [sampler] })
+        })
+        .collect();
+    doc["animations"] = split.clone().into();
+    let dir = tempfile::tempdir().unwrap();
+    let split_path = dir.path().join("split.gltf");
+    std::fs::write(&split_path, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let got = read_gltf(&split_path, &GltfReadOptions::default()).unwrap();
+    assert_eq!((got.frames, &got.vertices), (whole.frames, &whole.vertices));
+    // The first channel twice: alternatives, so only the first animation moves the strip.
+    doc["animations"] = serde_json::json!([split[0], split[0], split[1]]);
+    std::fs::write(&split_path, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let first = read_gltf(&split_path, &GltfReadOptions::default()).unwrap();
+    assert_ne!(first.vertices, whole.vertices);
+}
+
 #[test]
 fn gltf_without_animation_is_an_error() {
     let e = read_gltf(&fixture("gltf/static_square.gltf"), &GltfReadOptions::default()).unwrap_err();

@@ -14,20 +14,22 @@
 //! the temporary folder and named in the panic message. The cargo-fuzz targets of `fuzz/` cover the same readers
 //! with coverage feedback on a nightly toolchain.
 
-use std::collections::BTreeMap;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use any4d_data::Clip;
 use any4d_data::formats::dymesh_bin::read_bin_bytes;
 use any4d_data::formats::gltf::{ExternalBuffers, GltfReadOptions, read_gltf_bytes, write_gltf};
 use any4d_data::formats::obj::parse_obj;
 use any4d_data::formats::{PANIC_FIELD, write_clip};
 use any4d_data::preprocess::VertexFilter;
 use any4d_data::store::{self, ImportOptions};
-use any4d_data::{Clip, DataError};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+
+mod fuzz_common;
+use fuzz_common::{Tally, kind, mutate_once, replace_number};
 
 /// Inputs per reader in the default test run (a few seconds each).
 const QUICK_RUNS: usize = 3000;
@@ -166,25 +168,6 @@ fn seeds(target: Target, scratch: &Path) -> Vec<Vec<u8>> {
     out
 }
 
-const INTERESTING_U32: [u32; 10] = [0, 1, 2, 3, 0x7f, 0xff, 0xffff, 0x7fff_ffff, 0x8000_0000, 0xffff_ffff];
-const INTERESTING_NUMBERS: [&str; 16] = [
-    "0",
-    "-1",
-    "1",
-    "2",
-    "3",
-    "4",
-    "5",
-    "99",
-    "255",
-    "4096",
-    "65535",
-    "4294967295",
-    "1e8",
-    "1e30",
-    "-1e30",
-    "0.5",
-];
 const GLTF_WORDS: [&str; 18] = [
     "\"SCALAR\"",
     "\"VEC2\"",
@@ -308,77 +291,6 @@ fn glb_of(json: &[u8], bin: &[u8]) -> Vec<u8> {
     out
 }
 
-/// One byte-level mutation: a bit flip, an interesting byte, u32 or u64, a cut, a copied range, a crossover with
-/// another seed, a truncation.
-fn mutate_once(rng: &mut ChaCha8Rng, b: &mut Vec<u8>, seeds: &[Vec<u8>]) {
-    let len = b.len();
-    if len == 0 {
-        b.extend_from_slice(&seeds[rng.random_range(0..seeds.len())]);
-        return;
-    }
-    let at = rng.random_range(0..len);
-    match rng.random_range(0..8) {
-        0 => b[at] ^= 1 << rng.random_range(0..8),
-        1 => b[at] = [0, 1, 0x7f, 0x80, 0xff][rng.random_range(0..5)],
-        2 if len >= 4 => {
-            let v = INTERESTING_U32[rng.random_range(0..INTERESTING_U32.len())];
-            let at = rng.random_range(0..=len - 4);
-            b[at..at + 4].copy_from_slice(&v.to_le_bytes());
-        }
-        3 if len >= 8 => {
-            let v = if rng.random_bool(0.5) {
-                u64::MAX
-            } else {
-                rng.random::<u64>() >> rng.random_range(0..64)
-            };
-            let at = rng.random_range(0..=len - 8);
-            b[at..at + 8].copy_from_slice(&v.to_le_bytes());
-        }
-        4 => {
-            let end = (at + rng.random_range(1..=16)).min(len);
-            b.drain(at..end);
-        }
-        5 => {
-            let from = rng.random_range(0..len);
-            let end = (from + rng.random_range(1..=32)).min(len);
-            let chunk = b[from..end].to_vec();
-            b.splice(at..at, chunk);
-        }
-        6 => {
-            let other = &seeds[rng.random_range(0..seeds.len())];
-            if !other.is_empty() {
-                let from = rng.random_range(0..other.len());
-                b.truncate(at);
-                b.extend_from_slice(&other[from..]);
-            }
-        }
-        _ => b.truncate(at),
-    }
-}
-
-/// Replace one run of digits (with its sign) by an interesting number.
-fn replace_number(rng: &mut ChaCha8Rng, b: &mut Vec<u8>) {
-    let starts: Vec<usize> = (0..b.len())
-        .filter(|&i| b[i].is_ascii_digit() && (i == 0 || !b[i - 1].is_ascii_digit() && b[i - 1] != b'.'))
-        .collect();
-    if starts.is_empty() {
-        return;
-    }
-    let s = starts[rng.random_range(0..starts.len())];
-    let mut e = s;
-    while e < b.len() && (b[e].is_ascii_digit() || b[e] == b'.' || b[e] == b'e' || b[e] == b'-') {
-        e += 1;
-    }
-    let s = if s > 0 && b[s - 1] == b'-' { s - 1 } else { s };
-    // Mostly integers: most glTF numbers are counts, offsets and indices.
-    let pick = if rng.random_bool(0.8) {
-        rng.random_range(0..12)
-    } else {
-        rng.random_range(0..INTERESTING_NUMBERS.len())
-    };
-    b.splice(s..e, INTERESTING_NUMBERS[pick].bytes());
-}
-
 /// Replace one JSON string: a key by another glTF key, a value by a glTF word or component type.
 fn replace_word(rng: &mut ChaCha8Rng, b: &mut Vec<u8>) {
     let quotes: Vec<usize> = (0..b.len()).filter(|&i| b[i] == b'"').collect();
@@ -398,16 +310,6 @@ fn replace_word(rng: &mut ChaCha8Rng, b: &mut Vec<u8>) {
         GLTF_WORDS[rng.random_range(0..GLTF_WORDS.len())]
     };
     b.splice(s..e, new.bytes());
-}
-
-/// The error field and the start of its reason with digits blanked (`meshes[#] POSITION (accessors[#]): is
-/// VEC#`), to count where inputs stop.
-fn kind(e: &DataError) -> String {
-    let reason: String = e.reason.split_whitespace().take(4).collect::<Vec<_>>().join(" ");
-    format!("{}: {reason}", e.field)
-        .chars()
-        .map(|c| if c.is_ascii_digit() { '#' } else { c })
-        .collect()
 }
 
 /// Run `target` on `input`: `Ok(None)` when it read, `Ok(Some(error kind))`, or `Err(panic message)`.
@@ -451,45 +353,13 @@ fn run(target: Target, input: &[u8], scratch: &Path) -> Result<Option<String>, S
     }
 }
 
-/// Distinct error kinds a tally keeps.
-const MAX_KINDS: usize = 10_000;
-
-/// What one fuzzing run did.
-struct Tally {
-    runs: usize,
-    ok: usize,
-    slowest: Duration,
-    elapsed: Duration,
-    /// Error kind → inputs that stopped there.
-    errors: BTreeMap<String, usize>,
-}
-
-impl Tally {
-    /// The `n` most frequent error kinds.
-    fn top_errors(&self, n: usize) -> String {
-        let mut v: Vec<(&String, &usize)> = self.errors.iter().collect();
-        v.sort_by(|a, b| b.1.cmp(a.1));
-        v.iter()
-            .take(n)
-            .map(|(k, c)| format!("{c} × {k}"))
-            .collect::<Vec<_>>()
-            .join("; ")
-    }
-}
-
 /// Fuzz `target` until `runs` inputs or `time` have passed (whichever first); panics on the first failure.
 fn fuzz(target: Target, seed: u64, runs: usize, time: Duration) -> Tally {
     let scratch = tempfile::tempdir().unwrap();
     let corpus = seeds(target, scratch.path());
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let start = Instant::now();
-    let mut tally = Tally {
-        runs: 0,
-        ok: 0,
-        slowest: Duration::ZERO,
-        elapsed: Duration::ZERO,
-        errors: BTreeMap::new(),
-    };
+    let mut tally = Tally::new();
     // The seeds themselves first, then mutations.
     let mut next = 0;
     while tally.runs < runs && start.elapsed() < time {
@@ -502,15 +372,7 @@ fn fuzz(target: Target, seed: u64, runs: usize, time: Duration) -> Tally {
         let t0 = Instant::now();
         match run(target, &input, scratch.path()) {
             Ok(None) => tally.ok += 1,
-            Ok(Some(kind)) => {
-                // Kinds can include input text (an OBJ token): count new ones as "other" past a bound.
-                let key = if tally.errors.len() < MAX_KINDS || tally.errors.contains_key(&kind) {
-                    kind
-                } else {
-                    "(other)".to_string()
-                };
-                *tally.errors.entry(key).or_default() += 1;
-            }
+            Ok(Some(kind)) => tally.error(kind),
             Err(message) => {
                 let path = std::env::temp_dir().join(format!("any4d-fuzz-{}-{seed}-{}.bin", target.name(), tally.runs));
                 std::fs::write(&path, &input).unwrap();

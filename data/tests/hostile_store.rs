@@ -262,3 +262,47 @@ fn size_options_are_range_checked_before_allocation() {
     assert_eq!(e.field, "p");
     assert!(!tmp.path().join("s").exists(), "nothing is created for refused options");
 }
+
+/// A folder walk visits each folder and file once: a symlink cycle ends, and a file reached through a second
+/// link is imported once.
+#[test]
+fn symlink_cycles_end_and_linked_files_import_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let src = tmp.path().join("src");
+    std::fs::create_dir_all(src.join("sub")).unwrap();
+    formats::write_clip(&src.join("sub/a.bin"), &blob("a", 20, 1.0, 0.0)).unwrap();
+    // sub/loop → src (a cycle), sub/again.bin → sub/a.bin (the same file twice), dangling.bin → nothing.
+    std::os::unix::fs::symlink(&src, src.join("sub/loop")).unwrap();
+    std::os::unix::fs::symlink(src.join("sub/a.bin"), src.join("sub/again.bin")).unwrap();
+    std::os::unix::fs::symlink(src.join("gone.bin"), src.join("dangling.bin")).unwrap();
+    let out = tmp.path().join("store");
+    let report = store::import(std::slice::from_ref(&src), &out, &opts()).unwrap();
+    assert_eq!(report.added, 1, "{report}");
+    assert_eq!(report.rejected.len(), 1, "{report}");
+    assert!(report.rejected[0].source.ends_with("dangling.bin"), "{report}");
+}
+
+/// A `.gltf` whose buffer is a file beside it imports as one clip; the buffer (a `.bin`, which on its own would be
+/// read as a DyMesh pickle) is not a source of its own.
+#[test]
+fn gltf_external_buffers_are_not_imported_as_clips() {
+    use base64::Engine;
+    let tmp = tempfile::tempdir().unwrap();
+    let src = tmp.path().join("src");
+    std::fs::create_dir_all(&src).unwrap();
+    let gltf = src.join("figure.gltf");
+    formats::write_clip(&gltf, &blob("figure", 20, 1.0, 0.0)).unwrap();
+    let mut doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&gltf).unwrap()).unwrap();
+    let uri = doc["buffers"][0]["uri"].as_str().unwrap().to_owned();
+    let (_, data) = uri.split_once(",").unwrap();
+    let raw = base64::engine::general_purpose::STANDARD.decode(data).unwrap();
+    std::fs::write(src.join("figure0.bin"), raw).unwrap();
+    doc["buffers"][0]["uri"] = "figure0.bin".into();
+    std::fs::write(&gltf, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let report = store::import(std::slice::from_ref(&src), &tmp.path().join("store"), &opts()).unwrap();
+    assert_eq!(
+        (report.sources, report.added, report.rejected.len()),
+        (1, 1, 0),
+        "{report}"
+    );
+}

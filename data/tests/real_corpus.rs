@@ -408,6 +408,46 @@ fn assimp_directx_characters_are_staged_and_imported_but_not_its_md2() {
     );
 }
 
+/// `cube2-data`: a model folder with an IQM mesh and animation-only IQM files beside it is staged whole under
+/// the mesh's name and imports with the package's licence; a folder with a lone mesh (nothing moves it) is not.
+#[test]
+fn cube2_iqm_models_with_animation_files_are_staged_and_imported() {
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("extracted/cube2-data");
+    write(
+        &pkg.join("usr/share/doc/cube2-data/copyright"),
+        b"Format: dep5\n\nFiles: *\nLicense: CC-BY-3.0\n\nFiles: packages/models/armor/*\nLicense: GPL-2+\n",
+    );
+    let models = pkg.join("usr/share/games/cube2/packages/models");
+    let (pos, faces) = strip(20);
+    let skin: Vec<u8> = (0..pos.len()).map(|v| (v % 2) as u8).collect();
+    let joints = [("hips", -1, [0.0; 3]), ("head", 0, [0.0, 1.0, 0.0])];
+    let mesh = iqm::write_test_iqm(&pos, &faces, &skin, &joints, "", &[], true);
+    write(&models.join("squirrel/Squirrel.iqm"), &mesh);
+    write(&models.join("nut/Nut.iqm"), &mesh);
+    let run: Vec<Vec<[f32; 3]>> = (0..20)
+        .map(|f| vec![[0.1 * f as f32, 0.0, 0.0], [0.0, 1.0, 0.05 * f as f32]])
+        .collect();
+    // Sorted before the mesh: the asset is still named after the mesh.
+    write(
+        &models.join("squirrel/Run.md5anim.iqm"),
+        &iqm::write_test_iqm(&[], &[], &[], &joints, "Armature", &run, false),
+    );
+    let staged = dir.path().join("staged");
+    let report = stage(&dir.path().join("extracted"), &staged).unwrap();
+    assert_eq!(report.assets.get("cube2-data"), Some(&1), "{report:?}");
+    assert!(staged.join("cube2-data/squirrel/Squirrel.iqm").is_file());
+    assert!(staged.join("cube2-data/squirrel/Run.md5anim.iqm").is_file());
+    assert!(!staged.join("cube2-data/nut").exists());
+    import_two_windows(
+        &staged,
+        &dir.path().join("store"),
+        "iqm",
+        ("CC-BY-3.0", "cube2-data"),
+        "a squirrel",
+    );
+}
+
 fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
     let mut out = Vec::new();
     for e in std::fs::read_dir(dir).unwrap().flatten() {

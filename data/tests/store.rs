@@ -382,3 +382,50 @@ fn synth_store_inspect_and_batches() {
         .unwrap_err();
     assert!(e.reason.contains("exceed"), "{e}");
 }
+
+/// Short takes (docs/method.md §2.6): a take shorter than the window is rejected unless `loop_short` is on and the
+/// take is a cycle, which is then played round to the window's length.
+#[test]
+fn short_takes_loop_only_when_asked_and_only_when_they_cycle() {
+    let tmp = tempfile::tempdir().unwrap();
+    let src = tmp.path().join("src");
+    std::fs::create_dir_all(&src).unwrap();
+    // A 24-vertex ring turning once in 6 frames (frame 6 would equal frame 0), and a blob drifting away.
+    let n = 24;
+    let ring: Vec<[f32; 3]> = (0..6)
+        .flat_map(|f| {
+            (0..n).map(move |v| {
+                let a = std::f32::consts::TAU * (v as f32 / n as f32 + f as f32 / 6.0);
+                [a.cos(), a.sin(), (v % 3) as f32 * 0.1]
+            })
+        })
+        .collect();
+    let faces = (0..n as u32 - 2).map(|i| [i, i + 1, i + 2]).collect();
+    let cycle = Clip::new("spin_offset0_0-5", ring, 6, n, faces, "a spinning ring", "test").unwrap();
+    formats::write_clip(&src.join("spin_offset0_0-5.bin"), &cycle).unwrap();
+    formats::write_clip(&src.join("drift_offset0_0-5.bin"), &blob("drift_offset0_0-5", 6, 20, 9)).unwrap();
+
+    let off = store::import(std::slice::from_ref(&src), &tmp.path().join("off"), &opts()).unwrap();
+    assert_eq!((off.added, off.rejected.len()), (0, 2), "{off}");
+    assert!(off.rejected.iter().all(|r| r.reason.contains("--loop-short")), "{off}");
+
+    let on = ImportOptions {
+        loop_short: true,
+        ..opts()
+    };
+    let out = tmp.path().join("on");
+    let report = store::import(std::slice::from_ref(&src), &out, &on).unwrap();
+    assert_eq!(report.added, 1, "{report}");
+    assert_eq!(report.rejected.len(), 1, "{report}");
+    assert!(report.rejected[0].source.ends_with("drift_offset0_0-5.bin"), "{report}");
+    assert!(report.rejected[0].reason.contains("does not loop"), "{report}");
+    let st = Store::open(&out).unwrap();
+    let got = st.get(0).unwrap();
+    assert_eq!((got.clip.id.as_str(), got.clip.frames), ("spin_offset0_0-5_loop", 16));
+    // Played round: frame f of the window is frame f mod 6 of the take, normalised as one window.
+    let (expect, _) = normalize(&cycle);
+    for f in 0..16 {
+        assert_eq!(got.clip.frame(f), expect.frame(f % 6), "frame {f}");
+    }
+    assert_eq!(read_index(&out).unwrap()[0].object, "spin");
+}

@@ -96,6 +96,10 @@ pub struct ImportArgs {
     /// Longest take (animation) read from a file with takes, in frames; a longer one is rejected unread.
     #[arg(long, default_value_t = any4d_data::formats::skeletal::MAX_FRAMES)]
     pub max_frames: usize,
+    /// Play a take shorter than the window as a cycle when its last frame leads back to its first (a walk or
+    /// idle loop); without it such takes are rejected.
+    #[arg(long)]
+    pub loop_short: bool,
 }
 
 #[derive(Args, Debug)]
@@ -311,6 +315,7 @@ fn import(a: ImportArgs) -> anyhow::Result<ExitCode> {
         weld: weld(a.weld),
         p: a.p,
         max_frames: a.max_frames,
+        loop_short: a.loop_short,
         ..ImportOptions::default()
     };
     opts.validate()?;

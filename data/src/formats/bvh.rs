@@ -659,34 +659,68 @@ pub fn retarget(path: &Path, bvh: &Bvh, rig: &Rig) -> Result<Vec<Vec<Mat>>> {
     Ok(out)
 }
 
+/// Hips → Spine → Chest → Neck → Head, and a left arm held sideways (+x, a T-pose) from the chest.
+fn skeleton() -> &'static str {
+    "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n\
+     JOINT Spine\n{\n OFFSET 0 2 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n\
+     JOINT Chest\n{\n OFFSET 0 2 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n\
+     JOINT Neck\n{\n OFFSET 0 2 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n\
+     JOINT Head\n{\n OFFSET 0 1 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n End Site\n{\n OFFSET 0 1 0\n}\n}\n}\n\
+     JOINT LeftArm\n{\n OFFSET 1 0 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n\
+     JOINT LeftForeArm\n{\n OFFSET 3 0 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n\
+     JOINT LeftHand\n{\n OFFSET 3 0 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n End Site\n{\n OFFSET 1 0 0\n}\n}\n}\n}\n\
+     }\n}\n}\n"
+}
+
+/// Text of a BVH for tests and fuzzing: the chain of [`skeleton`] with `rows` (27 values each: hips position + 8
+/// joints × ZYX degrees) at `dt` seconds per frame.
+#[doc(hidden)]
+pub fn write_test_bvh(rows: &[Vec<f64>], dt: f64) -> String {
+    let mut s = format!("{}MOTION\nFrames: {}\nFrame Time: {dt}\n", skeleton(), rows.len());
+    for r in rows {
+        s += &r.iter().map(f64::to_string).collect::<Vec<_>>().join(" ");
+        s += "\n";
+    }
+    s
+}
+
+/// Bytes of an `.iqm` rig for tests and fuzzing, in IQM's Z-up axes: the chain of [`skeleton`] with the arm
+/// hanging down (an A-pose), hips at height 10, joints named `names`; vertex 0 sits on the hand, vertices 1 and 2
+/// on the hips.
+#[doc(hidden)]
+pub fn write_test_rig(names: [&str; 8]) -> Vec<u8> {
+    let joints = [
+        (names[0], -1, [0.0, 0.0, 10.0]),
+        (names[1], 0, [0.0, 0.0, 2.0]),
+        (names[2], 1, [0.0, 0.0, 2.0]),
+        (names[3], 2, [0.0, 0.0, 2.0]),
+        (names[4], 3, [0.0, 0.0, 1.0]),
+        (names[5], 2, [1.0, 0.0, 0.0]),
+        (names[6], 5, [0.0, 0.0, -3.0]),
+        (names[7], 6, [0.0, 0.0, -3.0]),
+    ];
+    let pos = [[1.0, 0.0, 8.0], [0.0, 0.0, 10.0], [0.0, 1.0, 10.0]];
+    super::iqm::write_test_iqm(&pos, &[[0, 1, 2]], &[7, 0, 0], &joints, "", &[], true)
+}
+
+/// Joint names of a Rigify-style rig that [`write_test_bvh`]'s skeleton maps onto.
+#[doc(hidden)]
+pub const TEST_RIG: [&str; 8] = [
+    "hips",
+    "spine",
+    "chest",
+    "neck",
+    "head",
+    "upper_arm.L.01",
+    "forearm.L.01",
+    "hand.L",
+];
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::formats::iqm;
     use crate::formats::skeletal::{ReadOptions, TakeSel};
-
-    /// Hips → Spine → Chest → Neck → Head, and a left arm held sideways (+x, a T-pose) from the chest.
-    fn skeleton() -> &'static str {
-        "HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n\
-         JOINT Spine\n{\n OFFSET 0 2 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n\
-         JOINT Chest\n{\n OFFSET 0 2 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n\
-         JOINT Neck\n{\n OFFSET 0 2 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n\
-         JOINT Head\n{\n OFFSET 0 1 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n End Site\n{\n OFFSET 0 1 0\n}\n}\n}\n\
-         JOINT LeftArm\n{\n OFFSET 1 0 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n\
-         JOINT LeftForeArm\n{\n OFFSET 3 0 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n\
-         JOINT LeftHand\n{\n OFFSET 3 0 0\n CHANNELS 3 Zrotation Yrotation Xrotation\n End Site\n{\n OFFSET 1 0 0\n}\n}\n}\n}\n\
-         }\n}\n}\n"
-    }
-
-    /// A BVH of `rows` (27 values each: hips position + 8 joints × ZYX degrees) at `dt` seconds per frame.
-    fn bvh_text(rows: &[Vec<f64>], dt: f64) -> String {
-        let mut s = format!("{}MOTION\nFrames: {}\nFrame Time: {dt}\n", skeleton(), rows.len());
-        for r in rows {
-            s += &r.iter().map(f64::to_string).collect::<Vec<_>>().join(" ");
-            s += "\n";
-        }
-        s
-    }
 
     fn still() -> Vec<f64> {
         vec![0.0; 27]
@@ -698,7 +732,7 @@ mod tests {
         let path = dir.path().join("m.bvh");
         // 9 frames at 120 fps → every 4th: frames 0, 4, 8.
         let rows: Vec<Vec<f64>> = (0..9).map(|f| [vec![f as f64], vec![0.0; 26]].concat()).collect();
-        std::fs::write(&path, bvh_text(&rows, 1.0 / 120.0)).unwrap();
+        std::fs::write(&path, write_test_bvh(&rows, 1.0 / 120.0)).unwrap();
         let b = parse(&path, 100, true).unwrap();
         assert_eq!((b.frames, b.file_frames, b.fps.round()), (3, 9, 30.0));
         assert_eq!(
@@ -708,7 +742,7 @@ mod tests {
         // A first frame 90° away from the second is a calibration pose: dropped.
         let mut cal = rows.clone();
         cal[0][5] = 90.0;
-        std::fs::write(&path, bvh_text(&cal, 1.0 / 120.0)).unwrap();
+        std::fs::write(&path, write_test_bvh(&cal, 1.0 / 120.0)).unwrap();
         let b = parse(&path, 100, true).unwrap();
         assert_eq!(b.values.iter().step_by(27).copied().collect::<Vec<_>>(), [1.0, 5.0]);
         // The limit counts kept frames and refuses before reading them.
@@ -718,7 +752,7 @@ mod tests {
             "{e}"
         );
         // A whole extra frame is ignored; a partial one or a missing one is an error.
-        let text = bvh_text(&rows, 1.0 / 120.0);
+        let text = write_test_bvh(&rows, 1.0 / 120.0);
         std::fs::write(&path, format!("{text}{}\n", vec!["0"; 27].join(" "))).unwrap();
         assert_eq!(parse(&path, 100, true).unwrap().file_frames, 9);
         std::fs::write(&path, format!("{text}0 0\n")).unwrap();
@@ -729,34 +763,6 @@ mod tests {
         assert!(parse(&path, 100, true).unwrap_err().reason.contains("at most 6"));
     }
 
-    /// A rig in IQM's Z-up axes: the same chain with the arm hanging down (an A-pose), hips at height 10; vertex
-    /// 0 sits on the hand, vertices 1 and 2 on the hips.
-    fn rig_iqm(names: [&str; 8]) -> Vec<u8> {
-        let joints = [
-            (names[0], -1, [0.0, 0.0, 10.0]),
-            (names[1], 0, [0.0, 0.0, 2.0]),
-            (names[2], 1, [0.0, 0.0, 2.0]),
-            (names[3], 2, [0.0, 0.0, 2.0]),
-            (names[4], 3, [0.0, 0.0, 1.0]),
-            (names[5], 2, [1.0, 0.0, 0.0]),
-            (names[6], 5, [0.0, 0.0, -3.0]),
-            (names[7], 6, [0.0, 0.0, -3.0]),
-        ];
-        let pos = [[1.0, 0.0, 8.0], [0.0, 0.0, 10.0], [0.0, 1.0, 10.0]];
-        iqm::write_test_iqm(&pos, &[[0, 1, 2]], &[7, 0, 0], &joints, "", &[], true)
-    }
-
-    const RIG: [&str; 8] = [
-        "hips",
-        "spine",
-        "chest",
-        "neck",
-        "head",
-        "upper_arm.L.01",
-        "forearm.L.01",
-        "hand.L",
-    ];
-
     fn close(a: [f32; 3], b: [f32; 3]) -> bool {
         a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4)
     }
@@ -765,14 +771,14 @@ mod tests {
     fn retargets_by_name_across_rest_poses() {
         let dir = tempfile::tempdir().unwrap();
         let mesh = dir.path().join("body.iqm");
-        std::fs::write(&mesh, rig_iqm(RIG)).unwrap();
+        std::fs::write(&mesh, write_test_rig(TEST_RIG)).unwrap();
         // Frame 2: the performer moved 1 along x and turned 90° about the vertical.
         let mut turn = still();
         turn[0] = 1.0;
         turn[4] = 90.0;
         std::fs::write(
             dir.path().join("turn.bvh"),
-            bvh_text(&[still(), still(), turn], 1.0 / 30.0),
+            write_test_bvh(&[still(), still(), turn], 1.0 / 30.0),
         )
         .unwrap();
         let takes = iqm::list_takes(&mesh).unwrap();
@@ -792,8 +798,12 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mesh = dir.path().join("body.iqm");
         let rig = ["root", "b1", "b2", "b3", "b4", "b5", "b6", "b7"];
-        std::fs::write(&mesh, rig_iqm(rig)).unwrap();
-        std::fs::write(dir.path().join("walk.bvh"), bvh_text(&[still(), still()], 1.0 / 30.0)).unwrap();
+        std::fs::write(&mesh, write_test_rig(rig)).unwrap();
+        std::fs::write(
+            dir.path().join("walk.bvh"),
+            write_test_bvh(&[still(), still()], 1.0 / 30.0),
+        )
+        .unwrap();
         let opts = ReadOptions {
             take: TakeSel::Name("walk".into()),
             ..ReadOptions::default()

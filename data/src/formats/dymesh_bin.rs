@@ -39,6 +39,24 @@ pub fn read_bin_bytes(bytes: &[u8], source: &str) -> Result<Clip> {
     if frames == 0 {
         return Err(err("vertices", "zero frames".into()));
     }
+    let (max_frames, max_rows) = (
+        crate::limits::FRAMES.get_usize(),
+        crate::limits::CLIP_VERTICES.get_usize(),
+    );
+    if frames > max_frames {
+        let hint = crate::limits::FRAMES.hint();
+        return Err(err(
+            "vertices",
+            format!("{frames} frames, more than the limit of {max_frames}{hint}"),
+        ));
+    }
+    if frames.saturating_mul(n_vertices) > max_rows {
+        let hint = crate::limits::CLIP_VERTICES.hint();
+        return Err(err(
+            "vertices",
+            format!("{frames} × {n_vertices} vertex rows, more than the limit of {max_rows}{hint}"),
+        ));
+    }
     let coords: Vec<f32> = match &v.data {
         ArrayData::Float(x) => x.iter().map(|&c| c as f32).collect(),
         ArrayData::Int(x) if v.dtype != DType::Bool => x.iter().map(|&c| c as f32).collect(),

@@ -92,6 +92,14 @@ fn frame_name(m: &mut Md2, f: usize) -> Result<String> {
 fn ranges(path: &Path, m: &mut Md2) -> Result<Vec<(String, usize, usize, f32)>> {
     let anm = path.with_extension("anm");
     if anm.is_file() {
+        if !skeletal::sidecar_inside(path.parent().unwrap_or(Path::new(".")), &anm) {
+            return Err(DataError::new(
+                &anm,
+                "file",
+                "the animation table leads out of the model's folder (a link elsewhere); sidecars are read only \
+                 from inside it",
+            ));
+        }
         let len = std::fs::metadata(&anm).map_err(|e| DataError::io(&anm, e))?.len();
         if len > MAX_ANM_BYTES {
             return Err(DataError::new(
@@ -298,6 +306,18 @@ mod tests {
         assert_eq!((t[0].name.as_str(), t[0].frames, t[0].fps), ("walk0", 4, 24.0));
         std::fs::write(dir.path().join("guy.anm"), "walk 1 40 24\n").unwrap();
         assert!(list_takes(&path).unwrap_err().reason.contains("outside"));
+        // A table reached through a link that leads out of the folder is never read (the sidecar rule).
+        let elsewhere = tempfile::tempdir().unwrap();
+        std::fs::write(elsewhere.path().join("t.anm"), "walk0 1 4 24\n").unwrap();
+        std::fs::remove_file(dir.path().join("guy.anm")).unwrap();
+        std::os::unix::fs::symlink(elsewhere.path().join("t.anm"), dir.path().join("guy.anm")).unwrap();
+        assert!(
+            list_takes(&path)
+                .unwrap_err()
+                .reason
+                .contains("leads out of the model's folder")
+        );
+        std::fs::remove_file(dir.path().join("guy.anm")).unwrap();
         for rate in ["nan", "inf", "-3", "1e9"] {
             std::fs::write(dir.path().join("guy.anm"), format!("walk0 1 4 {rate}\n")).unwrap();
             let e = list_takes(&path).unwrap_err();

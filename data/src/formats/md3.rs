@@ -244,15 +244,14 @@ fn player_cfg(path: &Path) -> Option<(std::path::PathBuf, &'static str)> {
     let stem = path.file_stem()?.to_string_lossy().to_ascii_lowercase();
     let part = ["lower", "upper"].into_iter().find(|p| stem.starts_with(p))?;
     let dir = path.parent()?;
-    let cfg = std::fs::read_dir(if dir.as_os_str().is_empty() {
+    let dir = if dir.as_os_str().is_empty() {
         Path::new(".")
     } else {
         dir
-    })
-    .ok()?
-    .flatten()
-    .map(|e| e.path())
-    .find(|p| p.file_name().is_some_and(|n| n.eq_ignore_ascii_case("animation.cfg")) && p.is_file())?;
+    };
+    let cfg = std::fs::read_dir(dir).ok()?.flatten().map(|e| e.path()).find(|p| {
+        p.file_name().is_some_and(|n| n.eq_ignore_ascii_case("animation.cfg")) && skeletal::sidecar_inside(dir, p)
+    })?;
     Some((cfg, part))
 }
 

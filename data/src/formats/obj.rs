@@ -23,6 +23,18 @@ pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
     if files.is_empty() {
         return Err(DataError::new(dir, "frames", "folder holds no .obj files"));
     }
+    let max = crate::limits::FRAMES.get_usize();
+    if files.len() > max {
+        return Err(DataError::new(
+            dir,
+            "frames",
+            format!(
+                "{} .obj frames, more than the limit of {max}{}",
+                files.len(),
+                crate::limits::FRAMES.hint()
+            ),
+        ));
+    }
     let mut vertices = Vec::new();
     let mut first: Option<(usize, Vec<[u32; 3]>)> = None;
     for file in &files {
@@ -79,15 +91,24 @@ pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
     )
 }
 
-/// The `.obj` files of `dir` in natural order.
+/// The `.obj` files of `dir` in natural order. An entry named `*.obj` that is not a regular file (a folder, a
+/// FIFO, a link to a device or to nothing) is an error, not a frame silently left out.
 fn frame_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let entries = std::fs::read_dir(dir).map_err(|e| DataError::io(dir, e))?;
     let mut files = Vec::new();
     for entry in entries {
         let path = entry.map_err(|e| DataError::io(dir, e))?.path();
-        if path.is_file() && path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) {
-            files.push(path);
+        if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) {
+            continue;
         }
+        if !path.is_file() {
+            return Err(DataError::new(
+                &path,
+                "frames",
+                "named as an .obj frame but not a regular file (a folder, a FIFO, a device or a dangling link)",
+            ));
+        }
+        files.push(path);
     }
     files.sort_by(|a, b| {
         natural_cmp(
@@ -232,6 +253,32 @@ mod tests {
         let (v, f) = parse_obj(text, Path::new("q.obj")).unwrap();
         assert_eq!(v.len(), 4);
         assert_eq!(f, vec![[0, 1, 2], [0, 2, 3]]);
+    }
+
+    #[test]
+    fn a_frame_that_is_not_a_regular_file_is_an_error() {
+        let tmp = tempfile::tempdir().unwrap();
+        std::fs::write(tmp.path().join("0.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+        std::fs::copy(tmp.path().join("0.obj"), tmp.path().join("2.obj")).unwrap();
+        assert_eq!(read_obj_seq(tmp.path()).unwrap().frames, 2);
+        for (name, make) in [
+            ("1.obj", &(|p: &Path| std::fs::create_dir(p).unwrap()) as &dyn Fn(&Path)),
+            ("1.obj", &|p: &Path| std::os::unix::fs::symlink("/dev/null", p).unwrap()),
+            ("1.obj", &|p: &Path| std::os::unix::fs::symlink("gone", p).unwrap()),
+        ] {
+            let frame = tmp.path().join(name);
+            make(&frame);
+            let e = read_obj_seq(tmp.path()).unwrap_err();
+            assert!(
+                e.reason.contains("not a regular file") && e.path.ends_with("1.obj"),
+                "{e}"
+            );
+            if frame.is_dir() {
+                std::fs::remove_dir(&frame).unwrap();
+            } else {
+                std::fs::remove_file(&frame).unwrap();
+            }
+        }
     }
 
     #[test]

@@ -466,8 +466,23 @@ pub fn skin_frame(bind: &[[f64; 3]], infl: &Influences, skin: &[Mat], out: &mut 
     }
 }
 
+/// The one rule for every sidecar (animation files, `.anm` tables, `animation.cfg`, a BVH's rig), as for glTF's
+/// external buffers: it is read only when its real path is a regular file inside the real path of the folder it
+/// was found in, so that a link leading out of the folder (to `/dev/zero`, to a file elsewhere) is never followed.
+pub fn sidecar_inside(dir: &Path, file: &Path) -> bool {
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    match (dir.canonicalize(), file.canonicalize()) {
+        (Ok(d), Ok(f)) => f.starts_with(&d) && f.is_file(),
+        _ => false,
+    }
+}
+
 /// Animation files that may belong to `mesh`: files with one of `exts` (lower-case, no dot) in the mesh's folder
-/// and, when `parent` is set, its parent folder; sorted by path.
+/// and, when `parent` is set, its parent folder, each inside its folder ([`sidecar_inside`]); sorted by path.
 pub fn companions(mesh: &Path, exts: &[&str], parent: bool) -> Vec<PathBuf> {
     let mut dirs = Vec::new();
     if let Some(d) = mesh.parent() {
@@ -482,7 +497,7 @@ pub fn companions(mesh: &Path, exts: &[&str], parent: bool) -> Vec<PathBuf> {
         for e in rd.flatten() {
             let p = e.path();
             let ext = p.extension().and_then(|x| x.to_str()).map(str::to_ascii_lowercase);
-            if p.is_file() && p != mesh && ext.is_some_and(|x| exts.contains(&x.as_str())) {
+            if p != mesh && ext.is_some_and(|x| exts.contains(&x.as_str())) && sidecar_inside(d, &p) {
                 found.push(p);
             }
         }
@@ -514,6 +529,29 @@ pub fn stem(path: &Path) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn companions_are_regular_files_inside_their_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let elsewhere = tempfile::tempdir().unwrap();
+        std::fs::write(elsewhere.path().join("far.md5anim"), "x").unwrap();
+        let mesh = dir.path().join("m.md5mesh");
+        std::fs::write(&mesh, "x").unwrap();
+        std::fs::write(dir.path().join("walk.md5anim"), "x").unwrap();
+        std::fs::create_dir(dir.path().join("sub")).unwrap();
+        std::fs::write(dir.path().join("sub/run.md5anim"), "x").unwrap();
+        let link = |target: &Path, name: &str| std::os::unix::fs::symlink(target, dir.path().join(name)).unwrap();
+        link(&elsewhere.path().join("far.md5anim"), "far.md5anim");
+        link(Path::new("/dev/zero"), "zero.md5anim");
+        link(&dir.path().join("sub/run.md5anim"), "run.md5anim");
+        link(&dir.path().join("sub"), "folder.md5anim");
+        let found: Vec<String> = companions(&mesh, &["md5anim"], false)
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        // A link inside the folder is followed; links out of it, to a device or to a folder are not.
+        assert_eq!(found, ["run.md5anim", "walk.md5anim"]);
+    }
 
     fn close(a: [f64; 3], b: [f64; 3]) -> bool {
         a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9)

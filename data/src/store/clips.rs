@@ -147,13 +147,24 @@ fn accept(mut clip: Clip, source: String, opts: &ImportOptions) -> Result<Vec<(S
     clip.source = source;
     let clip = opts.weld.apply(clip)?;
     opts.filter.check(&clip)?;
+    let clip = match opts.loop_short && clip.frames < opts.frames {
+        true => preprocess::loop_to(&clip, opts.frames).unwrap_or(clip),
+        false => clip,
+    };
     if clip.frames < opts.frames {
         return Err(DataError::new(
             &clip.source,
             "frames",
             format!(
-                "clip {} has {} frames, fewer than the window length {}",
-                clip.id, clip.frames, opts.frames
+                "clip {} has {} frames, fewer than the window length {}{}",
+                clip.id,
+                clip.frames,
+                opts.frames,
+                if opts.loop_short {
+                    " and does not loop (its last frame does not lead back to its first)"
+                } else {
+                    " (--loop-short plays a looping take as a cycle)"
+                }
             ),
         ));
     }

@@ -229,6 +229,7 @@ fn prepare_out(out: &Path, frames: usize, p: usize) -> Result<Option<(Store, Vec
 fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
     let out_canon = std::fs::canonicalize(out).map_err(|e| DataError::io(out, e))?;
     let mut found: Vec<(PathBuf, Result<Format>)> = Vec::new();
+    let mut seen = HashSet::new();
     for src in sources {
         match std::fs::canonicalize(src) {
             Err(e) => found.push((src.clone(), Err(DataError::io(src, e)))),
@@ -243,17 +244,29 @@ fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
                         )),
                     ));
                 } else {
-                    walk(&path, &out_canon, &mut found);
+                    walk(&path, &out_canon, &mut found, &mut seen);
                 }
             }
             Ok(path) => {
-                let format = Format::from_path(&path);
-                found.push((path, format));
+                if seen.insert(path.clone()) {
+                    let format = Format::from_path(&path);
+                    found.push((path, format));
+                }
             }
         }
     }
     found.sort_by(|a, b| a.0.cmp(&b.0));
     found.dedup_by(|a, b| a.0 == b.0);
+    // A glTF's external buffers are parts of it, not clips of their own.
+    let buffers: HashSet<PathBuf> = found
+        .iter()
+        .filter(|(p, f)| matches!(f, Ok(Format::Gltf)) && p.is_file())
+        .flat_map(|(p, _)| formats::gltf::buffer_files(p))
+        .filter_map(|b| std::fs::canonicalize(b).ok())
+        .collect();
+    if !buffers.is_empty() {
+        found.retain(|(p, _)| std::fs::canonicalize(p).map_or(true, |c| !buffers.contains(&c)));
+    }
     let mut cache = HashMap::new();
     Ok(found
         .into_iter()
@@ -267,9 +280,22 @@ fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
 }
 
 /// Recursively collect clip files and OBJ-sequence folders under `dir`. Unreadable folders become rejected jobs.
-fn walk(dir: &Path, out: &Path, found: &mut Vec<(PathBuf, Result<Format>)>) {
+/// Every folder and file is visited once by its canonical path (`seen`), so a symlink cycle ends and a file
+/// reached through two links is imported once, under the first path met.
+fn walk(dir: &Path, out: &Path, found: &mut Vec<(PathBuf, Result<Format>)>, seen: &mut HashSet<PathBuf>) {
     if dir == out || dir.join(CLIPS_FILE).exists() {
         return;
+    }
+    match std::fs::canonicalize(dir) {
+        Ok(canon) => {
+            if !seen.insert(canon) {
+                return;
+            }
+        }
+        Err(e) => {
+            found.push((dir.to_path_buf(), Err(DataError::io(dir, e))));
+            return;
+        }
     }
     let mut entries: Vec<PathBuf> =
         match std::fs::read_dir(dir).and_then(|rd| rd.map(|e| e.map(|e| e.path())).collect()) {
@@ -286,10 +312,13 @@ fn walk(dir: &Path, out: &Path, found: &mut Vec<(PathBuf, Result<Format>)>) {
     }
     for p in entries {
         if p.is_dir() {
-            walk(&p, out, found);
+            walk(&p, out, found, seen);
         } else if formats::is_source(&p) {
-            let format = Format::from_path(&p);
-            found.push((p, format));
+            // A link that resolves to nothing is still listed: its read fails with the reason.
+            if std::fs::canonicalize(&p).map_or(true, |c| seen.insert(c)) {
+                let format = Format::from_path(&p);
+                found.push((p, format));
+            }
         }
     }
 }

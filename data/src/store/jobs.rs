@@ -60,18 +60,25 @@ impl Job {
 /// The per-source work of an import or a synth run.
 pub(super) type Process = Arc<dyn Fn(&Job) -> Outcome + Send + Sync>;
 
+/// Stack of each reader thread: eight times what every reader's depth limit needs (the COLLADA parser at its
+/// 512 levels fits Rust's default 2 MiB, tested), so that no file within the limits can overflow it.
+const READER_STACK: usize = 16 << 20;
+
 /// Run `process` on `job` in its own thread, so that neither a panic nor a source slower than `limit` stops the
 /// import: both become a rejection. A thread past its limit is left to finish on its own.
 pub(super) fn run_one(job: &Job, process: &Process, limit: Duration) -> Outcome {
     let (tx, rx) = mpsc::channel();
     let (job, process) = (job.clone(), Arc::clone(process));
-    let spawned = std::thread::Builder::new().name("any4d-import".into()).spawn(move || {
-        let source = PathBuf::from(job.source());
-        let outcome = formats::guard(&source, || Ok(process(&job)))
-            .unwrap_or_else(|e| Outcome::Rejected(format!("{}: {}", e.field, e.reason)));
-        // The receiver is gone when the time limit passed; nothing is waiting for this result then.
-        let _ = tx.send(outcome);
-    });
+    let spawned = std::thread::Builder::new()
+        .name("any4d-import".into())
+        .stack_size(READER_STACK)
+        .spawn(move || {
+            let source = PathBuf::from(job.source());
+            let outcome = formats::guard(&source, || Ok(process(&job)))
+                .unwrap_or_else(|e| Outcome::Rejected(format!("{}: {}", e.field, e.reason)));
+            // The receiver is gone when the time limit passed; nothing is waiting for this result then.
+            let _ = tx.send(outcome);
+        });
     if let Err(e) = spawned {
         return Outcome::Rejected(format!("import: could not start a thread for this source: {e}"));
     }

@@ -71,6 +71,9 @@ pub struct ImportOptions {
     /// Longest take read from a file with takes, in frames: a longer one is refused before its frames are
     /// baked (default [`skeletal::MAX_FRAMES`]; at most the current [`FRAMES`] limit).
     pub max_frames: usize,
+    /// Play a take shorter than the window as a cycle when it loops (docs/method.md §2.6,
+    /// [`crate::preprocess::loop_to`]); off by default, when such a take is rejected.
+    pub loop_short: bool,
 }
 
 impl Default for ImportOptions {
@@ -83,6 +86,7 @@ impl Default for ImportOptions {
             p: DEFAULT_P,
             time_limit: FILE_TIME_LIMIT,
             max_frames: skeletal::MAX_FRAMES,
+            loop_short: false,
         }
     }
 }

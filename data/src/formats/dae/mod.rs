@@ -42,6 +42,10 @@ pub const MAX_DAE_BYTES: u64 = 512 << 20;
 /// Deepest node nesting read.
 pub const MAX_DEPTH: usize = 256;
 
+/// Deepest element nesting of a `.dae` accepted before it is parsed: the XML parser and the readers after it
+/// recurse per level, and a file nested thousands deep would overflow the stack.
+pub const MAX_XML_DEPTH: usize = 512;
+
 /// Frame rate of takes whose keys do not lie on one grid.
 pub const DEFAULT_FPS: f64 = 30.0;
 
@@ -296,7 +300,65 @@ fn read_xml(path: &Path) -> Result<String> {
     Ok(String::from_utf8_lossy(&bytes).into_owned())
 }
 
+/// The deepest element nesting of XML `text`, scanning tags only (comments, CDATA, declarations and processing
+/// instructions skipped, quoted attribute values honoured), stopping as soon as it passes `max`. An approximate
+/// count on malformed XML is harmless: the parser then refuses the file.
+fn xml_depth(text: &str, max: usize) -> usize {
+    let b = text.as_bytes();
+    let find = |from: usize, pat: &[u8]| {
+        b[from.min(b.len())..]
+            .windows(pat.len())
+            .position(|w| w == pat)
+            .map_or(b.len(), |k| from + k + pat.len())
+    };
+    let (mut i, mut depth, mut deepest) = (0, 0usize, 0);
+    while let Some(k) = b[i..].iter().position(|&c| c == b'<') {
+        i += k + 1;
+        match b.get(i) {
+            Some(b'/') => {
+                depth = depth.saturating_sub(1);
+                i = find(i, b">");
+            }
+            Some(b'?') => i = find(i, b"?>"),
+            Some(b'!') if b[i..].starts_with(b"!--") => i = find(i, b"-->"),
+            Some(b'!') if b[i..].starts_with(b"![CDATA[") => i = find(i, b"]]>"),
+            Some(b'!') => i = find(i, b">"),
+            Some(_) => {
+                // An element start: to its closing `>` outside quotes; `/>` closes it at once.
+                let mut quote = None;
+                let mut prev = 0u8;
+                while let Some(&c) = b.get(i) {
+                    match (quote, c) {
+                        (None, b'"' | b'\'') => quote = Some(c),
+                        (Some(q), _) if c == q => quote = None,
+                        (None, b'>') => break,
+                        _ => {}
+                    }
+                    prev = c;
+                    i += 1;
+                }
+                if prev != b'/' {
+                    depth += 1;
+                    deepest = deepest.max(depth);
+                    if deepest > max {
+                        return deepest;
+                    }
+                }
+            }
+            None => break,
+        }
+    }
+    deepest
+}
+
 fn xml_doc<'i>(path: &Path, text: &'i str) -> Result<roxmltree::Document<'i>> {
+    if xml_depth(text, MAX_XML_DEPTH) > MAX_XML_DEPTH {
+        return Err(DataError::new(
+            path,
+            "xml",
+            format!("elements nested more than {MAX_XML_DEPTH} deep"),
+        ));
+    }
     let opts = roxmltree::ParsingOptions {
         allow_dtd: false,
         ..Default::default()

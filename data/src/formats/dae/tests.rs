@@ -196,6 +196,27 @@ fn broken_files_get_reasons() {
     let deep = "<node>".repeat(MAX_DEPTH + 2) + &"</node>".repeat(MAX_DEPTH + 2);
     let text = rigid("", "", "Y_UP").replace("<node id=\"n\">", &format!("{deep}<node id=\"n\">"));
     assert!(bake(&text).unwrap_err().reason.contains("nested"));
+    // Any element nested past the XML limit is refused before parsing (20,000 levels overflowed the stack).
+    for tag in ["animation", "extra", "node"] {
+        let deep = format!("<{tag}>").repeat(20_000) + &format!("</{tag}>").repeat(20_000);
+        let text = rigid("", "", "Y_UP").replace("<library_visual_scenes>", &format!("{deep}<library_visual_scenes>"));
+        let e = bake(&text).unwrap_err();
+        assert!(e.reason.contains("elements nested more than"), "{tag}: {e}");
+    }
+    // Just under the limit the file parses on a thread of Rust's default 2 MiB stack (an overflow would abort
+    // the test process) and is refused for what it lacks, the motion.
+    let deep = "<extra>".repeat(MAX_XML_DEPTH - 8) + &"</extra>".repeat(MAX_XML_DEPTH - 8);
+    let text = rigid("", "", "Y_UP").replace("<library_visual_scenes>", &format!("{deep}<library_visual_scenes>"));
+    let parsed = std::thread::Builder::new()
+        .stack_size(2 << 20)
+        .spawn(move || bake(&text).map(|_| ()))
+        .unwrap()
+        .join()
+        .unwrap();
+    assert!(parsed.unwrap_err().reason.contains("static mesh"));
+    // Comments, CDATA, quoted `>` and self-closed elements do not count as nesting.
+    let flat = "<a x=\"1>2\"/><!-- <b><b><b> --><![CDATA[<c><c>]]><?pi <d>?>".repeat(MAX_XML_DEPTH);
+    assert_eq!(xml_depth(&format!("<r>{flat}<e><f/></e></r>"), MAX_XML_DEPTH), 2);
     // A take longer than the frame limit is refused before it is baked.
     let opts = ReadOptions {
         max_frames: 1,

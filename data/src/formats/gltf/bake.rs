@@ -240,7 +240,7 @@ pub(super) fn bake(ctx: Ctx, scene: &Scene, frames: usize, fps: f32) -> Result<V
         steps = steps.saturating_add((count + n * (1 + active.len()) + influences) as u64);
         if steps > MAX_BAKE_STEPS {
             return Err(ctx.err(
-                "animations[0]",
+                "animations",
                 format!(
                     "baking frame {f} of {frames} needs more than {MAX_BAKE_STEPS} vertex updates (vertices × \
                      (1 + active morph targets + joint influences) per frame)"

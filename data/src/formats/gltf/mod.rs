@@ -1,7 +1,8 @@
 //! glTF 2.0 / GLB clips: animation baked to per-frame world-space vertex positions, and a writer that
 //! stores a clip as frame-0 mesh + one morph target per frame.
 //!
-//! Reading takes the first animation and the first triangle primitive of the chosen mesh, samples every channel
+//! Reading takes the animations (all of them when no two target the same node property, as exporters that write
+//! one animation per joint do; else the first) and the first triangle primitive of the chosen mesh, samples every channel
 //! (STEP, LINEAR with slerp for rotations, CUBICSPLINE) at `t = f / fps` for `f = 0..=⌊duration · fps⌋`, and bakes
 //! morph targets (`p = base + Σ_k w_k · target_k`), then skinning (`v = Σ_i w_i · G(joint_i) · IBM_i · p`) or, for
 //! an unskinned mesh, the mesh node's world matrix. The caption is `asset.extras.caption` (written by
@@ -88,6 +89,28 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
 /// Read and bake glTF or GLB `bytes`; `path` names the file in errors and gives the clip its id and source.
 pub fn read_gltf_bytes(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: &ExternalBuffers) -> Result<Clip> {
     super::guard(path, || read::read(bytes, path, opts, external))
+}
+
+/// The files a `.gltf` names as external buffers (`buffers[].uri` other than `data:`), resolved against its
+/// folder: an import leaves them out of its sources, since they are parts of the glTF and not clips. A file that
+/// cannot be read or parsed names none (reading it as a clip then says why).
+pub fn buffer_files(path: &Path) -> Vec<PathBuf> {
+    let Ok(bytes) = super::read_clip_file(path) else {
+        return Vec::new();
+    };
+    let Ok(doc) = serde_json::from_slice::<serde_json::Value>(&bytes) else {
+        return Vec::new();
+    };
+    let folder = path.parent().unwrap_or(Path::new("."));
+    doc.get("buffers")
+        .and_then(|b| b.as_array())
+        .into_iter()
+        .flatten()
+        .filter_map(|b| b.get("uri")?.as_str())
+        .filter(|uri| !uri.starts_with("data:"))
+        .filter_map(|uri| source::percent_decode(uri).ok())
+        .map(|rel| folder.join(rel))
+        .collect()
 }
 
 /// Errors of one read: the file and the field at fault.

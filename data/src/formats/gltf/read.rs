@@ -18,6 +18,21 @@ use crate::error::Result;
 use crate::formats::dymesh_bin::MISSING_CAPTION;
 use crate::limits::{CLIP_VERTICES, FRAMES};
 
+/// The animations baked as the clip: all of them when no two target the same channel (node and property) —
+/// exporters such as COLLADA2GLTF write one animation per joint, which players run together — else the first.
+fn played_together(animations: &[json::Animation]) -> Vec<usize> {
+    let mut owner = std::collections::HashMap::new();
+    for (a, anim) in animations.iter().enumerate() {
+        for ch in &anim.channels {
+            let key = (ch.target.node.value(), format!("{:?}", ch.target.path));
+            if *owner.entry(key).or_insert(a) != a {
+                return vec![0];
+            }
+        }
+    }
+    (0..animations.len()).collect()
+}
+
 /// Read and bake one glTF / GLB file's bytes.
 pub(super) fn read(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: &ExternalBuffers) -> Result<Clip> {
     let ctx = Ctx { path };
@@ -30,10 +45,9 @@ pub(super) fn read(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: 
         root: &root,
         buffers: &buffers,
     };
-    let anim = root
-        .animations
-        .first()
-        .ok_or_else(|| ctx.err("animations", "no animation"))?;
+    if root.animations.is_empty() {
+        return Err(ctx.err("animations", "no animation"));
+    }
     let node_index = root
         .nodes
         .iter()
@@ -102,7 +116,10 @@ pub(super) fn read(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: 
         Some(s) => Some(r.skin(s.value(), prim, n, &mesh_field)?),
     };
     let nodes = r.hierarchy()?;
-    let tracks = r.tracks(anim, node_index, targets.len())?;
+    let mut tracks = Vec::new();
+    for a in played_together(&root.animations) {
+        tracks.extend(r.tracks(a, &root.animations[a], node_index, targets.len())?);
+    }
 
     let duration = tracks.iter().map(|t| t.times[t.times.len() - 1]).fold(0.0f32, f32::max);
     let wanted = (duration as f64 * opts.fps as f64 + 1e-4).floor() + 1.0;
@@ -111,7 +128,7 @@ pub(super) fn read(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: 
         Some(m) => wanted.min(m as f64) as usize,
         None if wanted > max_frames as f64 => {
             return Err(ctx.err(
-                "animations[0]",
+                "animations",
                 format!(
                     "lasts {duration} s = {wanted} frames at {} fps, more than the limit of {max_frames} frames{} \
                      (read options `max_frames` keep the first frames of a longer animation)",
@@ -309,11 +326,11 @@ impl Reader<'_> {
             .collect())
     }
 
-    /// The channels of `anim` that can move the mesh: TRS of any node, weights of the mesh node.
-    fn tracks(&self, anim: &json::Animation, mesh_node: usize, n_targets: usize) -> Result<Vec<Track>> {
+    /// The channels of animation `a` that can move the mesh: TRS of any node, weights of the mesh node.
+    fn tracks(&self, a: usize, anim: &json::Animation, mesh_node: usize, n_targets: usize) -> Result<Vec<Track>> {
         let mut tracks = Vec::new();
         for (c, ch) in anim.channels.iter().enumerate() {
-            let field = format!("animations[0].channels[{c}]");
+            let field = format!("animations[{a}].channels[{c}]");
             let node = ch.target.node.value();
             if node >= self.root.nodes.len() {
                 return Err(self
@@ -345,7 +362,7 @@ impl Reader<'_> {
                 Checked::Valid(JsonInterpolation::CubicSpline) => Interpolation::CubicSpline,
                 Checked::Invalid => {
                     return Err(self.ctx.err(
-                        format!("animations[0].samplers[{s}].interpolation"),
+                        format!("animations[{a}].samplers[{s}].interpolation"),
                         "not STEP, LINEAR or CUBICSPLINE",
                     ));
                 }

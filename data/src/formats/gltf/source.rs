@@ -168,7 +168,7 @@ fn data_uri(uri: &str) -> std::result::Result<Vec<u8>, String> {
 }
 
 /// Percent-decode a URI reference; invalid escapes and non-UTF-8 results are errors.
-fn percent_decode(uri: &str) -> std::result::Result<String, String> {
+pub(super) fn percent_decode(uri: &str) -> std::result::Result<String, String> {
     let b = uri.as_bytes();
     let mut out = Vec::with_capacity(b.len());
     let mut i = 0;

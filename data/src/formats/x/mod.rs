@@ -6,7 +6,8 @@
 //! unnamed one); a set whose keys all fall on one time is no motion and is not a take. Every mesh of the file is
 //! read into one vertex list (polygons split into fans). A skinned mesh's vertex is `Σ_k w_k · G(j_k) · O_k · v`
 //! with `O_k` its skin weights' offset matrix and `G` a frame's object-space transform; a vertex without weights,
-//! and every vertex of an unskinned mesh, follows the frame that holds its mesh, `G(frame) · v`. A frame the take
+//! and every vertex of an unskinned mesh, follows the frame that holds its mesh, `G(frame) · v`; so do the weights
+//! of a `SkinWeights` naming a joint that is not a frame of the file (as assimp reads them: nothing moves it). A frame the take
 //! animates is `T · R · S` from its position, rotation and scale keys (a kind it has no keys for comes from its
 //! `FrameTransformMatrix`) or its matrix keys, linear between keys and held outside them; other frames keep their
 //! matrix. The take is sampled at `t₀, t₀ + Δ, …, t₁`, Δ the greatest common divisor of the key times' offsets
@@ -410,21 +411,21 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     let mut infl: Influences = Vec::new();
     let mut faces = Vec::new();
     let mut bones: Vec<(usize, Mat)> = Vec::new();
-    for (m, mesh) in file.meshes.iter().enumerate() {
+    for mesh in &file.meshes {
         let base = bind.len() as u32;
         // Rigid vertices follow the mesh's frame, or the identity (slot `n_frames`) for a mesh outside every frame.
         let rigid = mesh.frame.unwrap_or(n_frames);
         let mut lists: Influences = vec![Vec::new(); mesh.positions.len()];
         for s in &mesh.skins {
-            let j = *by_name.get(s.bone).ok_or_else(|| {
-                DataError::new(
-                    path,
-                    format!("Mesh {m} SkinWeights"),
-                    format!("joint {:?} is not a frame of the file", s.bone),
-                )
-            })?;
-            let slot = n_frames + 1 + bones.len();
-            bones.push((j, s.offset));
+            // Weights on a joint that is not a frame of the file (assimp reads such files) hold their vertices
+            // to the mesh as if unskinned: nothing animates that joint.
+            let slot = match by_name.get(s.bone) {
+                Some(&j) => {
+                    bones.push((j, s.offset));
+                    n_frames + bones.len()
+                }
+                None => rigid,
+            };
             for (&v, &w) in s.vertices.iter().zip(&s.weights) {
                 lists[v].push((slot, w));
             }
