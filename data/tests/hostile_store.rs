@@ -299,10 +299,21 @@ fn gltf_external_buffers_are_not_imported_as_clips() {
     std::fs::write(src.join("figure0.bin"), raw).unwrap();
     doc["buffers"][0]["uri"] = "figure0.bin".into();
     std::fs::write(&gltf, serde_json::to_vec(&doc).unwrap()).unwrap();
+    // Files of no clip format are not read, but counted by extension in the report.
+    std::fs::write(src.join("skin.PNG"), b"png").unwrap();
+    std::fs::write(src.join("README"), b"text").unwrap();
+    std::fs::write(src.join("licence.txt"), b"text").unwrap();
+    std::fs::write(src.join("notes.txt"), b"text").unwrap();
     let report = store::import(std::slice::from_ref(&src), &tmp.path().join("store"), &opts()).unwrap();
     assert_eq!(
         (report.sources, report.added, report.rejected.len()),
         (1, 1, 0),
+        "{report}"
+    );
+    let skipped: Vec<(&str, usize)> = report.skipped.iter().map(|(e, n)| (e.as_str(), *n)).collect();
+    assert_eq!(skipped, [("", 1), ("bin", 1), ("png", 1), ("txt", 2)]);
+    assert!(
+        report.to_string().contains("5 other files not read as clips"),
         "{report}"
     );
 }

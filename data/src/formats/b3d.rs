@@ -121,7 +121,7 @@ fn parse(path: &Path) -> Result<B3d> {
         if &tag == b"NODE" {
             node(&mut b, body_end, None, 0, &mut file)?;
         }
-        b.seek(body_end, "chunk")?;
+        leave(&mut b, body_end, &tag)?;
     }
     Ok(file)
 }
@@ -152,8 +152,9 @@ fn node(b: &mut Bytes, end: usize, parent: Option<usize>, depth: usize, file: &m
             b"MESH" => mesh(b, body_end, j, file)?,
             b"BONE" => {
                 let f = format!("{field}.BONE");
-                let n = (body_end - b.pos()) / 8;
-                if !(body_end - b.pos()).is_multiple_of(8) {
+                let bytes = left(b, body_end, &f)?;
+                let n = bytes / 8;
+                if !bytes.is_multiple_of(8) {
                     return Err(b.err(f, "length is not a whole number of (vertex, weight) pairs"));
                 }
                 file.weights.reserve(n);
@@ -172,9 +173,21 @@ fn node(b: &mut Bytes, end: usize, parent: Option<usize>, depth: usize, file: &m
             b"NODE" => node(b, body_end, Some(j), depth + 1, file)?,
             _ => {}
         }
-        b.seek(body_end, "chunk")?;
+        leave(b, body_end, &tag)?;
     }
     Ok(())
+}
+
+/// The bytes left in a chunk whose body ends at `end`; an error when its header fields already ran past it.
+fn left(b: &Bytes, end: usize, field: &str) -> Result<usize> {
+    end.checked_sub(b.pos())
+        .ok_or_else(|| b.err(field, format!("the chunk's fields run past its end at offset {end}")))
+}
+
+/// Moves to the end of a chunk, refusing one whose fields ran past that end.
+fn leave(b: &mut Bytes, end: usize, tag: &[u8; 4]) -> Result<()> {
+    left(b, end, &String::from_utf8_lossy(tag))?;
+    b.seek(end, "chunk")
 }
 
 fn keys(b: &mut Bytes, end: usize, field: &str, out: &mut Keys) -> Result<()> {
@@ -184,7 +197,7 @@ fn keys(b: &mut Bytes, end: usize, field: &str, out: &mut Keys) -> Result<()> {
         .filter(|(bit, _)| flags & bit != 0)
         .map(|(_, s)| s)
         .sum::<usize>();
-    let bytes = end - b.pos();
+    let bytes = left(b, end, field)?;
     if !bytes.is_multiple_of(size) {
         return Err(b.err(field, format!("{bytes} bytes of keys are not whole {size}-byte keys")));
     }
@@ -227,7 +240,7 @@ fn mesh(b: &mut Bytes, end: usize, node: usize, file: &mut B3d) -> Result<()> {
                 }
                 let stride =
                     12 + if flags & 1 != 0 { 12 } else { 0 } + if flags & 2 != 0 { 16 } else { 0 } + 4 * sets * size;
-                let bytes = body_end - b.pos();
+                let bytes = left(b, body_end, "VRTS")?;
                 if !bytes.is_multiple_of(stride) {
                     return Err(b.err("VRTS", format!("{bytes} bytes are not whole {stride}-byte vertices")));
                 }
@@ -240,7 +253,7 @@ fn mesh(b: &mut Bytes, end: usize, node: usize, file: &mut B3d) -> Result<()> {
             }
             b"TRIS" => {
                 let _brush = b.i32("TRIS.brush")?;
-                let bytes = body_end - b.pos();
+                let bytes = left(b, body_end, "TRIS")?;
                 if !bytes.is_multiple_of(12) {
                     return Err(b.err("TRIS", format!("{bytes} bytes are not whole triangles")));
                 }
@@ -255,7 +268,7 @@ fn mesh(b: &mut Bytes, end: usize, node: usize, file: &mut B3d) -> Result<()> {
             }
             _ => {}
         }
-        b.seek(body_end, "chunk")?;
+        leave(b, body_end, &tag)?;
     }
     file.mesh = Some((node, positions, faces));
     Ok(())
@@ -491,5 +504,21 @@ mod tests {
         assert!(e.reason.contains("vertex 7 of 3"), "{e}");
         std::fs::write(&path, b"BB3Dxxxx").unwrap();
         assert!(read(&path, &ReadOptions::default()).is_err());
+    }
+
+    #[test]
+    fn refuses_chunks_shorter_than_their_own_fields() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.b3d");
+        let good = triangle_file(&[(1, [0.0; 3]), (3, [0.0; 3])]);
+        for tag in [b"TRIS", b"VRTS", b"KEYS", b"ANIM", b"BONE"] {
+            let at = good.windows(4).position(|w| w == tag).unwrap();
+            // Two bytes claimed: fewer than the chunk's header fields (a brush, flags or counts) need.
+            let mut short = good.clone();
+            short[at + 4..at + 8].copy_from_slice(&2i32.to_le_bytes());
+            std::fs::write(&path, &short).unwrap();
+            let e = read(&path, &ReadOptions::default()).unwrap_err();
+            assert!(!e.reason.contains("panicked"), "{}: {e}", String::from_utf8_lossy(tag));
+        }
     }
 }

@@ -7,7 +7,7 @@
 //! are imported. Only problems with the output folder or an existing store abort, and then no temporary file is
 //! left behind.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -64,6 +64,9 @@ pub struct ImportReport {
     /// Skin weights of this run's accepted takes that were renormalised or had more than 4 entries (each
     /// take's vertices counted once, however many windows it gave).
     pub skin: SkinStats,
+    /// Files met in the searched folders that are not read as clips (sidecars, textures, unknown formats), counted
+    /// by lower-case extension (`""` for none).
+    pub skipped: BTreeMap<String, usize>,
 }
 
 impl fmt::Display for ImportReport {
@@ -82,6 +85,19 @@ impl fmt::Display for ImportReport {
         )?;
         if self.skin.vertices > 0 {
             writeln!(f, "  skin weights: {}", self.skin.line())?;
+        }
+        if !self.skipped.is_empty() {
+            let by_ext: Vec<String> = self
+                .skipped
+                .iter()
+                .map(|(ext, n)| format!("{n} × {}", if ext.is_empty() { "(no extension)" } else { ext }))
+                .collect();
+            let n: usize = self.skipped.values().sum();
+            writeln!(
+                f,
+                "  {n} other files not read as clips (sidecars, textures, unknown formats): {}",
+                by_ext.join(", ")
+            )?;
         }
         for r in &self.rejected {
             writeln!(f, "  rejected {}: {}", r.source, r.reason)?;
@@ -109,21 +125,22 @@ pub fn import_with_progress(
 ) -> Result<ImportReport> {
     opts.validate()?;
     let existing = prepare_out(out, opts.frames, opts.p)?;
-    let jobs = discover(sources, out)?;
+    let (jobs, skipped) = discover(sources, out)?;
     let owned = opts.clone();
     let limits = Limits {
         frames: opts.frames,
         p: opts.p,
         time: opts.time_limit,
     };
-    run_jobs(
+    let report = run_jobs(
         out,
         existing,
         &jobs,
         limits,
         progress,
         Arc::new(move |job: &Job| process_file(job, &owned)),
-    )
+    )?;
+    Ok(ImportReport { skipped, ..report })
 }
 
 /// Write `cfg.clips` procedural clips into the store `out` with P = [`DEFAULT_P`].
@@ -225,11 +242,13 @@ fn prepare_out(out: &Path, frames: usize, p: usize) -> Result<Option<(Store, Vec
 }
 
 /// Find import jobs under `sources`, sorted and deduplicated by canonical path; skips the output folder and any
-/// folder that holds a store.
-fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
+/// folder that holds a store. Also counts, by extension, the files of the searched folders that are not sources
+/// (an OBJ folder's frames aside) and a glTF's buffer files.
+fn discover(sources: &[PathBuf], out: &Path) -> Result<(Vec<Job>, BTreeMap<String, usize>)> {
     let out_canon = std::fs::canonicalize(out).map_err(|e| DataError::io(out, e))?;
     let mut found: Vec<(PathBuf, Result<Format>)> = Vec::new();
     let mut seen = HashSet::new();
+    let mut skipped = BTreeMap::new();
     for src in sources {
         match std::fs::canonicalize(src) {
             Err(e) => found.push((src.clone(), Err(DataError::io(src, e)))),
@@ -244,7 +263,7 @@ fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
                         )),
                     ));
                 } else {
-                    walk(&path, &out_canon, &mut found, &mut seen);
+                    walk(&path, &out_canon, &mut found, &mut seen, &mut skipped);
                 }
             }
             Ok(path) => {
@@ -265,10 +284,16 @@ fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
         .filter_map(|b| std::fs::canonicalize(b).ok())
         .collect();
     if !buffers.is_empty() {
-        found.retain(|(p, _)| std::fs::canonicalize(p).map_or(true, |c| !buffers.contains(&c)));
+        found.retain(|(p, _)| {
+            let keep = std::fs::canonicalize(p).map_or(true, |c| !buffers.contains(&c));
+            if !keep {
+                *skipped.entry(extension(p)).or_insert(0) += 1;
+            }
+            keep
+        });
     }
     let mut cache = HashMap::new();
-    Ok(found
+    let jobs = found
         .into_iter()
         .map(|(path, format)| Job::File {
             source: path.display().to_string(),
@@ -276,13 +301,27 @@ fn discover(sources: &[PathBuf], out: &Path) -> Result<Vec<Job>> {
             path,
             format,
         })
-        .collect())
+        .collect();
+    Ok((jobs, skipped))
+}
+
+/// A path's lower-case extension, `""` when it has none.
+fn extension(p: &Path) -> String {
+    p.extension()
+        .map_or_else(String::new, |e| e.to_string_lossy().to_ascii_lowercase())
 }
 
 /// Recursively collect clip files and OBJ-sequence folders under `dir`. Unreadable folders become rejected jobs.
 /// Every folder and file is visited once by its canonical path (`seen`), so a symlink cycle ends and a file
-/// reached through two links is imported once, under the first path met.
-fn walk(dir: &Path, out: &Path, found: &mut Vec<(PathBuf, Result<Format>)>, seen: &mut HashSet<PathBuf>) {
+/// reached through two links is imported once, under the first path met. Files that are not sources (an OBJ
+/// folder's `.obj` frames and the store's own files aside) are counted by extension in `skipped`.
+fn walk(
+    dir: &Path,
+    out: &Path,
+    found: &mut Vec<(PathBuf, Result<Format>)>,
+    seen: &mut HashSet<PathBuf>,
+    skipped: &mut BTreeMap<String, usize>,
+) {
     if dir == out || dir.join(CLIPS_FILE).exists() {
         return;
     }
@@ -306,19 +345,20 @@ fn walk(dir: &Path, out: &Path, found: &mut Vec<(PathBuf, Result<Format>)>, seen
             }
         };
     entries.sort();
-    let ext = |p: &Path| p.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    if entries.iter().any(|p| p.is_file() && ext(p).as_deref() == Some("obj")) {
+    if entries.iter().any(|p| p.is_file() && extension(p) == "obj") {
         found.push((dir.to_path_buf(), Format::from_path(dir)));
     }
     for p in entries {
         if p.is_dir() {
-            walk(&p, out, found, seen);
+            walk(&p, out, found, seen, skipped);
         } else if formats::is_source(&p) {
             // A link that resolves to nothing is still listed: its read fails with the reason.
             if std::fs::canonicalize(&p).map_or(true, |c| seen.insert(c)) {
                 let format = Format::from_path(&p);
                 found.push((p, format));
             }
+        } else if extension(&p) != "obj" && p.file_name().is_none_or(|n| n != PROVENANCE_FILE) {
+            *skipped.entry(extension(&p)).or_insert(0) += 1;
         }
     }
 }
@@ -483,6 +523,7 @@ fn run_jobs(
         val,
         rejected,
         skin,
+        skipped: BTreeMap::new(),
     })
 }
 

@@ -46,6 +46,10 @@ pub const MAX_DEPTH: usize = 256;
 /// recurse per level, and a file nested thousands deep would overflow the stack.
 pub const MAX_XML_DEPTH: usize = 512;
 
+/// Most attributes on one element of a `.dae` accepted before it is parsed: the XML parser checks each new
+/// attribute against those before it (quadratic work), and COLLADA's elements carry a handful.
+pub const MAX_XML_ATTRIBUTES: usize = 256;
+
 /// Frame rate of takes whose keys do not lie on one grid.
 pub const DEFAULT_FPS: f64 = 30.0;
 
@@ -300,10 +304,20 @@ fn read_xml(path: &Path) -> Result<String> {
     Ok(String::from_utf8_lossy(&bytes).into_owned())
 }
 
-/// The deepest element nesting of XML `text`, scanning tags only (comments, CDATA, declarations and processing
-/// instructions skipped, quoted attribute values honoured), stopping as soon as it passes `max`. An approximate
-/// count on malformed XML is harmless: the parser then refuses the file.
-fn xml_depth(text: &str, max: usize) -> usize {
+/// The shape of an XML text as [`xml_shape`] scans it.
+#[derive(Debug, PartialEq)]
+struct XmlShape {
+    /// Deepest element nesting.
+    depth: usize,
+    /// Most attributes (`=` signs outside quotes) on one element start.
+    attributes: usize,
+}
+
+/// The deepest element nesting and the most attributes on one element of XML `text`, scanning tags only
+/// (comments, CDATA, declarations and processing instructions skipped, quoted attribute values honoured),
+/// stopping as soon as either passes its limit ([`MAX_XML_DEPTH`], [`MAX_XML_ATTRIBUTES`]). An approximate count
+/// on malformed XML is harmless: the parser then refuses the file.
+fn xml_shape(text: &str) -> XmlShape {
     let b = text.as_bytes();
     let find = |from: usize, pat: &[u8]| {
         b[from.min(b.len())..]
@@ -311,7 +325,11 @@ fn xml_depth(text: &str, max: usize) -> usize {
             .position(|w| w == pat)
             .map_or(b.len(), |k| from + k + pat.len())
     };
-    let (mut i, mut depth, mut deepest) = (0, 0usize, 0);
+    let (mut i, mut depth) = (0, 0usize);
+    let mut shape = XmlShape {
+        depth: 0,
+        attributes: 0,
+    };
     while let Some(k) = b[i..].iter().position(|&c| c == b'<') {
         i += k + 1;
         match b.get(i) {
@@ -326,37 +344,47 @@ fn xml_depth(text: &str, max: usize) -> usize {
             Some(_) => {
                 // An element start: to its closing `>` outside quotes; `/>` closes it at once.
                 let mut quote = None;
-                let mut prev = 0u8;
+                let (mut prev, mut attributes) = (0u8, 0);
                 while let Some(&c) = b.get(i) {
                     match (quote, c) {
                         (None, b'"' | b'\'') => quote = Some(c),
                         (Some(q), _) if c == q => quote = None,
+                        (None, b'=') => attributes += 1,
                         (None, b'>') => break,
                         _ => {}
                     }
                     prev = c;
                     i += 1;
                 }
+                shape.attributes = shape.attributes.max(attributes);
                 if prev != b'/' {
                     depth += 1;
-                    deepest = deepest.max(depth);
-                    if deepest > max {
-                        return deepest;
-                    }
+                    shape.depth = shape.depth.max(depth);
+                }
+                if shape.depth > MAX_XML_DEPTH || shape.attributes > MAX_XML_ATTRIBUTES {
+                    return shape;
                 }
             }
             None => break,
         }
     }
-    deepest
+    shape
 }
 
 fn xml_doc<'i>(path: &Path, text: &'i str) -> Result<roxmltree::Document<'i>> {
-    if xml_depth(text, MAX_XML_DEPTH) > MAX_XML_DEPTH {
+    let shape = xml_shape(text);
+    if shape.depth > MAX_XML_DEPTH {
         return Err(DataError::new(
             path,
             "xml",
             format!("elements nested more than {MAX_XML_DEPTH} deep"),
+        ));
+    }
+    if shape.attributes > MAX_XML_ATTRIBUTES {
+        return Err(DataError::new(
+            path,
+            "xml",
+            format!("an element with more than {MAX_XML_ATTRIBUTES} attributes"),
         ));
     }
     let opts = roxmltree::ParsingOptions {

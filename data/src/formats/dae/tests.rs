@@ -216,7 +216,24 @@ fn broken_files_get_reasons() {
     assert!(parsed.unwrap_err().reason.contains("static mesh"));
     // Comments, CDATA, quoted `>` and self-closed elements do not count as nesting.
     let flat = "<a x=\"1>2\"/><!-- <b><b><b> --><![CDATA[<c><c>]]><?pi <d>?>".repeat(MAX_XML_DEPTH);
-    assert_eq!(xml_depth(&format!("<r>{flat}<e><f/></e></r>"), MAX_XML_DEPTH), 2);
+    let shape = xml_shape(&format!("<r>{flat}<e><f/></e></r>"));
+    assert_eq!(
+        shape,
+        XmlShape {
+            depth: 2,
+            attributes: 1
+        }
+    );
+    // An element with 128k attributes (the parser's duplicate check is quadratic in them) is refused unparsed;
+    // `=` inside quoted values is not an attribute.
+    let many: String = (0..131_072).map(|k| format!(" a{k}=\"{k}\"")).collect();
+    let text = rigid("", "", "Y_UP").replace(
+        "<library_visual_scenes>",
+        &format!("<extra{many}/><library_visual_scenes>"),
+    );
+    let e = bake(&text).unwrap_err();
+    assert!(e.reason.contains("more than 256 attributes"), "{e}");
+    assert_eq!(xml_shape("<a b=\"x=y=z\" c='=' d=\"1\"/>").attributes, 3);
     // A take longer than the frame limit is refused before it is baked.
     let opts = ReadOptions {
         max_frames: 1,
