@@ -7,7 +7,8 @@ use any4d_data::Clip;
 use any4d_data::formats::dymesh_bin::{read_bin, write_bin};
 use any4d_data::formats::gltf::{GltfReadOptions, read_gltf, write_gltf};
 use any4d_data::formats::obj::{read_obj_seq, write_obj_seq};
-use any4d_data::formats::{read_clip, write_clip, write_clip_at};
+use any4d_data::formats::skeletal::{ReadOptions, TakeSel};
+use any4d_data::formats::{self, read_clip, write_clip, write_clip_at};
 
 fn fixture(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(rel)
@@ -246,6 +247,7 @@ fn gltf_morph_fixture_bakes_weights() {
         fps: 10.0,
         max_frames: Some(5),
         mesh: Some(0),
+        take: 0,
     };
     assert_eq!(read_gltf(&fixture("gltf/morph_square.gltf"), &opts).unwrap().frames, 5);
     let opts = GltfReadOptions {
@@ -310,11 +312,45 @@ fn gltf_animations_on_disjoint_channels_play_together() {
     std::fs::write(&split_path, serde_json::to_vec(&doc).unwrap()).unwrap();
     let got = read_gltf(&split_path, &GltfReadOptions::default()).unwrap();
     assert_eq!((got.frames, &got.vertices), (whole.frames, &whole.vertices));
-    // The first channel twice: alternatives, so only the first animation moves the strip.
-    doc["animations"] = serde_json::json!([split[0], split[0], split[1]]);
+    let takes = formats::list_takes(&split_path).unwrap().unwrap();
+    assert_eq!(takes.iter().map(|t| t.name.as_str()).collect::<Vec<_>>(), ["all"]);
+    // The first channel twice: alternatives (as Blender writes one animation per action), so each animation is a
+    // take of its own, named after it, and picked by index or name.
+    let mut named = split[0].clone();
+    named["name"] = "wave".into();
+    doc["animations"] = serde_json::json!([split[0], named, split[1]]);
     std::fs::write(&split_path, serde_json::to_vec(&doc).unwrap()).unwrap();
-    let first = read_gltf(&split_path, &GltfReadOptions::default()).unwrap();
-    assert_ne!(first.vertices, whole.vertices);
+    let takes = formats::list_takes(&split_path).unwrap().unwrap();
+    let names: Vec<&str> = takes.iter().map(|t| t.name.as_str()).collect();
+    assert_eq!(names, ["animation0", "wave", "animation2"]);
+    let read = |take: TakeSel| {
+        let opts = ReadOptions {
+            take,
+            ..ReadOptions::default()
+        };
+        formats::read_take(&split_path, &opts).unwrap()
+    };
+    let first = read(TakeSel::First);
+    assert_ne!(first.clip.vertices, whole.vertices);
+    assert_eq!(first.take.unwrap().name, "animation0");
+    assert_eq!(read(TakeSel::Name("wave".into())).clip.vertices, first.clip.vertices);
+    let third = read(TakeSel::Index(2));
+    assert_ne!(third.clip.vertices, first.clip.vertices);
+    assert_eq!(third.clip.frames, takes[2].frames);
+    // An import makes a clip of every take.
+    let report = any4d_data::store::import(
+        std::slice::from_ref(&split_path),
+        &dir.path().join("store"),
+        &any4d_data::store::ImportOptions {
+            filter: any4d_data::preprocess::VertexFilter { min: 3, max: 1024 },
+            frames: 2,
+            p: 4,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!((report.rejected.len(), report.sources), (0, 1), "{report}");
+    assert!(report.added >= 3, "{report}");
 }
 
 #[test]

@@ -173,7 +173,7 @@ impl Format {
 
     /// Whether files of this format hold takes ([`list_takes`]) rather than exactly one clip.
     pub fn has_takes(self) -> bool {
-        !matches!(self, Format::Bin | Format::ObjSeq | Format::Gltf | Format::Glb)
+        !matches!(self, Format::Bin | Format::ObjSeq)
     }
 }
 
@@ -239,8 +239,7 @@ impl Format {
     }
 }
 
-/// Read a clip in the format of its path (glTF with [`gltf::GltfReadOptions::default`]; the first take of a
-/// format with takes), under [`guard`].
+/// Read a clip in the format of its path (the first take of a format with takes), under [`guard`].
 pub fn read_clip(path: &Path) -> Result<Clip> {
     Ok(read_take(path, &ReadOptions::default())?.clip)
 }
@@ -279,7 +278,7 @@ fn read_take_unguarded(path: &Path, format: Format, opts: &ReadOptions) -> Resul
     let (clip, stats, take) = match format {
         Format::Bin => return single(dymesh_bin::read_bin(path)?),
         Format::ObjSeq => return single(obj::read_obj_seq(path)?),
-        Format::Gltf | Format::Glb => return single(gltf::read_gltf(path, &gltf::GltfReadOptions::default())?),
+        Format::Gltf | Format::Glb => gltf::read(path, opts)?,
         Format::Iqm => iqm::read(path, opts)?,
         Format::Md5 => md5::read(path, opts)?,
         Format::Md2 => md2::read(path, opts)?,
@@ -306,7 +305,8 @@ pub fn list_takes(path: &Path) -> Result<Option<Vec<TakeInfo>>> {
 
 fn list_takes_unguarded(path: &Path, format: Format) -> Result<Option<Vec<TakeInfo>>> {
     Ok(Some(match format {
-        Format::Bin | Format::ObjSeq | Format::Gltf | Format::Glb => return Ok(None),
+        Format::Bin | Format::ObjSeq => return Ok(None),
+        Format::Gltf | Format::Glb => gltf::list_takes(path)?,
         Format::Iqm => iqm::list_takes(path)?,
         Format::Md5 => md5::list_takes(path)?,
         Format::Md2 => md2::list_takes(path)?,

@@ -7,7 +7,7 @@ use std::path::Path;
 use crate::caption;
 use crate::clip::{Clip, object_uid};
 use crate::error::{DataError, Result};
-use crate::formats;
+use crate::formats::{self, Format, dymesh_bin::MISSING_CAPTION};
 use crate::formats::skeletal::{ReadOptions, SkinStats, TakeSel};
 use crate::fps::farthest_point_sampling;
 use crate::preprocess;
@@ -81,7 +81,12 @@ pub(super) fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
         let result = read.and_then(|t| {
             let mut clip = t.clip;
             clip.id = format!("{object}_offset{k}_0-{}", clip.frames - 1);
-            clip.caption = caption::caption(&asset, &take.name);
+            // A glTF may carry its own caption (any4d's writer stores the clip's); other clips are captioned
+            // from their asset and take names.
+            let own = matches!(format, Format::Gltf | Format::Glb) && clip.caption != MISSING_CAPTION;
+            if !own {
+                clip.caption = caption::caption(&asset, &take.name);
+            }
             Ok((accept(clip, take_source.clone(), opts)?, t.stats))
         });
         match result {

@@ -29,6 +29,7 @@ use std::path::{Path, PathBuf};
 
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
+use crate::formats::skeletal::{self, ReadOptions, SkinStats, TakeInfo};
 
 pub use write::{MAX_WRITE_FRAMES, write_gltf};
 
@@ -53,6 +54,8 @@ pub struct GltfReadOptions {
     pub max_frames: Option<usize>,
     /// Mesh index to read; `None` = the first mesh that a node instantiates.
     pub mesh: Option<usize>,
+    /// The take baked ([`list_takes`]: all animations when they drive disjoint channels, else one each).
+    pub take: usize,
 }
 
 impl Default for GltfReadOptions {
@@ -61,6 +64,7 @@ impl Default for GltfReadOptions {
             fps: DEFAULT_FPS,
             max_frames: None,
             mesh: None,
+            take: 0,
         }
     }
 }
@@ -78,12 +82,42 @@ pub enum ExternalBuffers {
 pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
     super::guard(path, || {
         let bytes = super::read_clip_file(path)?;
-        let folder = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        read::read(&bytes, path, opts, &ExternalBuffers::Folder(folder))
+        read::read(&bytes, path, opts, &ExternalBuffers::Folder(folder_of(path)))
     })
+}
+
+/// The takes of a `.gltf` / `.glb` at [`DEFAULT_FPS`]: one of all its animations when no two drive the same
+/// channel (node and property), else one per animation, named after it.
+pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
+    let bytes = super::read_clip_file(path)?;
+    read::takes(&bytes, path, DEFAULT_FPS, &ExternalBuffers::Folder(folder_of(path)))
+}
+
+/// Read take `opts.take` of a `.gltf` / `.glb` at [`DEFAULT_FPS`], its length checked against `opts.max_frames`
+/// before it is baked.
+pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInfo)> {
+    let bytes = super::read_clip_file(path)?;
+    let external = ExternalBuffers::Folder(folder_of(path));
+    let takes = read::takes(&bytes, path, DEFAULT_FPS, &external)?;
+    if takes.is_empty() {
+        return Err(DataError::new(path, "animations", "no animation: a static mesh is not a clip"));
+    }
+    let k = skeletal::pick(path, &takes, &opts.take)?;
+    skeletal::check_frames(path, &takes[k].name, takes[k].frames, opts.max_frames)?;
+    let gltf_opts = GltfReadOptions {
+        take: k,
+        ..GltfReadOptions::default()
+    };
+    let clip = read::read(&bytes, path, &gltf_opts, &external)?;
+    Ok((clip, SkinStats::default(), takes[k].clone()))
+}
+
+/// The folder a glTF's relative buffer URIs resolve against.
+fn folder_of(path: &Path) -> PathBuf {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
 }
 
 /// Read and bake glTF or GLB `bytes`; `path` names the file in errors and gives the clip its id and source.

@@ -15,22 +15,73 @@ use super::source::{self, Document};
 use super::{Ctx, ExternalBuffers, GltfReadOptions};
 use crate::clip::Clip;
 use crate::error::Result;
+use crate::formats::skeletal::TakeInfo;
 use crate::formats::dymesh_bin::MISSING_CAPTION;
 use crate::limits::{CLIP_VERTICES, FRAMES};
 
-/// The animations baked as the clip: all of them when no two target the same channel (node and property) —
-/// exporters such as COLLADA2GLTF write one animation per joint, which players run together — else the first.
-fn played_together(animations: &[json::Animation]) -> Vec<usize> {
+/// The takes of a glTF file, each a name and the animations baked together: one take of every animation when no
+/// two target the same channel (node and property) — exporters such as COLLADA2GLTF write one animation per
+/// joint, which players run together — else one take per animation (Blender writes one per action), named after
+/// it (`animation<a>` when it has no name).
+pub(super) fn take_groups(animations: &[json::Animation]) -> Vec<(String, Vec<usize>)> {
+    let named = |a: usize| {
+        animations[a]
+            .name
+            .clone()
+            .filter(|n| !n.trim().is_empty())
+            .unwrap_or_else(|| format!("animation{a}"))
+    };
     let mut owner = std::collections::HashMap::new();
-    for (a, anim) in animations.iter().enumerate() {
-        for ch in &anim.channels {
+    let disjoint = animations.iter().enumerate().all(|(a, anim)| {
+        anim.channels.iter().all(|ch| {
             let key = (ch.target.node.value(), format!("{:?}", ch.target.path));
-            if *owner.entry(key).or_insert(a) != a {
-                return vec![0];
+            *owner.entry(key).or_insert(a) == a
+        })
+    });
+    match animations.len() {
+        0 => Vec::new(),
+        1 => vec![(named(0), vec![0])],
+        n if disjoint => vec![("all".to_owned(), (0..n).collect())],
+        n => (0..n).map(|a| (named(a), vec![a])).collect(),
+    }
+}
+
+/// The takes of one glTF / GLB file's bytes ([`take_groups`]), each as long as its latest key, in frames at
+/// `fps`; the key times are read and checked as the bake reads them.
+pub(super) fn takes(bytes: &[u8], path: &Path, fps: f32, external: &ExternalBuffers) -> Result<Vec<TakeInfo>> {
+    let ctx = Ctx { path };
+    let Document { root, buffers, .. } = source::load(ctx, bytes, external)?;
+    let r = Reader {
+        ctx,
+        root: &root,
+        buffers: &buffers,
+    };
+    let mut out = Vec::new();
+    for (name, group) in take_groups(&root.animations) {
+        let mut duration = 0.0f64;
+        for &a in &group {
+            for (c, ch) in root.animations[a].channels.iter().enumerate() {
+                let field = format!("animations[{a}].channels[{c}]");
+                let s = ch.sampler.value();
+                let sampler = root.animations[a].samplers.get(s).ok_or_else(|| {
+                    ctx.err(format!("{field}.sampler"), format!("sampler {s} does not exist"))
+                })?;
+                let times = r.floats(sampler.input.value(), &format!("{field} input"), Type::Scalar, FLOAT)?;
+                if !times.iter().all(|t| t.is_finite()) || times.windows(2).any(|w| w[1] < w[0]) {
+                    return Err(ctx.err(&field, "key times are not increasing"));
+                }
+                duration = duration.max(times.last().copied().unwrap_or(0.0));
             }
         }
+        out.push(TakeInfo {
+            name,
+            // A float-to-int cast saturates: a take longer than any limit stays longer than it.
+            frames: (duration * f64::from(fps) + 1e-4).floor() as usize + 1,
+            fps,
+            file: None,
+        });
     }
-    (0..animations.len()).collect()
+    Ok(out)
 }
 
 /// Read and bake one glTF / GLB file's bytes.
@@ -117,7 +168,14 @@ pub(super) fn read(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: 
     };
     let nodes = r.hierarchy()?;
     let mut tracks = Vec::new();
-    for a in played_together(&root.animations) {
+    let groups = take_groups(&root.animations);
+    let (_, group) = groups.get(opts.take).ok_or_else(|| {
+        ctx.err(
+            "animations",
+            format!("take {} of a file with {} takes", opts.take, groups.len()),
+        )
+    })?;
+    for &a in group {
         tracks.extend(r.tracks(a, &root.animations[a], node_index, targets.len())?);
     }
 
