@@ -19,8 +19,10 @@
 //!   first-person hands and guns, a flag;
 //! - `minetest-data` and `minetest-mod-*`: every `.b3d` under `usr/share/games/minetest` that has node keys (the
 //!   player character, mobs), one folder per file, the asset named after the file;
-//! - both of the last two (folder [`MOCAP_FOLDER`]): the `.bvh` motion capture of `assimp-testmodels` beside
-//!   copies of the Red Eclipse player meshes, retargeted at import ([`crate::formats::bvh`]).
+//! - `redeclipse-data` and `assimp-testmodels` (folder [`MOCAP_FOLDER`]): the `.bvh` motion capture of
+//!   `assimp-testmodels` beside copies of the Red Eclipse player meshes, retargeted at import
+//!   ([`crate::formats::bvh`]); `cube2-data` and `assimp-testmodels` (folder [`CUBE2_MOCAP_FOLDER`]): the same
+//!   beside a copy of Cube 2's snoutx10k player.
 //!
 //! Packages held out for evaluation (OpenArena, MegaGlest, Nexuiz, Xonotic) are refused by name.
 
@@ -90,11 +92,42 @@ pub fn stage(extracted: &Path, out: &Path) -> Result<StageReport> {
         let n = stage_mocap(&re, &assimp, &out.join(MOCAP_FOLDER))?;
         report.assets.insert(MOCAP_FOLDER.to_owned(), n);
     }
+    let cube2 = extracted.join("cube2-data");
+    if cube2.is_dir() && assimp.is_dir() {
+        let n = stage_cube2_mocap(&cube2, &assimp, &out.join(CUBE2_MOCAP_FOLDER))?;
+        report.assets.insert(CUBE2_MOCAP_FOLDER.to_owned(), n);
+    }
     Ok(report)
 }
 
 /// Staging folder (and `source_package`) of the motion capture retargeted onto the Red Eclipse players.
 pub const MOCAP_FOLDER: &str = "redeclipse-data+assimp-testmodels";
+
+/// Staging folder (and `source_package`) of the motion capture retargeted onto Cube 2's snoutx10k player.
+pub const CUBE2_MOCAP_FOLDER: &str = "cube2-data+assimp-testmodels";
+
+/// The BVH files of `assimp-testmodels` beside a copy of Cube 2's snoutx10k player mesh, in a folder whose last
+/// names match the player's own staging (`cube2-data/snoutx10k/`), so that its clips share the player's object
+/// uid and split. The licence records both sources.
+fn stage_cube2_mocap(cube2: &Path, assimp: &Path, dest: &Path) -> Result<usize> {
+    let motions = files_with(&assimp.join("usr/share/assimp/models/BVH"), "bvh");
+    let mesh = cube2.join("usr/share/games/cube2/packages/models/snoutx10k/snoutx10k.iqm");
+    if motions.is_empty() || !mesh.is_file() {
+        return Ok(0);
+    }
+    let to = dest.join("cube2-data/snoutx10k");
+    copy(&mesh, &to.join("snoutx10k.iqm"))?;
+    for m in &motions {
+        copy(m, &to.join(m.file_name().expect("file")))?;
+    }
+    let licence = format!(
+        "{} (mesh) AND {} (motion)",
+        Dep5::read(&cube2.join("usr/share/doc/cube2-data/copyright")).licence(&rel(cube2, &mesh)),
+        Dep5::read(&assimp.join("usr/share/doc/assimp-testmodels/copyright")).licence(&rel(assimp, &motions[0]))
+    );
+    write_provenance(&to, CUBE2_MOCAP_FOLDER, &licence, "snout player")?;
+    Ok(1)
+}
 
 /// The CMU and Biovision BVH files of `assimp-testmodels` beside copies of the Red Eclipse player meshes, in
 /// folders whose last two names match the players' own staging (`player_male/male/`), so that their clips share

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use any4d_data::formats::{iqm, md2};
 use any4d_data::preprocess::VertexFilter;
-use any4d_data::real_corpus::{MOCAP_FOLDER, stage};
+use any4d_data::real_corpus::{CUBE2_MOCAP_FOLDER, MOCAP_FOLDER, stage};
 use any4d_data::store::{self, ImportOptions, Status, read_index};
 
 fn write(path: &Path, bytes: &[u8]) {
@@ -289,6 +289,25 @@ fn mocap_is_staged_beside_the_players_with_both_licences() {
         serde_json::from_slice(&std::fs::read(to.join(store::PROVENANCE_FILE)).unwrap()).unwrap();
     assert_eq!(provenance["licence"], "CC-BY-SA-3.0 (mesh) AND BSD-3-clause (motion)");
     assert_eq!(provenance["source_package"], MOCAP_FOLDER);
+    // No Cube 2 package, no snoutx10k copy; with it, the player gets the same motions.
+    assert_eq!(report.assets.get(CUBE2_MOCAP_FOLDER), None, "{report:?}");
+    let cube2 = extracted.join("cube2-data");
+    write(
+        &cube2.join("usr/share/games/cube2/packages/models/snoutx10k/snoutx10k.iqm"),
+        b"IQM",
+    );
+    write(
+        &cube2.join("usr/share/doc/cube2-data/copyright"),
+        b"Format: dep5\n\nFiles: *\nLicense: CC-BY-3.0\n",
+    );
+    let staged2 = dir.path().join("staged2");
+    let report = stage(&extracted, &staged2).unwrap();
+    assert_eq!(report.assets.get(CUBE2_MOCAP_FOLDER), Some(&1), "{report:?}");
+    let snout = staged2.join(CUBE2_MOCAP_FOLDER).join("cube2-data/snoutx10k");
+    assert!(snout.join("snoutx10k.iqm").is_file() && snout.join("01_01.bvh").is_file());
+    let provenance: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(snout.join(store::PROVENANCE_FILE)).unwrap()).unwrap();
+    assert_eq!(provenance["licence"], "CC-BY-3.0 (mesh) AND BSD-3-clause (motion)");
 
     let opts = ImportOptions {
         filter: VertexFilter { min: 3, max: 4096 },

@@ -104,7 +104,7 @@ pub const PARTS: &[Part] = &[
     part(
         "{p}forearm",
         &["{S}ForeArm", "{S}Elbow", "{S}LowArm"],
-        &["forearm.{s}.01", "forearm.{s}", "{S}ForeArm"],
+        &["forearm.{s}.01", "forearm.{s}", "{S}ForeArm", "LowerArm.{s}"],
         Some("{p}hand"),
         Some("{p}upper_arm"),
     ),
@@ -132,7 +132,7 @@ pub const PARTS: &[Part] = &[
     part(
         "{p}foot",
         &["{S}Foot", "{S}Ankle"],
-        &["foot.{s}", "{S}Foot"],
+        &["foot.{s}", "{S}Foot", "UpperFoot.{s}"],
         Some("{p}toe"),
         Some("{p}shin"),
     ),
@@ -791,6 +791,54 @@ mod tests {
         // Turned 90° about the vertical through the hips and moved 1 along x: (1, 7, 14) Z-up → (1, 14, −7).
         assert!(close(clip.frame(2)[0], [1.0, 14.0, -7.0]), "{:?}", clip.frame(2)[0]);
         assert!(close(clip.frame(2)[1], [1.0, 10.0, 0.0]), "{:?}", clip.frame(2)[1]);
+    }
+
+    #[test]
+    fn the_table_maps_cube2_player_bones() {
+        // Bone names of Cube 2's snoutx10k player (IK helpers and fingers among them).
+        let names: Vec<String> = [
+            "Root",
+            "SpineTwist",
+            "Torso",
+            "Hips",
+            "Spine1",
+            "ArmIK.L",
+            "Spine2",
+            "Neck",
+            "Head",
+            "UpperArm.L",
+            "LowerArm.L",
+            "Hand.L",
+            "UpperArm.R",
+            "LowerArm.R",
+            "Hand.R",
+            "Hip.L",
+            "Thigh.L",
+            "Shin.L",
+            "UpperFoot.L",
+            "LowerFoot.L",
+            "Hip.R",
+            "Thigh.R",
+            "Shin.R",
+            "UpperFoot.R",
+            "LowerFoot.R",
+        ]
+        .map(str::to_owned)
+        .to_vec();
+        let rows = expanded();
+        let got = assign(&names, |p| rows[p].rig.clone(), rows.len());
+        let mapped = |part: &str| {
+            let p = rows.iter().position(|r| r.name == part).unwrap();
+            got[p].map(|j| names[j].as_str())
+        };
+        assert_eq!(mapped("hips"), Some("Hips"));
+        assert_eq!(mapped("chest"), Some("Spine1"));
+        assert_eq!(mapped("head"), Some("Head"));
+        assert_eq!(mapped("l_forearm"), Some("LowerArm.L"));
+        assert_eq!(mapped("r_hand"), Some("Hand.R"));
+        assert_eq!(mapped("l_thigh"), Some("Thigh.L"));
+        assert_eq!(mapped("r_shin"), Some("Shin.R"));
+        assert_eq!(mapped("r_foot"), Some("UpperFoot.R"));
     }
 
     #[test]

@@ -7,8 +7,8 @@ use std::path::Path;
 use crate::caption;
 use crate::clip::{Clip, object_uid};
 use crate::error::{DataError, Result};
-use crate::formats::{self, Format, dymesh_bin::MISSING_CAPTION};
 use crate::formats::skeletal::{ReadOptions, SkinStats, TakeSel};
+use crate::formats::{self, Format, dymesh_bin::MISSING_CAPTION};
 use crate::fps::farthest_point_sampling;
 use crate::preprocess;
 

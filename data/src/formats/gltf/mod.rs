@@ -100,7 +100,11 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     let external = ExternalBuffers::Folder(folder_of(path));
     let takes = read::takes(&bytes, path, DEFAULT_FPS, &external)?;
     if takes.is_empty() {
-        return Err(DataError::new(path, "animations", "no animation: a static mesh is not a clip"));
+        return Err(DataError::new(
+            path,
+            "animations",
+            "no animation: a static mesh is not a clip",
+        ));
     }
     let k = skeletal::pick(path, &takes, &opts.take)?;
     skeletal::check_frames(path, &takes[k].name, takes[k].frames, opts.max_frames)?;

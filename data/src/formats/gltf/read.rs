@@ -15,8 +15,8 @@ use super::source::{self, Document};
 use super::{Ctx, ExternalBuffers, GltfReadOptions};
 use crate::clip::Clip;
 use crate::error::Result;
-use crate::formats::skeletal::TakeInfo;
 use crate::formats::dymesh_bin::MISSING_CAPTION;
+use crate::formats::skeletal::TakeInfo;
 use crate::limits::{CLIP_VERTICES, FRAMES};
 
 /// The takes of a glTF file, each a name and the animations baked together: one take of every animation when no
@@ -63,9 +63,10 @@ pub(super) fn takes(bytes: &[u8], path: &Path, fps: f32, external: &ExternalBuff
             for (c, ch) in root.animations[a].channels.iter().enumerate() {
                 let field = format!("animations[{a}].channels[{c}]");
                 let s = ch.sampler.value();
-                let sampler = root.animations[a].samplers.get(s).ok_or_else(|| {
-                    ctx.err(format!("{field}.sampler"), format!("sampler {s} does not exist"))
-                })?;
+                let sampler = root.animations[a]
+                    .samplers
+                    .get(s)
+                    .ok_or_else(|| ctx.err(format!("{field}.sampler"), format!("sampler {s} does not exist")))?;
                 let times = r.floats(sampler.input.value(), &format!("{field} input"), Type::Scalar, FLOAT)?;
                 if !times.iter().all(|t| t.is_finite()) || times.windows(2).any(|w| w[1] < w[0]) {
                     return Err(ctx.err(&field, "key times are not increasing"));
