@@ -8,8 +8,8 @@
 # Sizes (environment): SHAPES=32000 and RIGGED=25000 procedural clips (seed SEED=666; a store of fewer clips of
 # the same seed holds the first of these, in the same splits), 16-frame windows every 8 frames of the real takes,
 # P=128 FPS tokens (the small presets'; 512 for the paper's), procedural meshes of at most SYNTH_MAX_VERTICES=1024
-# vertices and real meshes of 128–4,096. With the defaults: 63,105 windows, 50,605 of them in the train split,
-# 25,083 of those articulated (rigged or real). Splits are drawn per object, so every procedural validation clip
+# vertices and real meshes of 128–4,096. With the defaults: 63,456 windows, 50,956 of them in the train split,
+# 25,434 of those articulated (rigged or real). Splits are drawn per object, so every procedural validation clip
 # of a smaller store of the same seed is a validation clip here too.
 set -euo pipefail
 OUT=${1:?usage: scripts/training_corpus.sh OUT}
