@@ -354,11 +354,13 @@ impl FileSummary {
                     .file
                     .as_ref()
                     .map_or_else(String::new, |f| format!("  ({})", f.display()));
-                let _ = writeln!(
-                    o,
-                    "  {i:>3}  {:<28} {:>5} frames  {:>5.1} fps{file}",
-                    t.name, t.frames, t.fps
-                );
+                // A rate of 0 means the file gives none (an MD3 without `animation.cfg`, frames-only formats).
+                let fps = if t.fps > 0.0 {
+                    format!("{:>5.1} fps", t.fps)
+                } else {
+                    "  fps not given".to_owned()
+                };
+                let _ = writeln!(o, "  {i:>3}  {:<28} {:>5} frames  {fps}{file}", t.name, t.frames);
             }
         }
         o
@@ -368,6 +370,18 @@ impl FileSummary {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_take_without_a_rate_says_so() {
+        let dir = tempfile::tempdir().unwrap();
+        // An MD3 with no animation.cfg beside it: one take, no frame rate.
+        let path = dir.path().join("lower.md3");
+        let frames: Vec<Vec<[i16; 3]>> = (0..3i16).map(|f| vec![[0, 0, 0], [64, 0, f * 8], [0, 64, 0]]).collect();
+        std::fs::write(&path, crate::formats::md3::write_test_md3(&frames, &[[0, 1, 2]])).unwrap();
+        let text = inspect(&path).unwrap().to_table();
+        assert!(text.contains("3 frames    fps not given"), "{text}");
+        assert!(!text.contains("0.0 fps"), "{text}");
+    }
 
     fn row(id: &str, vertices: u32, split: Option<Split>, status: Status, reason: &str) -> IndexRow {
         IndexRow {
