@@ -45,6 +45,21 @@ pub struct VaeSection {
     /// Training-time augmentation of each example (docs/method.md §2.9); off when absent, as in every paper preset.
     #[serde(default, skip_serializing_if = "Augment::is_off")]
     pub augment: Augment,
+    /// Latent statistics (docs/method.md §3.4) from at most this many training windows, evenly strided over the
+    /// training list ([`stats_subset`]); 0 = every training window, as in every preset (and in run folders
+    /// written before the key). A corpus of 50,000 windows otherwise spends longer on its statistics than the
+    /// small preset spends training.
+    #[serde(default)]
+    pub stats_windows: usize,
+}
+
+/// The training windows latent statistics are computed from: all of `train` when `cap` is 0 or not smaller, else
+/// `cap` of them evenly strided from the first (deterministic, so a run's statistics can be recomputed).
+pub fn stats_subset(train: &[usize], cap: usize) -> Vec<usize> {
+    if cap == 0 || cap >= train.len() {
+        return train.to_vec();
+    }
+    (0..cap).map(|k| train[k * train.len() / cap]).collect()
 }
 
 /// A whole `configs/vae/*.toml` run config.
@@ -524,7 +539,7 @@ where
         let stats = latent_stats(
             &model.valid(),
             &objective.store,
-            &objective.train,
+            &stats_subset(&objective.train, cfg.vae.stats_windows),
             cfg.train.micro_batch,
             cfg.vae.tokens,
             &inference,

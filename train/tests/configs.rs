@@ -483,3 +483,38 @@ fn augmentation_keys_are_off_in_the_presets_set_by_override_and_checked_at_load(
     let ok = RfRunConfig::load(&rf, &set(&["rf.latent_cache=\"per_batch\"", "rf.augment.reverse=0.5"])).unwrap();
     assert_eq!(ok.rf.augment.reverse, 0.5);
 }
+
+/// `vae.stats_windows` caps the windows latent statistics are computed from: 0 (all windows) in every preset, kept
+/// in the run folder's config, absent in run folders written before it (read as 0); the subset is evenly strided
+/// and deterministic.
+#[test]
+fn latent_statistics_window_cap() {
+    use any4d_train::vae_loop::stats_subset;
+    let set = |s: &[&str]| -> Vec<Override> { s.iter().map(|s| s.parse().unwrap()).collect() };
+    for preset in [
+        "configs/vae/paper.toml",
+        "configs/vae/small.toml",
+        "configs/vae/tiny.toml",
+    ] {
+        let cfg = VaeRunConfig::load(&root().join(preset), &[]).unwrap();
+        assert_eq!(cfg.vae.stats_windows, 0, "{preset}");
+    }
+    let vae = root().join("configs/vae/tiny.toml");
+    let on = VaeRunConfig::load(&vae, &set(&["vae.stats_windows=3"])).unwrap();
+    let text = on.to_toml().unwrap();
+    let back = VaeRunConfig::from_table(toml::from_str(&text).unwrap(), &vae).unwrap();
+    assert_eq!(back.vae.stats_windows, 3);
+    let old = text.replace("stats_windows = 3\n", "");
+    assert_ne!(old, text);
+    let back = VaeRunConfig::from_table(toml::from_str(&old).unwrap(), &vae).unwrap();
+    assert_eq!(back.vae.stats_windows, 0);
+    let err = VaeRunConfig::load(&vae, &set(&["vae.stats_windows=-1"]))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("stats_windows"), "{err}");
+    let train: Vec<usize> = (100..110).collect();
+    assert_eq!(stats_subset(&train, 0), train);
+    assert_eq!(stats_subset(&train, 10), train);
+    assert_eq!(stats_subset(&train, 3), [100, 103, 106]);
+    assert_eq!(stats_subset(&train, 1), [100]);
+}
