@@ -51,10 +51,14 @@ pub struct VaeSection {
     /// small preset spends training.
     #[serde(default)]
     pub stats_windows: usize,
+    /// Validation on at most this many validation windows, evenly strided ([`stats_subset`]); 0 = all, as in
+    /// every preset (and in run folders written before the key).
+    #[serde(default)]
+    pub valid_windows: usize,
 }
 
-/// The training windows latent statistics are computed from: all of `train` when `cap` is 0 or not smaller, else
-/// `cap` of them evenly strided from the first (deterministic, so a run's statistics can be recomputed).
+/// The windows latent statistics (or validation) are computed from: all of `train` when `cap` is 0 or not smaller,
+/// else `cap` of them evenly strided from the first (deterministic, so a run's statistics can be recomputed).
 pub fn stats_subset(train: &[usize], cap: usize) -> Vec<usize> {
     if cap == 0 || cap >= train.len() {
         return train.to_vec();
@@ -280,7 +284,7 @@ impl<V> VaeObjective<V> {
         let (train_frames, tokens) = (vae.train_frames, vae.tokens);
         let store = open_store(data, vae)?;
         let train = store.indices(Split::Train);
-        let valid = store.indices(Split::Val);
+        let valid = stats_subset(&store.indices(Split::Val), vae.valid_windows);
         let train_clips = WholeClips::new(store.whole_clips(&train)?);
         Ok(VaeObjective {
             store,

@@ -497,10 +497,11 @@ fn latent_statistics_window_cap() {
         "configs/vae/tiny.toml",
     ] {
         let cfg = VaeRunConfig::load(&root().join(preset), &[]).unwrap();
-        assert_eq!(cfg.vae.stats_windows, 0, "{preset}");
+        assert_eq!((cfg.vae.stats_windows, cfg.vae.valid_windows), (0, 0), "{preset}");
     }
     let vae = root().join("configs/vae/tiny.toml");
-    let on = VaeRunConfig::load(&vae, &set(&["vae.stats_windows=3"])).unwrap();
+    let on = VaeRunConfig::load(&vae, &set(&["vae.stats_windows=3", "vae.valid_windows=2"])).unwrap();
+    assert_eq!(on.vae.valid_windows, 2);
     let text = on.to_toml().unwrap();
     let back = VaeRunConfig::from_table(toml::from_str(&text).unwrap(), &vae).unwrap();
     assert_eq!(back.vae.stats_windows, 3);
