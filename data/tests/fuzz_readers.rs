@@ -283,22 +283,9 @@ fn fuzz(case: &Case, seed: u64, runs: usize, time: Duration) -> Tally {
             None => mutate(&mut rng, &case.seeds, case.text),
         };
         let t0 = Instant::now();
-        match run(case, dir.path(), &input) {
-            Ok(None) => tally.ok += 1,
-            Ok(Some(kind)) => tally.error(kind),
-            Err(message) => {
-                let path = std::env::temp_dir().join(format!("any4d-fuzz-{}-{seed}-{}", case.name, tally.runs));
-                std::fs::write(&path, &input).unwrap();
-                panic!(
-                    "{} input {} panicked: {message}; input saved to {}",
-                    case.name,
-                    tally.runs,
-                    path.display()
-                );
-            }
-        }
-        tally.slowest = tally.slowest.max(t0.elapsed());
-        tally.runs += 1;
+        let outcome = run(case, dir.path(), &input);
+        let label = format!("{}-{seed}-{}", case.name, tally.runs);
+        tally.record(&label, &input, outcome, t0.elapsed());
     }
     tally.elapsed = start.elapsed();
     tally

@@ -370,21 +370,9 @@ fn fuzz(target: Target, seed: u64, runs: usize, time: Duration) -> Tally {
             mutate(&mut rng, &corpus, target)
         };
         let t0 = Instant::now();
-        match run(target, &input, scratch.path()) {
-            Ok(None) => tally.ok += 1,
-            Ok(Some(kind)) => tally.error(kind),
-            Err(message) => {
-                let path = std::env::temp_dir().join(format!("any4d-fuzz-{}-{seed}-{}.bin", target.name(), tally.runs));
-                std::fs::write(&path, &input).unwrap();
-                panic!(
-                    "{target:?} input {} panicked: {message}; input saved to {}",
-                    tally.runs,
-                    path.display()
-                );
-            }
-        }
-        tally.slowest = tally.slowest.max(t0.elapsed());
-        tally.runs += 1;
+        let outcome = run(target, &input, scratch.path());
+        let label = format!("{}-{seed}-{}.bin", target.name(), tally.runs);
+        tally.record(&label, &input, outcome, t0.elapsed());
     }
     tally.elapsed = start.elapsed();
     tally

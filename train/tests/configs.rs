@@ -414,14 +414,22 @@ fn fuzz_configs_for_a_long_time() {
     println!("config: {inputs} inputs in {secs}s, {accepted} accepted, none panicked");
 }
 
+/// The frame-wise VAE presets that set every `[vae]` key themselves or through `extends`.
+const VAE_PRESETS: [&str; 3] = [
+    "configs/vae/paper.toml",
+    "configs/vae/small.toml",
+    "configs/vae/tiny.toml",
+];
+
+/// `--set` overrides from their text.
+fn overrides(s: &[&str]) -> Vec<Override> {
+    s.iter().map(|s| s.parse().unwrap()).collect()
+}
+
 #[test]
 fn augmentation_keys_are_off_in_the_presets_set_by_override_and_checked_at_load() {
-    let set = |s: &[&str]| -> Vec<Override> { s.iter().map(|s| s.parse().unwrap()).collect() };
-    for preset in [
-        "configs/vae/paper.toml",
-        "configs/vae/small.toml",
-        "configs/vae/tiny.toml",
-    ] {
+    let set = overrides;
+    for preset in VAE_PRESETS {
         let cfg = VaeRunConfig::load(&root().join(preset), &[]).unwrap();
         assert!(cfg.vae.augment.is_off(), "{preset}");
         assert!(
@@ -490,12 +498,8 @@ fn augmentation_keys_are_off_in_the_presets_set_by_override_and_checked_at_load(
 #[test]
 fn latent_statistics_window_cap() {
     use any4d_train::vae_loop::stats_subset;
-    let set = |s: &[&str]| -> Vec<Override> { s.iter().map(|s| s.parse().unwrap()).collect() };
-    for preset in [
-        "configs/vae/paper.toml",
-        "configs/vae/small.toml",
-        "configs/vae/tiny.toml",
-    ] {
+    let set = overrides;
+    for preset in VAE_PRESETS {
         let cfg = VaeRunConfig::load(&root().join(preset), &[]).unwrap();
         assert_eq!((cfg.vae.stats_windows, cfg.vae.valid_windows), (0, 0), "{preset}");
     }

@@ -146,6 +146,26 @@ impl Tally {
         }
     }
 
+    /// Record one run of `input` that took `took`: a read (`Ok(None)`), an error of a kind, or a panic, which
+    /// saves the input as `any4d-fuzz-<label>` in the temporary folder and fails the test naming it.
+    pub fn record(&mut self, label: &str, input: &[u8], outcome: Result<Option<String>, String>, took: Duration) {
+        match outcome {
+            Ok(None) => self.ok += 1,
+            Ok(Some(kind)) => self.error(kind),
+            Err(message) => {
+                let path = std::env::temp_dir().join(format!("any4d-fuzz-{label}"));
+                std::fs::write(&path, input).unwrap();
+                panic!(
+                    "{label}: input {} panicked: {message}; input saved to {}",
+                    self.runs,
+                    path.display()
+                );
+            }
+        }
+        self.slowest = self.slowest.max(took);
+        self.runs += 1;
+    }
+
     /// Count one input that stopped with error `kind` (new kinds past [`MAX_KINDS`] count as "other": kinds can
     /// include input text).
     pub fn error(&mut self, kind: String) {
