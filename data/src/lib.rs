@@ -15,6 +15,7 @@ pub mod error;
 pub mod formats;
 pub mod fps;
 pub mod inspect;
+pub mod io;
 pub mod keyframes;
 pub mod limits;
 pub mod preprocess;

@@ -5,9 +5,8 @@ use std::io::Cursor;
 use std::path::Path;
 
 use any4d_data::DataError;
+use any4d_data::io::write_atomic;
 use image::{ImageFormat, Rgb, RgbImage};
-
-use crate::protocol::write_atomic;
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
 

@@ -5,6 +5,7 @@
 
 use std::path::Path;
 
+use any4d_data::io::write_atomic;
 use any4d_data::keyframes::Placement;
 use any4d_data::rng::{GOLDEN_GAMMA, Rng, rng, splitmix64};
 use any4d_data::store::{Split, Status, Store, StoredClip, read_index};
@@ -467,14 +468,4 @@ fn join_shared_frame(a: &StoredClip, b: &StoredClip, dir: &Path) -> Result<Clip>
         &a_abs.caption,
         &a_abs.source,
     )
-}
-
-/// Write `bytes` to `path` through a temporary file in the same folder and a rename.
-pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension(format!(
-        "{}.tmp",
-        path.extension().and_then(|e| e.to_str()).unwrap_or("out")
-    ));
-    std::fs::write(&tmp, bytes).map_err(|e| DataError::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| DataError::io(path, e))
 }

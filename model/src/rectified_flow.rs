@@ -264,8 +264,8 @@ pub fn rf_training_loss(
     opts: &RfLossOptions,
 ) -> Tensor<1> {
     let [_, _, frames, _] = batch.z.dims();
-    // docs/method.md §4.10: with an anchor the flow's data end is the scaled residual X₁ = (Z − A)/s, and the network
-    // sees the state as latents, A + s X_τ.
+    // docs/method.md §4.10, (R11): with an anchor the flow's data end is the scaled residual X₁ = (Z − A)/s, and the
+    // network sees the state as latents, A + s X_τ.
     let anchor = anchor_of(model.anchor(), &batch.z_key, &batch.mask);
     let x1 = match &anchor {
         Some((a, s)) => (batch.z.clone() - a.clone()).div_scalar(*s),

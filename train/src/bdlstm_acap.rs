@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use any4d_data::Clip;
 use any4d_data::acap::{ACAP_CHANNELS, AcapFrame, AcapScaling, AcapTopology, ScalingGranularity, check_topology};
+use any4d_data::io::write_atomic;
 use any4d_data::store::{Split, Store};
 use any4d_model::bdlstm::{BdLstm, MeshConvCodec, MeshGraph};
 use any4d_model::mesh_vae::Posterior;
@@ -22,7 +23,7 @@ use crate::data_order::WholeClips;
 use crate::error::{Result, TrainError, io_err, run_err};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, RunOptions};
 use crate::multi_device::run_devices;
-use crate::run_folder::{RunFolder, write_atomic};
+use crate::run_folder::RunFolder;
 use crate::runs;
 
 /// The run file holding the reference mesh and the feature scaling.
@@ -56,7 +57,7 @@ impl AcapRecord {
     /// Writes `acap.json` into `run`.
     pub fn write(&self, run: &RunFolder) -> Result<()> {
         let json = serde_json::to_vec(self).map_err(|e| run_err(run.root(), format!("serialise {ACAP_FILE}: {e}")))?;
-        write_atomic(&run.path(ACAP_FILE), &json)
+        Ok(write_atomic(&run.path(ACAP_FILE), &json)?)
     }
 
     /// Reads `acap.json` of the run in `run_dir` and checks that its parts agree.

@@ -8,6 +8,7 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
+use any4d_data::io::write_atomic;
 use burn::module::Module;
 use burn::optim::ModuleOptimizer;
 use rand_chacha::ChaCha8Rng;
@@ -15,7 +16,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::data_order::DataOrder;
 use crate::error::{Result, TrainError, io_err};
-use crate::run_folder::write_atomic;
 
 /// Model parameters (burnpack).
 pub const MODEL_FILE: &str = "model.bpk";

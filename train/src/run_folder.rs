@@ -3,9 +3,11 @@
 //! folder is claimed with `create_dir` (never reused), files that are replaced are written atomically (temp file +
 //! rename), logs and tables are only appended to.
 
-use std::fs::{self, File, OpenOptions};
+use std::fs::{self, OpenOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+use any4d_data::io::write_atomic;
 
 use crate::error::{Result, TrainError, io_err};
 
@@ -130,7 +132,7 @@ impl RunFolder {
         }
         let mut cols = vec!["step"];
         cols.extend_from_slice(columns);
-        write_atomic(&p, (cols.join(",") + "\n").as_bytes())
+        Ok(write_atomic(&p, (cols.join(",") + "\n").as_bytes())?)
     }
 
     /// Appends one row to `samples.csv` (create it first with [`RunFolder::ensure_table`]).
@@ -156,22 +158,6 @@ fn csv_row(step: u64, values: &[f64]) -> String {
     }
     row.push('\n');
     row
-}
-
-/// Writes `bytes` to `path` through a temporary sibling and a rename, so readers see the old file or the new
-/// one, never a torn one.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".tmp_{file_name}"));
-    {
-        let mut f = File::create(&tmp).map_err(io_err("create", &tmp))?;
-        f.write_all(bytes).map_err(io_err("write", &tmp))?;
-        f.sync_all().map_err(io_err("sync", &tmp))?;
-    }
-    fs::rename(&tmp, path).map_err(io_err("rename into place", path))
 }
 
 /// A parsed CSV table of a run (`metrics.csv` or `valid.csv`): header and rows. When a resumed run repeated

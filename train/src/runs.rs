@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use any4d_data::io::write_atomic;
 use any4d_model::any_vae::{AnyMeshVae, AnyMeshVaeConfig};
 use any4d_model::frame_vae::FrameVae;
 use any4d_model::latent_stats::LatentStats;
@@ -15,7 +16,7 @@ use serde::{Deserialize, Serialize};
 use crate::checkpoint;
 use crate::error::{Result, TrainError, io_err, run_err};
 use crate::rf_loop::{RfModel, RfRunConfig};
-use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder, write_atomic};
+use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE, RunFolder};
 use crate::vae_loop::{LATENT_STATS_FILE, StoredLatentStats, VaeRunConfig};
 
 /// File in an RF run folder naming the VAE run (and its checkpoint step) whose latents trained it.
@@ -208,7 +209,7 @@ impl VaeRunRecord {
 pub fn write_vae_record(run: &RunFolder, record: &VaeRunRecord) -> Result<()> {
     let json =
         serde_json::to_vec_pretty(record).map_err(|e| run_err(run.root(), format!("serialise {VAE_RUN_FILE}: {e}")))?;
-    write_atomic(&run.path(VAE_RUN_FILE), &json)
+    Ok(write_atomic(&run.path(VAE_RUN_FILE), &json)?)
 }
 
 /// Reads `vae_run.json` of the RF run in `run_dir`. A relative `run` is resolved against `run_dir`, so run folders

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use any4d_data::augment::Augment;
 use any4d_data::batch::{ClipBatch, ClipBatcher, PadTo};
+use any4d_data::io::write_atomic;
 use any4d_data::store::{Split, Store, StoredClip};
 use any4d_model::any_vae::{AnyMeshVaeConfig, VaeKind};
 use any4d_model::latent_stats::{LatentStats, LatentStatsAccumulator};
@@ -23,7 +24,7 @@ use crate::data_order::WholeClips;
 use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, RunOptions};
 use crate::multi_device::{run_strategy, strategy_note, train_data_parallel, worker_devices};
-use crate::run_folder::{RunFolder, open_for_resume, write_atomic};
+use crate::run_folder::{RunFolder, open_for_resume};
 
 /// File in the VAE run folder with the docs/method.md §3.4 statistics of its final checkpoint.
 pub const LATENT_STATS_FILE: &str = "latent_stats.json";

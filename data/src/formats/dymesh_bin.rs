@@ -133,17 +133,7 @@ pub fn bin_bytes(clip: &Clip) -> Result<Vec<u8>> {
 pub fn write_bin(path: &Path, clip: &Clip) -> Result<()> {
     clip.validate()?;
     let bytes = bin_bytes(clip).map_err(|e| e.at(path))?;
-    write_atomic(path, &bytes)
-}
-
-/// Write `bytes` to a sibling temp file, then rename it over `path`.
-pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .ok_or_else(|| DataError::new(path, "file", "path has no file name"))?;
-    let tmp = path.with_file_name(format!(".{}.tmp", name.to_string_lossy()));
-    std::fs::write(&tmp, bytes).map_err(|e| DataError::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| DataError::io(path, e))
+    crate::io::write_atomic(path, &bytes)
 }
 
 #[cfg(test)]

@@ -337,7 +337,7 @@ pub fn write_clip_at(path: &Path, clip: &Clip, fps: Option<f32>) -> Result<()> {
         Format::Bin => dymesh_bin::write_bin(path, clip),
         Format::ObjSeq => obj::write_obj_seq(path, clip),
         Format::Gltf | Format::Glb => gltf::write_gltf(path, clip, fps),
-        Format::Anime => write_atomic_bytes(path, &anime::write_anime(clip)),
+        Format::Anime => crate::io::write_atomic(path, &anime::write_anime(clip)),
         other => Err(DataError::new(
             path,
             "format",
@@ -347,10 +347,6 @@ pub fn write_clip_at(path: &Path, clip: &Clip, fps: Option<f32>) -> Result<()> {
             ),
         )),
     }
-}
-
-fn write_atomic_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
-    dymesh_bin::write_atomic(path, bytes)
 }
 
 #[cfg(test)]

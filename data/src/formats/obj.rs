@@ -8,9 +8,10 @@
 use std::cmp::Ordering;
 use std::path::{Path, PathBuf};
 
-use super::dymesh_bin::{MISSING_CAPTION, write_atomic};
+use super::dymesh_bin::MISSING_CAPTION;
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
+use crate::io::write_atomic;
 
 /// Name of the caption file inside an OBJ sequence folder.
 pub const CAPTION_FILE: &str = "caption.txt";

@@ -9,13 +9,14 @@
 
 use std::path::{Path, PathBuf};
 
+use any4d_data::io::write_atomic;
 use any4d_data::keyframes::Placement;
 use any4d_data::{Clip, DataError};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::methods::{Method, complete_and_score_batch, metrics_map};
 use crate::plot::{Series, line_plot};
-use crate::protocol::{EvalSplit, MANIFEST_SEED, Manifest, ManifestOptions, StoreSource, noise_seed, write_atomic};
+use crate::protocol::{EvalSplit, MANIFEST_SEED, Manifest, ManifestOptions, StoreSource, noise_seed};
 use crate::render::{ExportFormat, StripOptions, export_sequence, write_strip};
 use crate::rollout::{OverlapSource, RolloutSpec};
 use crate::view;

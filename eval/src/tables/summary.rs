@@ -7,12 +7,12 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use any4d_data::DataError;
+use any4d_data::io::write_atomic;
 use polars::prelude::{Column, DataFrame, ParquetReader, ParquetWriter, SerReader};
 use serde::{Deserialize, Serialize};
 
 use any4d_model::bench::median;
 
-use crate::protocol::write_atomic;
 use crate::tables::timing;
 
 type Result<T, E = DataError> = std::result::Result<T, E>;

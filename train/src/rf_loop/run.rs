@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use any4d_data::io::write_atomic;
 use any4d_data::store::{Split, Store};
 use any4d_model::mmdit::Anchor;
 use any4d_model::text::scratch::ScratchTokenizer;
@@ -14,7 +15,7 @@ use crate::checkpoint::MODEL_FILE;
 use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Objective, Outcome, RunOptions};
 use crate::multi_device::{run_strategy, strategy_note, train_data_parallel, worker_devices};
-use crate::run_folder::{RunFolder, open_for_resume, write_atomic};
+use crate::run_folder::{RunFolder, open_for_resume};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 
 use super::RF_TERMS;

@@ -6,7 +6,7 @@ use serde_json::json;
 
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
-use crate::formats::dymesh_bin::write_atomic;
+use crate::io::write_atomic;
 
 /// Most frames [`write_gltf`] writes: its weights animation holds frames² floats (64 MiB at 4096 frames), which is
 /// also what the reader's [`super::MAX_ACCESSOR_VALUES`] accepts back.
