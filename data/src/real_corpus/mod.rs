@@ -19,6 +19,11 @@
 //!   first-person hands and guns, a flag;
 //! - `minetest-data` and `minetest-mod-*`: every `.b3d` under `usr/share/games/minetest` that has node keys (the
 //!   player character, mobs), one folder per file, the asset named after the file;
+//! - `minetest-mod-homedecor` is one of those mods (its desk fan turns);
+//! - [`ANIMATED_FILES`]: packages whose animated files stand alone, each file with at least one take staged as
+//!   its own folder (a glTF with its buffer): `gambas3-examples` (seven Quake II-style MD2 monsters and a weapon of
+//!   its OpenGL example), `blobandconquer-data` (an MD2 spider), `castle-game-engine-doc` (the glTF characters,
+//!   cars and gears of the engine's examples);
 //! - `redeclipse-data` and `assimp-testmodels` (folder [`MOCAP_FOLDER`]): the `.bvh` motion capture of
 //!   `assimp-testmodels` beside copies of the Red Eclipse player meshes, retargeted at import
 //!   ([`crate::formats::bvh`]); `cube2-data` and `assimp-testmodels` (folder [`CUBE2_MOCAP_FOLDER`]): the same
@@ -35,7 +40,10 @@ use crate::error::{DataError, Result};
 use crate::store::PROVENANCE_FILE;
 
 mod dep5;
+mod files;
 pub use dep5::Dep5;
+pub use files::ANIMATED_FILES;
+use files::AnimatedFiles;
 
 /// Unit (human) body meshes staged from 0 A.D. at most.
 pub const MAX_UNIT_MESHES: usize = 40;
@@ -86,7 +94,13 @@ pub fn stage(extracted: &Path, out: &Path) -> Result<StageReport> {
             p if p == "minetest-data" || p.starts_with("minetest-mod-") => {
                 stage_minetest(&dir, &dest, &package, &copyright, &mut report)?
             }
-            _ => continue,
+            p => match ANIMATED_FILES.iter().find(|(name, _, _)| *name == p) {
+                Some(&(_, root, exts)) => {
+                    let files = AnimatedFiles { root, exts };
+                    files.stage(&dir, &dest, &package, &copyright, &mut report)?
+                }
+                None => continue,
+            },
         };
         report.assets.insert(package, n);
     }
