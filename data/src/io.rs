@@ -46,40 +46,31 @@ fn sync_parent(path: &Path) {
 mod tests {
     use super::*;
 
-    fn scratch(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("any4d-io-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
-    }
-
     #[test]
     fn replaces_the_file_and_leaves_no_sibling() {
-        let dir = scratch("replace");
-        let path = dir.join("a.txt");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.txt");
         write_atomic(&path, b"old").unwrap();
         write_atomic(&path, b"new bytes").unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"new bytes");
-        let names: Vec<_> = std::fs::read_dir(&dir)
+        let names: Vec<_> = std::fs::read_dir(dir.path())
             .unwrap()
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names, vec![std::ffi::OsString::from("a.txt")]);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
     fn a_failed_write_keeps_the_old_file_and_names_the_path() {
-        let dir = scratch("fail");
-        let path = dir.join("b.txt");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("b.txt");
         write_atomic(&path, b"kept").unwrap();
         // A folder where the temporary sibling would go makes the write fail before anything is renamed.
-        std::fs::create_dir(dir.join(".b.txt.tmp")).unwrap();
+        std::fs::create_dir(dir.path().join(".b.txt.tmp")).unwrap();
         let err = write_atomic(&path, b"lost").unwrap_err();
         assert!(err.to_string().contains(".b.txt.tmp"), "{err}");
         assert_eq!(std::fs::read(&path).unwrap(), b"kept");
         let no_name = write_atomic(Path::new("/"), b"x").unwrap_err();
         assert_eq!(no_name.field, "file");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -380,6 +380,38 @@ fn gltf_and_glb_round_trip() {
     }
 }
 
+/// Extensions a file may require that change no vertex (lights, materials, texture transforms, texture formats) are
+/// read through; one that does (Draco-compressed geometry) is refused, naming it.
+#[test]
+fn gltf_required_extensions_that_move_no_vertex_are_read_through() {
+    let dir = tempfile::tempdir().unwrap();
+    let clip = sample_clip();
+    let plain = dir.path().join("plain.gltf");
+    write_gltf(&plain, &clip, 24.0).unwrap();
+    let mut doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&plain).unwrap()).unwrap();
+    let harmless = ["KHR_lights_punctual", "KHR_materials_unlit", "KHR_texture_transform"];
+    doc["extensionsUsed"] = serde_json::json!(harmless);
+    doc["extensionsRequired"] = serde_json::json!(harmless);
+    doc["extensions"] = serde_json::json!({
+        "KHR_lights_punctual": { "lights": [{ "type": "point", "color": [1.0, 0.9, 0.8], "intensity": 3.0 }] }
+    });
+    let lit = dir.path().join("lit.gltf");
+    std::fs::write(&lit, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let opts = GltfReadOptions {
+        fps: 24.0,
+        ..GltfReadOptions::default()
+    };
+    let (a, b) = (read_gltf(&plain, &opts).unwrap(), read_gltf(&lit, &opts).unwrap());
+    assert_eq!((a.frames, &a.vertices, &a.faces), (b.frames, &b.vertices, &b.faces));
+
+    doc["extensionsUsed"] = serde_json::json!(["KHR_draco_mesh_compression"]);
+    doc["extensionsRequired"] = serde_json::json!(["KHR_draco_mesh_compression"]);
+    let draco = dir.path().join("draco.gltf");
+    std::fs::write(&draco, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let e = read_gltf(&draco, &opts).unwrap_err();
+    assert!(e.to_string().contains("extensionsRequired"), "{e}");
+}
+
 #[test]
 fn read_and_write_clip_dispatch_by_path() {
     let dir = tempfile::tempdir().unwrap();

@@ -67,8 +67,12 @@ impl AnimatedFiles {
             copy(&file, &to.join(file.file_name().unwrap_or_default()))?;
             // A `.bin` beside it is its buffer only when its text names it (one with its buffers inside, as a
             // `data:` URI, leaves a stale `.bin` that would be read as a clip of its own).
-            let text = std::fs::read(&file).map(|b| String::from_utf8_lossy(&b).into_owned());
-            for buffer in files_with(folder, "bin") {
+            let buffers = files_with(folder, "bin");
+            let text = match buffers.is_empty() {
+                true => Ok(String::new()),
+                false => std::fs::read(&file).map(|b| String::from_utf8_lossy(&b).into_owned()),
+            };
+            for buffer in buffers {
                 let name = buffer.file_name().unwrap_or_default().to_string_lossy().into_owned();
                 if text.as_ref().is_ok_and(|t| t.contains(&format!("\"{name}\""))) {
                     copy(&buffer, &to.join(&name))?;

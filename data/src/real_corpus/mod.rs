@@ -463,35 +463,14 @@ fn stage_ufoai(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut St
     Ok(n)
 }
 
+/// Minetest and its mods: every `.b3d` with node keys, one folder per file ([`AnimatedFiles`]); static models
+/// (doors, carts without keys, scenery) have no take and are skipped.
 fn stage_minetest(dir: &Path, dest: &Path, package: &str, c: &Dep5, report: &mut StageReport) -> Result<usize> {
-    let root = dir.join("usr/share/games/minetest");
-    if !root.is_dir() {
-        return Ok(0);
-    }
-    let mut folders = Vec::new();
-    walk_dirs(&root, &mut folders);
-    let mut n = 0;
-    for b3d in folders.iter().flat_map(|d| files_with(d, "b3d")) {
-        match crate::formats::b3d::list_takes(&b3d) {
-            // Static models (doors, carts without keys, scenery) have no take.
-            Ok(takes) if takes.is_empty() => continue,
-            Ok(_) => {}
-            Err(e) => {
-                report.refused.push((rel(dir, &b3d), e.to_string()));
-                continue;
-            }
-        }
-        let stem = crate::formats::skeletal::stem(&b3d);
-        let to = dest.join(&stem);
-        if to.exists() {
-            continue;
-        }
-        copy(&b3d, &to.join(b3d.file_name().unwrap_or_default()))?;
-        let asset = caption::asset_words(&stem).join(" ");
-        write_provenance(&to, package, &c.licence(&rel(dir, &b3d)), asset.trim())?;
-        n += 1;
-    }
-    Ok(n)
+    let files = AnimatedFiles {
+        root: "usr/share/games/minetest",
+        exts: &["b3d"],
+    };
+    files.stage(dir, dest, package, c, report)
 }
 
 fn stage_assimp(dir: &Path, dest: &Path, package: &str, c: &Dep5) -> Result<usize> {
