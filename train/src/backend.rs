@@ -34,6 +34,22 @@ pub enum Precision {
     Bf16,
 }
 
+/// One rayon pool per CPU worker, `max(1, threads / workers)` threads each, out of the current pool's threads.
+/// burn-flex runs its matrix products on the current rayon pool and its element-wise kernels on the calling thread:
+/// workers that shared one pool would queue their products behind each other while their element-wise work left
+/// cores idle; with a pool each, two workers on two cores keep both busy.
+pub fn worker_pools(workers: usize) -> Result<Vec<rayon::ThreadPool>, rayon::ThreadPoolBuildError> {
+    let threads = (rayon::current_num_threads() / workers.max(1)).max(1);
+    (0..workers)
+        .map(|w| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .thread_name(move |i| format!("any4d-worker{w}-{i}"))
+                .build()
+        })
+        .collect()
+}
+
 /// Errors of [`device`].
 #[derive(Debug, thiserror::Error)]
 pub enum BackendError {

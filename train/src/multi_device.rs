@@ -249,21 +249,10 @@ struct DataParallel<'a> {
     pools: Vec<rayon::ThreadPool>,
 }
 
-/// One rayon pool per worker, `max(1, threads / workers)` threads each, out of the current pool's threads. burn-flex
-/// runs its matrix products on the current rayon pool and its element-wise kernels on the calling thread: workers
-/// that shared one pool would queue their products behind each other while their element-wise work left cores idle;
-/// with a pool each, two workers on two cores keep both busy.
+/// One rayon pool per worker ([`backend::worker_pools`]).
 fn worker_pools(workers: usize) -> Result<Vec<rayon::ThreadPool>> {
-    let threads = (rayon::current_num_threads() / workers.max(1)).max(1);
-    (0..workers)
-        .map(|w| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .thread_name(move |i| format!("any4d-worker{w}-{i}"))
-                .build()
-                .map_err(|e| TrainError::Devices(format!("worker {w}: cannot start its {threads}-thread pool: {e}")))
-        })
-        .collect()
+    backend::worker_pools(workers)
+        .map_err(|e| TrainError::Devices(format!("cannot start the thread pools of {workers} workers: {e}")))
 }
 
 impl<O: Objective + Sync> StepGradients<O> for DataParallel<'_> {

@@ -1,7 +1,8 @@
 //! Data-parallel training (`any4d_train::multi_device`): on a deterministic toy regression,
 //! two CPU worker devices give the parameters of the single-device loop with the same global batch (within
-//! float-summation tolerance); a tiny VAE trains over `flex,flex` with the losses of one device; `--devices` parsing
-//! rejects bad entries with a message naming them.
+//! float-summation tolerance); a tiny VAE trains over `flex,flex` with the losses of one device; the RF's latent
+//! cache encoded on two CPU workers is one worker's; `--devices` parsing rejects bad entries with a message naming
+//! them.
 
 mod common;
 
@@ -10,10 +11,12 @@ use any4d_train::config::{OptimConfig, TrainConfig};
 use any4d_train::loop_common::{Outcome, RunOptions, StopFlag, train};
 use any4d_train::multi_device::{DeviceSpec, Parallel, Strategy, train_data_parallel};
 use any4d_train::progress::ProgressMode;
+use any4d_train::rf_loop::{encode_latents, encode_latents_on_workers};
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, read_table};
+use any4d_train::runs::load_vae_run;
 use any4d_train::vae_loop::{LATENT_STATS_FILE, train_vae};
 use burn::prelude::Device;
-use common::{Mlp, Toy, params, quiet_setup, serial, synth_store, tiny_vae, toy_configs};
+use common::{Mlp, Toy, params, quiet_setup, serial, synth_store, tiny_vae, toy_configs, vae_fixture};
 
 /// The toy loop's configs with micro-batches of 2 and no checkpoint or validation before the end.
 fn cfgs(steps: u64) -> (TrainConfig, OptimConfig) {
@@ -127,6 +130,36 @@ fn tiny_vae_over_two_cpu_workers_trains_the_numbers_of_one_device() {
             assert!(
                 (x - y).abs() <= 1e-5 * x.abs().max(1e-3),
                 "{col}: one device {a:?}, two workers {b:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn latents_encoded_on_two_workers_are_one_workers() {
+    let _g = serial();
+    let f = vae_fixture(2);
+    let dev = device(Backend::Flex, Precision::F32).unwrap();
+    let vae = load_vae_run(&f.vae_run, &dev).unwrap();
+    let store = any4d_data::store::Store::open(&f.store).unwrap();
+    let all: Vec<usize> = (0..store.len()).collect();
+    assert!(all.len() > 6, "the fixture store holds {} clips", all.len());
+    let one = encode_latents(&vae.model, &store, &all, 3, vae.tokens(), &dev).unwrap();
+    // Two workers over every clip, and more workers than micro-batches over two clips.
+    for (indices, workers) in [(&all[..], 2), (&all[..2], 4)] {
+        let got = encode_latents_on_workers(&vae.model, &store, indices, 3, vae.tokens(), &dev, workers).unwrap();
+        assert_eq!(
+            (got.frames, got.tokens, got.channels),
+            (one.frames, one.tokens, one.channels)
+        );
+        assert_eq!(got.clips.len(), indices.len());
+        for (a, b) in one.clips.iter().zip(&got.clips) {
+            assert_eq!((a.store_index, &a.caption), (b.store_index, &b.caption));
+            assert_eq!(
+                (&a.z0, &a.mu, &a.logvar),
+                (&b.z0, &b.mu, &b.logvar),
+                "clip {}",
+                a.store_index
             );
         }
     }

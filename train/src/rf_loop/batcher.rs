@@ -25,7 +25,7 @@ use crate::runs::LoadedVae;
 use crate::vae_loop::{load_clips, vae_batch};
 
 use super::config::{LatentCache, LatentDraw, RfRunConfig, RfSection};
-use super::latents::{LatentSet, encode_augmented, encode_latents};
+use super::latents::{LatentSet, encode_augmented, encode_latents_on_workers};
 use super::network::RfModel;
 
 /// Whether a batch applies the CFG caption dropout.
@@ -103,16 +103,23 @@ impl RfBatcher {
         let store = open_store(data)?;
         check_compatible(cfg, &store, vae)?;
         let frozen = vae.model.clone();
+        // On a CPU, one encoding worker per core (the latents are the same as one worker's).
+        let workers = if cfg.device.backend.is_cpu() {
+            rayon::current_num_threads()
+        } else {
+            1
+        };
         let split = |split: Split| -> Result<SplitLatents> {
             let store_indices = store.indices(split);
             let cached = match cfg.rf.latent_cache {
-                LatentCache::Memory => Some(encode_latents(
+                LatentCache::Memory => Some(encode_latents_on_workers(
                     &frozen,
                     &store,
                     &store_indices,
                     cfg.train.micro_batch,
                     vae.tokens(),
                     device,
+                    workers,
                 )?),
                 LatentCache::PerBatch => None,
             };

@@ -8,6 +8,7 @@ use rand_chacha::ChaCha8Rng;
 
 use any4d_model::mesh_vae::MeshVae;
 
+use crate::backend;
 use crate::error::{Result, TrainError};
 use crate::vae_loop::{load_augmented, vae_batch};
 
@@ -65,6 +66,61 @@ pub fn encode_latents(
     device: &Device,
 ) -> Result<LatentSet> {
     encode_augmented(vae, store, store_indices, micro_batch, tokens, None, device)
+}
+
+/// [`encode_latents`] on `workers` CPU threads, each with its share of the cores ([`backend::worker_pools`]) and a
+/// contiguous run of the micro-batches: every clip is encoded in the same micro-batch as by one worker, so the
+/// latents are the same, and the parts are joined in store order.
+pub fn encode_latents_on_workers(
+    vae: &AnyMeshVae,
+    store: &Store,
+    store_indices: &[usize],
+    micro_batch: usize,
+    tokens: usize,
+    device: &Device,
+    workers: usize,
+) -> Result<LatentSet> {
+    let micro_batch = micro_batch.max(1);
+    let batches = store_indices.len().div_ceil(micro_batch);
+    let workers = workers.clamp(1, batches.max(1));
+    if workers == 1 {
+        return encode_latents(vae, store, store_indices, micro_batch, tokens, device);
+    }
+    let pools = backend::worker_pools(workers).map_err(|e| {
+        TrainError::Setup(format!(
+            "cannot start the thread pools of {workers} encoding workers: {e}"
+        ))
+    })?;
+    let per_worker = batches.div_ceil(workers) * micro_batch;
+    let parts: Vec<Result<LatentSet>> = std::thread::scope(|s| {
+        let handles: Vec<_> = store_indices
+            .chunks(per_worker)
+            .zip(&pools)
+            .map(|(part, pool)| {
+                s.spawn(move || pool.install(|| encode_latents(vae, store, part, micro_batch, tokens, device)))
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err(TrainError::Loop("a latent-encoding worker panicked".into())))
+            })
+            .collect()
+    });
+    let mut parts = parts.into_iter();
+    let mut all = parts.next().unwrap_or_else(|| {
+        Ok(LatentSet {
+            clips: Vec::new(),
+            frames: 0,
+            tokens,
+            channels: 0,
+        })
+    })?;
+    for part in parts {
+        all.clips.extend(part?.clips);
+    }
+    Ok(all)
 }
 
 /// [`encode_latents`] of the clips augmented in order with draws from the generator, when one is given
