@@ -4,7 +4,7 @@ use std::path::Path;
 
 use super::{Dep5, StageReport, copy, files_with, rel, walk_dirs, write_provenance};
 use crate::caption;
-use crate::error::Result;
+use crate::error::{DataError, Result};
 
 /// Packages staged file by file: (package, folder under the package root, extensions of the animated files).
 pub const ANIMATED_FILES: &[(&str, &str, &[&str])] = &[
@@ -68,14 +68,14 @@ impl AnimatedFiles {
             // A `.bin` beside it is its buffer only when its text names it (one with its buffers inside, as a
             // `data:` URI, leaves a stale `.bin` that would be read as a clip of its own).
             let buffers = files_with(folder, "bin");
-            let text = match buffers.is_empty() {
-                true => Ok(String::new()),
-                false => std::fs::read(&file).map(|b| String::from_utf8_lossy(&b).into_owned()),
-            };
-            for buffer in buffers {
-                let name = buffer.file_name().unwrap_or_default().to_string_lossy().into_owned();
-                if text.as_ref().is_ok_and(|t| t.contains(&format!("\"{name}\""))) {
-                    copy(&buffer, &to.join(&name))?;
+            if !buffers.is_empty() {
+                let bytes = std::fs::read(&file).map_err(|e| DataError::io(&file, e))?;
+                let text = String::from_utf8_lossy(&bytes);
+                for buffer in buffers {
+                    let name = buffer.file_name().unwrap_or_default().to_string_lossy().into_owned();
+                    if text.contains(&format!("\"{name}\"")) {
+                        copy(&buffer, &to.join(&name))?;
+                    }
                 }
             }
             let asset = caption::asset_words(&stem).join(" ");

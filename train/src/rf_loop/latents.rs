@@ -108,19 +108,16 @@ pub fn encode_latents_on_workers(
             })
             .collect()
     });
-    let mut parts = parts.into_iter();
-    let mut all = parts.next().unwrap_or_else(|| {
-        Ok(LatentSet {
-            clips: Vec::new(),
-            frames: 0,
-            tokens,
-            channels: 0,
-        })
-    })?;
+    // At least two parts: `workers` ≥ 2 is clamped to the number of micro-batches.
+    let mut all: Option<LatentSet> = None;
     for part in parts {
-        all.clips.extend(part?.clips);
+        let part = part?;
+        match &mut all {
+            Some(set) => set.clips.extend(part.clips),
+            None => all = Some(part),
+        }
     }
-    Ok(all)
+    all.ok_or_else(|| TrainError::Loop("no latent-encoding worker ran".into()))
 }
 
 /// [`encode_latents`] of the clips augmented in order with draws from the generator, when one is given
