@@ -87,6 +87,8 @@ pub struct FileSummary {
     pub bbox_max: [f32; 3],
     /// The file's takes (empty for a single-clip format); the figures above are the first take's.
     pub takes: Vec<TakeInfo>,
+    /// Animations of one frame (poses), which are not takes ([`formats::one_frame_takes`]).
+    pub poses: Vec<String>,
     /// Skin weights of the first take that were renormalised or had more than 4 entries.
     pub skin: SkinStats,
 }
@@ -247,6 +249,7 @@ pub fn synthetic_family(id: &str) -> Option<&str> {
 pub fn summarize_file(path: &Path) -> Result<FileSummary> {
     let format = Format::from_path(path)?;
     let takes = formats::list_takes(path)?.unwrap_or_default();
+    let poses = formats::one_frame_takes(path)?;
     let taken = formats::read_take(path, &ReadOptions::default())?;
     let clip = taken.clip;
     let mut lo = [f32::INFINITY; 3];
@@ -269,6 +272,7 @@ pub fn summarize_file(path: &Path) -> Result<FileSummary> {
         bbox_min: lo,
         bbox_max: hi,
         takes,
+        poses,
         skin: taken.stats,
     })
 }
@@ -363,6 +367,14 @@ impl FileSummary {
                 let _ = writeln!(o, "  {i:>3}  {:<28} {:>5} frames  {fps}{file}", t.name, t.frames);
             }
         }
+        if !self.poses.is_empty() {
+            let _ = writeln!(
+                o,
+                "poses     {} one-frame animations, not takes (a clip needs motion): {}",
+                self.poses.len(),
+                self.poses.join(", ")
+            );
+        }
         o
     }
 }
@@ -381,6 +393,19 @@ mod tests {
         let text = inspect(&path).unwrap().to_table();
         assert!(text.contains("3 frames    fps not given"), "{text}");
         assert!(!text.contains("0.0 fps"), "{text}");
+    }
+
+    #[test]
+    fn one_frame_animations_are_listed_as_poses() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("soldier.md2");
+        let frame = |z: u8| vec![[0, 0, z], [10, 0, 0], [0, 10, 0]];
+        let frames = [("run1", frame(0)), ("run2", frame(5)), ("salute", frame(9))];
+        std::fs::write(&path, crate::formats::md2::write_md2(&frames, &[[0, 1, 2]])).unwrap();
+        let summary = summarize_file(&path).unwrap();
+        let text = summary.to_table();
+        assert!(text.contains("poses     1 one-frame animations"), "{text}");
+        assert_eq!((summary.poses, summary.takes.len()), (vec!["salute".to_owned()], 1));
     }
 
     fn row(id: &str, vertices: u32, split: Option<Split>, status: Status, reason: &str) -> IndexRow {

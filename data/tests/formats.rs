@@ -287,6 +287,48 @@ fn gltf_skin_fixture_bakes_joints() {
     assert_close(clip.frame(30), &end, 1e-5);
 }
 
+/// A vertex whose weights are all 0 (castle-game-engine's soldier has them) follows the first joint of its
+/// JOINTS_0 entry, as three.js's loader normalises it; a first joint outside the skin is still refused.
+#[test]
+fn gltf_vertex_without_weight_follows_its_first_joint() {
+    use base64::Engine as _;
+    let path = fixture("gltf/skin_strip.gltf");
+    let whole = read_gltf(&path, &GltfReadOptions::default()).unwrap();
+    let doc: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let uri = doc["buffers"][0]["uri"].as_str().unwrap();
+    let (head, data) = uri.split_once(',').unwrap();
+    let engine = base64::engine::general_purpose::STANDARD;
+    let bytes = engine.decode(data).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let write = |edit: &dyn Fn(&mut Vec<u8>)| {
+        let mut b = bytes.clone();
+        edit(&mut b);
+        let mut doc = doc.clone();
+        doc["buffers"][0]["uri"] = format!("{head},{}", engine.encode(&b)).into();
+        let p = dir.path().join("zero.gltf");
+        std::fs::write(&p, serde_json::to_vec(&doc).unwrap()).unwrap();
+        p
+    };
+    // Vertex 4 (joints [0, 1, 0, 0], weight 1 on joint 1) loses its weights: bytes 120 + 16·4 of WEIGHTS_0.
+    let zero_weights = |b: &mut Vec<u8>| b[184..200].fill(0);
+    let got = read_gltf(&write(&zero_weights), &GltfReadOptions::default()).unwrap();
+    let untouched: Vec<usize> = (0..6).filter(|&v| v != 4).collect();
+    for f in [0, 30] {
+        for &v in &untouched {
+            assert_eq!(got.frame(f)[v], whole.frame(f)[v], "frame {f} vertex {v}");
+        }
+    }
+    // On joint 0 alone it moves with the root (x + 1) and not with joint 1's turn.
+    assert_close(&got.frame(30)[4..5], &[[0.5, 2.0, 0.0]], 1e-5);
+    // Its first joint index (JOINTS_0 byte 96 + 4·4) past the skin's two joints: refused naming the vertex.
+    let bad = |b: &mut Vec<u8>| {
+        zero_weights(b);
+        b[112] = 7;
+    };
+    let e = read_gltf(&write(&bad), &GltfReadOptions::default()).unwrap_err();
+    assert!(e.reason.contains("vertex 4 has no joint weight"), "{e}");
+}
+
 /// One animation per channel (COLLADA2GLTF's layout: one per joint) bakes as the single animation does; two
 /// animations of the same channel are alternatives, and the first is read.
 #[test]

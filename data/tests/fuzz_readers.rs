@@ -1,6 +1,7 @@
 //! Mutation fuzzing of the skeletal and scene readers and of their sidecars (IQM and its animation-only files,
-//! MD2 and its `.anm` table, MD3 and its `animation.cfg`, MD5 mesh and animation, PMD and PSA, B3D, DirectX `.x`,
-//! binary FBX, COLLADA, BVH retargeted onto an IQM rig, `.anime`), on the stable toolchain: each case writes its
+//! MD2 and its `.anm` table, MD3 and its `animation.cfg`, a Quake III player assembled from three MD3 parts, MD5
+//! mesh and animation, PMD and PSA, B3D, DirectX `.x`, binary FBX, COLLADA, BVH retargeted onto an IQM rig,
+//! `.anime`), on the stable toolchain: each case writes its
 //! seed files (made by the readers' own test writers) into a folder, then mutates one file of it — the model or
 //! one sidecar — with byte- and token-level mutations plus repeated slices (deep nesting, long counts) and reads
 //! the model through `formats::read_take`, asserting a clean `Ok` or error, never a panic.
@@ -94,6 +95,12 @@ fn cases() -> Vec<Case> {
     let md2 = md2::write_md2(&md2_frames, &[[0, 1, 2], [1, 3, 2]]);
     let md3_frames: Vec<Vec<[i16; 3]>> = (0..30).map(|f| vec![[0, 0, 0], [64, 0, 0], [0, 64, 64 * f]]).collect();
     let md3 = md3::write_test_md3(&md3_frames, &[[0, 1, 2]]);
+    // A Quake III player: legs with `tag_torso`, a torso with `tag_head`, a head and the cfg.
+    let still = ([0.0f32; 3], [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
+    let tagged = |name: &'static str| vec![(name, vec![still; 30])];
+    let md3_lower = md3::write_test_md3_tags(&md3_frames, &[[0, 1, 2]], &tagged("tag_torso"));
+    let md3_upper = md3::write_test_md3_tags(&md3_frames, &[[0, 1, 2]], &tagged("tag_head"));
+    let md3_head = md3::write_test_md3(&md3_frames[..1], &[[0, 1, 2]]);
     let faces16: Vec<[u16; 3]> = faces.iter().map(|f| f.map(|i| i as u16)).collect();
     let pmd = pmd::write_test_pmd(&pos, &faces16, &skin, &[[0.0; 3], [0.0, 1.0, 0.0]]);
     let psa = pmd::write_test_psa(&keys(6));
@@ -149,6 +156,38 @@ fn cases() -> Vec<Case> {
             "lower.md3",
             "animation.cfg",
             vec![("lower.md3", md3)],
+            vec![Q3_CFG.into()],
+            true,
+        ),
+        case(
+            "md3-player-lower",
+            "lower.md3",
+            "lower.md3",
+            vec![
+                ("upper.md3", md3_upper.clone()),
+                ("head.md3", md3_head.clone()),
+                ("animation.cfg", Q3_CFG.into()),
+            ],
+            vec![md3_lower.clone()],
+            false,
+        ),
+        case(
+            "md3-player-upper",
+            "lower.md3",
+            "upper.md3",
+            vec![
+                ("lower.md3", md3_lower.clone()),
+                ("head.md3", md3_head),
+                ("animation.cfg", Q3_CFG.into()),
+            ],
+            vec![md3_upper.clone()],
+            false,
+        ),
+        case(
+            "md3-player-cfg",
+            "lower.md3",
+            "animation.cfg",
+            vec![("lower.md3", md3_lower), ("upper.md3", md3_upper)],
             vec![Q3_CFG.into()],
             true,
         ),

@@ -88,8 +88,8 @@ fn frame_name(m: &mut Md2, f: usize) -> Result<String> {
     m.b.name(16, &format!("frames[{f}].name"))
 }
 
-/// `(name, first, count, fps)` per take.
-fn ranges(path: &Path, m: &mut Md2) -> Result<Vec<(String, usize, usize, f32)>> {
+/// `(name, first, count, fps)` per animation, one-frame poses included.
+fn all_ranges(path: &Path, m: &mut Md2) -> Result<Vec<(String, usize, usize, f32)>> {
     let anm = path.with_extension("anm");
     if anm.is_file() {
         if !skeletal::sidecar_inside(path.parent().unwrap_or(Path::new(".")), &anm) {
@@ -136,7 +136,7 @@ fn ranges(path: &Path, m: &mut Md2) -> Result<Vec<(String, usize, usize, f32)>> 
                     format!("frames {s}..={e} outside the model's {} frames", m.num_frames),
                 ));
             }
-            if e > s && !out.iter().any(|r| r.1 == s && r.2 == e - s + 1) {
+            if !out.iter().any(|r| r.1 == s && r.2 == e - s + 1) {
                 out.push((name.to_owned(), s, e - s + 1, fps));
             }
         }
@@ -151,8 +151,14 @@ fn ranges(path: &Path, m: &mut Md2) -> Result<Vec<(String, usize, usize, f32)>> 
             _ => out.push((prefix, f, 1, 10.0)),
         }
     }
-    out.retain(|r| r.2 >= 2);
     Ok(out)
+}
+
+/// The takes' ranges: those of [`all_ranges`] with at least 2 frames.
+fn ranges(path: &Path, m: &mut Md2) -> Result<Vec<(String, usize, usize, f32)>> {
+    let mut r = all_ranges(path, m)?;
+    r.retain(|r| r.2 >= 2);
+    Ok(r)
 }
 
 fn infos(r: &[(String, usize, usize, f32)]) -> Vec<TakeInfo> {
@@ -176,6 +182,18 @@ pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
     let s = path.display().to_string();
     let mut m = parse(&s, &data)?;
     Ok(infos(&ranges(path, &mut m)?))
+}
+
+/// The animations of an `.md2` that have one frame (poses, not takes), by name.
+pub fn one_frame_takes(path: &Path) -> Result<Vec<String>> {
+    let data = load(path)?;
+    let s = path.display().to_string();
+    let mut m = parse(&s, &data)?;
+    Ok(all_ranges(path, &mut m)?
+        .into_iter()
+        .filter(|r| r.2 < 2)
+        .map(|r| r.0)
+        .collect())
 }
 
 /// Read one take of an `.md2` as a clip (id = file stem, caption empty).

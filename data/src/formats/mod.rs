@@ -183,13 +183,25 @@ pub const SOURCE_EXTENSIONS: &[&str] = &[
 ];
 
 /// Whether `path` is a clip source for an import: a file with one of [`SOURCE_EXTENSIONS`], except an
-/// animation-only `.iqm` (a companion of a mesh file).
+/// animation-only `.iqm` (a companion of a mesh file) and the parts of a Quake III player other than its
+/// `lower.md3` ([`md3::is_source`]).
 pub fn is_source(path: &Path) -> bool {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     match ext.as_deref() {
         Some("iqm") => iqm::has_mesh(path),
+        Some("md3") => md3::is_source(path),
         Some(e) => SOURCE_EXTENSIONS.contains(&e),
         None => false,
+    }
+}
+
+/// The path whose name says what the source `path` is, for its caption: the folder of an assembled Quake III
+/// player (its `lower.md3` is named for the body part, the folder for the character), else `path` itself.
+pub fn asset_path(path: &Path) -> std::path::PathBuf {
+    let player = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("md3")) && md3::Player::of(path).is_some();
+    match path.parent() {
+        Some(dir) if player && !dir.as_os_str().is_empty() => dir.to_path_buf(),
+        _ => path.to_path_buf(),
     }
 }
 
@@ -318,6 +330,21 @@ fn list_takes_unguarded(path: &Path, format: Format) -> Result<Option<Vec<TakeIn
         Format::Fbx => fbx::list_takes(path)?,
         Format::Dae => dae::list_takes(path)?,
     }))
+}
+
+/// The animations of `path` that have one frame, by name: poses, which are not takes (a clip needs motion), listed
+/// so that none is dropped unseen (`data inspect`, the import's report). Formats whose takes of one frame are
+/// listed as takes (and refused when read) return none. Runs under [`guard`].
+pub fn one_frame_takes(path: &Path) -> Result<Vec<String>> {
+    let format = Format::from_path(path)?;
+    guard(path, || match format {
+        Format::Md2 => md2::one_frame_takes(path),
+        Format::Md3 => md3::one_frame_takes(path),
+        Format::X => x::one_frame_takes(path),
+        Format::Fbx => fbx::one_frame_takes(path),
+        Format::Dae => dae::one_frame_takes(path),
+        _ => Ok(Vec::new()),
+    })
 }
 
 /// Write a clip in the format of its path (glTF at [`gltf::DEFAULT_FPS`]). The clip is validated first, so no

@@ -53,7 +53,7 @@ pub(super) fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
     }
     if !format.has_takes() {
         return match formats::read_clip(path).and_then(|c| accept(c, source.clone(), opts)) {
-            Ok(windows) => Outcome::Clips(windows, Vec::new(), SkinStats::default()),
+            Ok(windows) => Outcome::Clips(windows, Vec::new(), SkinStats::default(), Vec::new()),
             Err(e) => Outcome::Rejected(reason(&e, source)),
         };
     }
@@ -64,7 +64,10 @@ pub(super) fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
     if takes.is_empty() {
         return Outcome::Rejected("animations: no animation: a static mesh is not a clip".into());
     }
-    let asset = job.provenance().asset.unwrap_or_else(|| caption::asset_of_path(path));
+    let asset = job
+        .provenance()
+        .asset
+        .unwrap_or_else(|| caption::asset_of_path(&formats::asset_path(path)));
     let object = object_name(path);
     let mut clips = Vec::new();
     let mut failed = Vec::new();
@@ -115,7 +118,13 @@ pub(super) fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
             why.join("; ")
         ));
     }
-    Outcome::Clips(clips, failed, skin)
+    // Listing the poses is a notice only: a file whose takes read is not rejected for failing to list them.
+    let poses = formats::one_frame_takes(path)
+        .unwrap_or_default()
+        .into_iter()
+        .map(|name| format!("{source}#{name}"))
+        .collect();
+    Outcome::Clips(clips, failed, skin, poses)
 }
 
 /// The object uid of a file with takes: its last two folders and stem, lower-case, `[a-z0-9]` runs joined by

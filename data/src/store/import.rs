@@ -67,6 +67,8 @@ pub struct ImportReport {
     /// Files met in the searched folders that are not read as clips (sidecars, textures, unknown formats), counted
     /// by lower-case extension (`""` for none).
     pub skipped: BTreeMap<String, usize>,
+    /// One-frame animations of this run's files that are not takes (`source#name`; poses, not motion).
+    pub poses: Vec<String>,
 }
 
 impl fmt::Display for ImportReport {
@@ -97,6 +99,20 @@ impl fmt::Display for ImportReport {
                 f,
                 "  {n} other files not read as clips (sidecars, textures, unknown formats): {}",
                 by_ext.join(", ")
+            )?;
+        }
+        if !self.poses.is_empty() {
+            let more = self.poses.len().saturating_sub(3);
+            let more = if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            };
+            writeln!(
+                f,
+                "  {} one-frame animations not read as takes (poses, no motion): {}{more}",
+                self.poses.len(),
+                self.poses[..self.poses.len().min(3)].join(", ")
             )?;
         }
         for r in &self.rejected {
@@ -195,7 +211,7 @@ pub fn write_synth_windows(
             Ok(mut clip) => {
                 clip.source = source.clone();
                 match preprocess_windows(&clip, window, stride, p) {
-                    Ok(windows) => Outcome::Clips(windows, Vec::new(), SkinStats::default()),
+                    Ok(windows) => Outcome::Clips(windows, Vec::new(), SkinStats::default(), Vec::new()),
                     Err(e) => Outcome::Rejected(reason(&e, source)),
                 }
             }
@@ -471,6 +487,7 @@ fn run_jobs(
     }
     let mut rejected = Vec::new();
     let mut skin = SkinStats::default();
+    let mut poses = Vec::new();
     let mut added = 0;
     for (c, chunk) in jobs.chunks(CHUNK).enumerate() {
         let outcomes: Vec<Outcome> = chunk
@@ -479,8 +496,9 @@ fn run_jobs(
             .collect();
         for (job, outcome) in chunk.iter().zip(outcomes) {
             match outcome {
-                Outcome::Clips(clips, failed, stats) => {
+                Outcome::Clips(clips, failed, stats, one_frame) => {
                     skin.add(&stats);
+                    poses.extend(one_frame);
                     let provenance = job.provenance();
                     for (clip, object) in clips {
                         let sum = writer.append(&clip)?;
@@ -524,6 +542,7 @@ fn run_jobs(
         rejected,
         skin,
         skipped: BTreeMap::new(),
+        poses,
     })
 }
 

@@ -15,7 +15,9 @@ use crate::formats::{self, Format};
 /// that failed (`source#take`, reason), and the skin-weight counts of the takes that were accepted. A source
 /// that produced nothing is `Rejected`.
 pub(super) enum Outcome {
-    Clips(Vec<(StoredClip, String)>, Vec<(String, String)>, SkinStats),
+    /// Windows with their object, the takes that failed (`source#take`, reason), skin statistics and the
+    /// one-frame animations that are not takes (`source#name`).
+    Clips(Vec<(StoredClip, String)>, Vec<(String, String)>, SkinStats, Vec<String>),
     Rejected(String),
 }
 
@@ -122,7 +124,7 @@ mod tests {
                 std::thread::sleep(Duration::from_secs(30));
                 Outcome::Rejected("finished".into())
             }
-            _ => Outcome::Clips(Vec::new(), Vec::new(), SkinStats::default()),
+            _ => Outcome::Clips(Vec::new(), Vec::new(), SkinStats::default(), Vec::new()),
         });
         // Generous limits where the work is instant (a panic's backtrace can take a while on a busy machine).
         let generous = Duration::from_secs(120);

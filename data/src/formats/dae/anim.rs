@@ -211,9 +211,11 @@ fn take(name: String, list: Vec<(usize, Channel)>, span: Option<(f64, f64)>) -> 
     })
 }
 
-/// The takes of the file: its animation clips, else `all`, each kept when its keys span more than one time.
-pub(super) fn takes(doc: &Doc) -> Result<Vec<Take>> {
-    let mut out = Vec::new();
+/// An animation clip's name, channels and `(start, end)` when it states them.
+type ClipChannels = (String, Vec<(usize, Channel)>, Option<(f64, f64)>);
+
+/// The file's animation clips, else one clip `all` of every animation.
+fn clips(doc: &Doc) -> Result<Vec<ClipChannels>> {
     let clips: Vec<Node> = doc
         .root
         .children()
@@ -227,9 +229,9 @@ pub(super) fn takes(doc: &Doc) -> Result<Vec<Take>> {
                 gather(doc, a, &mut all)?;
             }
         }
-        out.extend(take("all".into(), all, None));
-        return Ok(out);
+        return Ok(vec![("all".into(), all, None)]);
     }
+    let mut out = Vec::new();
     for (i, clip) in clips.into_iter().enumerate() {
         let mut list = Vec::new();
         for inst in children(clip, "instance_animation") {
@@ -245,7 +247,29 @@ pub(super) fn takes(doc: &Doc) -> Result<Vec<Take>> {
             .attribute("name")
             .or(clip.attribute("id"))
             .map_or(format!("take{i}"), str::to_owned);
-        out.extend(take(name, list, span));
+        out.push((name, list, span));
     }
     Ok(out)
+}
+
+/// The takes of the file: its animation clips, else `all`, each kept when its keys span more than one time.
+pub(super) fn takes(doc: &Doc) -> Result<Vec<Take>> {
+    Ok(clips(doc)?
+        .into_iter()
+        .filter_map(|(name, list, span)| take(name, list, span))
+        .collect())
+}
+
+/// The animation clips whose keys all fall on one time (poses, not takes), by name.
+pub(super) fn poses(doc: &Doc) -> Result<Vec<String>> {
+    Ok(clips(doc)?
+        .into_iter()
+        .filter(|(_, list, _)| {
+            let times = || list.iter().flat_map(|(_, c)| c.times.iter().copied());
+            let lo = times().fold(f64::INFINITY, f64::min);
+            let hi = times().fold(f64::NEG_INFINITY, f64::max);
+            lo.is_finite() && hi - lo < 1e-9
+        })
+        .map(|(name, _, _)| name)
+        .collect())
 }

@@ -403,6 +403,13 @@ pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
     Ok(anim::takes(&doc)?.into_iter().map(|t| t.info).collect())
 }
 
+/// The animation clips of a `.dae` file whose keys all fall on one time (poses, not takes), by name.
+pub fn one_frame_takes(path: &Path) -> Result<Vec<String>> {
+    let text = read_xml(path)?;
+    let xml = xml_doc(path, &text)?;
+    anim::poses(&parse_doc(path, &xml)?)
+}
+
 /// Bake take `opts.take` of a `.dae` file into a clip (id = file stem, caption empty).
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInfo)> {
     let text = read_xml(path)?;

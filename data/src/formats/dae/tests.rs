@@ -117,6 +117,15 @@ fn members_clips_and_step_keys() {
     assert_eq!((takes.len(), takes[0].name.as_str(), takes[0].frames), (1, "turn", 16));
     let (clip, _, _) = read(&path, &ReadOptions::default()).unwrap();
     assert!(close(clip.frame(15)[1], [s, s, 0.0]), "{:?}", clip.frame(15));
+    // `still` has no key at all: neither a take nor a pose. A clip whose keys all sit at one time is a pose.
+    assert!(one_frame_takes(&path).unwrap().is_empty());
+    let pose = anim("c", "n/t.Y", &[0.25], &[1.0], 1, None);
+    let clips = r##"<library_animation_clips>
+        <animation_clip name="turn"><instance_animation url="#a"/></animation_clip>
+        <animation_clip name="aim"><instance_animation url="#c"/></animation_clip></library_animation_clips>"##;
+    std::fs::write(&path, rigid(&(channels + &pose), clips, "Y_UP")).unwrap();
+    assert_eq!(list_takes(&path).unwrap().len(), 1);
+    assert_eq!(one_frame_takes(&path).unwrap(), ["aim"]);
 }
 
 #[test]

@@ -133,11 +133,13 @@ fn curve(scene: &Scene, id: i64) -> Result<Curve> {
     Ok(keys)
 }
 
-/// The takes of the file, given each model id's index.
-fn takes(scene: &Scene, model_index: &HashMap<i64, usize>) -> Result<Vec<Take>> {
+/// The takes of the file, given each model id's index, and the names of the stacks that move something over
+/// one frame only (poses, not takes).
+fn takes(scene: &Scene, model_index: &HashMap<i64, usize>) -> Result<(Vec<Take>, Vec<String>)> {
     let fps = frame_rate(scene)?;
     let ticks_per_frame = TICKS_PER_SECOND / fps;
     let mut out = Vec::new();
+    let mut poses = Vec::new();
     for (i, stack) in scene.of_kind("AnimationStack").into_iter().enumerate() {
         let mut channels: HashMap<usize, [Option<Channel>; 3]> = HashMap::new();
         let (mut lo, mut hi, mut moving) = (i64::MAX, i64::MIN, false);
@@ -184,21 +186,23 @@ fn takes(scene: &Scene, model_index: &HashMap<i64, usize>) -> Result<Vec<Take>> 
             (a, Some(b)) if b > a => (a, b),
             _ => (lo, hi),
         };
-        if !moving {
-            continue;
-        }
         let frames = ((stop as f64 - start as f64) / ticks_per_frame).round() + 1.0;
-        if frames < 2.0 {
+        let name = scene.objects[&stack].name;
+        let name = if name.is_empty() {
+            format!("take{i}")
+        } else {
+            name.to_owned()
+        };
+        // Keys on one time (or within one frame) hold a pose: listed as such, not a take.
+        if !moving || frames < 2.0 {
+            if lo <= hi {
+                poses.push(name);
+            }
             continue;
         }
-        let name = scene.objects[&stack].name;
         out.push(Take {
             info: TakeInfo {
-                name: if name.is_empty() {
-                    format!("take{i}")
-                } else {
-                    name.to_owned()
-                },
+                name,
                 frames: if frames >= usize::MAX as f64 {
                     usize::MAX
                 } else {
@@ -212,7 +216,7 @@ fn takes(scene: &Scene, model_index: &HashMap<i64, usize>) -> Result<Vec<Take>> 
             ticks_per_frame,
         });
     }
-    Ok(out)
+    Ok((out, poses))
 }
 
 /// Model ids with parents before children, and each one's parent index.
@@ -268,7 +272,16 @@ pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
     let scene = Scene::new(path, &doc);
     let (order, _) = hierarchy(&scene)?;
     let index = order.iter().enumerate().map(|(i, &m)| (m, i)).collect();
-    Ok(takes(&scene, &index)?.into_iter().map(|t| t.info).collect())
+    Ok(takes(&scene, &index)?.0.into_iter().map(|t| t.info).collect())
+}
+
+/// The animation stacks of an `.fbx` file that move something over one frame only (poses, not takes), by name.
+pub fn one_frame_takes(path: &Path) -> Result<Vec<String>> {
+    let doc = read_doc(path)?;
+    let scene = Scene::new(path, &doc);
+    let (order, _) = hierarchy(&scene)?;
+    let index = order.iter().enumerate().map(|(i, &m)| (m, i)).collect();
+    Ok(takes(&scene, &index)?.1)
 }
 
 /// A skin cluster: its bone's model index, `TransformLink⁻¹ · G₀(model) · Geo`, and `(vertex, weight)`.
@@ -406,7 +419,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     if instances.iter().all(|i| i.positions.is_empty()) {
         return Err(scene.err("Geometry", "no mesh in the file"));
     }
-    let all = takes(&scene, &index)?;
+    let (all, _) = takes(&scene, &index)?;
     let list: Vec<TakeInfo> = all.iter().map(|t| t.info.clone()).collect();
     let take = &all[skeletal::pick(path, &list, &opts.take)?];
     let info = take.info.clone();

@@ -313,3 +313,20 @@ fn a_static_mesh_is_not_a_clip_and_long_takes_are_refused() {
     let e = read(&path, &opts).unwrap_err();
     assert!(e.reason.contains("maximum of 1"), "{e}");
 }
+
+#[test]
+fn a_stack_whose_keys_sit_on_one_time_is_a_pose_listed_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let pose = vec![vec![[0.0; 3], [0.5, 0.25, 0.0]]];
+    let path = write_file(
+        dir.path(),
+        &binary::write(7400, &test_fbx_nodes(&TRI, &[[0, 1, 2]], &[0, 1, 1], &pose), true),
+    );
+    assert!(list_takes(&path).unwrap().is_empty());
+    assert_eq!(one_frame_takes(&path).unwrap().len(), 1);
+    let path = write_file(dir.path(), &binary::write(7400, &nodes(), true));
+    assert_eq!(
+        (list_takes(&path).unwrap().len(), one_frame_takes(&path).unwrap().len()),
+        (1, 0)
+    );
+}

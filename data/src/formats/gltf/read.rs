@@ -271,6 +271,7 @@ impl Reader<'_> {
             ));
         }
         let mut influences: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
+        let mut first_joint: Vec<u32> = Vec::new();
         let mut set = 0;
         loop {
             let attr = |s: Semantic| prim.attributes.get(&Checked::Valid(s)).map(|i| i.value());
@@ -292,6 +293,9 @@ impl Reader<'_> {
                     format!("{} joints and {} weights for {n} vertices", j.len() / 4, w.len() / 4),
                 ));
             }
+            if set == 0 {
+                first_joint = j.chunks_exact(4).map(|js| js[0]).collect();
+            }
             for (v, (js, ws)) in j.chunks_exact(4).zip(w.chunks_exact(4)).enumerate() {
                 for (&ji, &wi) in js.iter().zip(ws) {
                     if !(wi.is_finite() && wi >= 0.0) {
@@ -312,11 +316,20 @@ impl Reader<'_> {
         if set == 0 {
             return Err(self.ctx.err(mesh_field, "skinned node without JOINTS_0/WEIGHTS_0"));
         }
-        if let Some(v) = influences.iter().position(|i| i.is_empty()) {
-            return Err(self.ctx.err(
-                format!("{mesh_field} WEIGHTS_0"),
-                format!("vertex {v} has no joint weight"),
-            ));
+        // A vertex whose weights are all 0 follows the first joint of its JOINTS_0 entry, as three.js's loader
+        // normalises it (exporters leave such vertices on meshes that are mostly skinned).
+        for (v, list) in influences.iter_mut().enumerate().filter(|(_, l)| l.is_empty()) {
+            let j = first_joint[v] as usize;
+            if j >= joints.len() {
+                return Err(self.ctx.err(
+                    format!("{mesh_field} WEIGHTS_0"),
+                    format!(
+                        "vertex {v} has no joint weight and its first joint {j} is not one of {}",
+                        joints.len()
+                    ),
+                ));
+            }
+            list.push((j, 1.0));
         }
         Ok(Skin {
             joints,

@@ -376,6 +376,18 @@ pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
     Ok(takes(&parse(path, &text)?).into_iter().map(|(_, t)| t).collect())
 }
 
+/// The animation sets of a `.x` file whose keys all fall on one time (poses, not takes), by name.
+pub fn one_frame_takes(path: &Path) -> Result<Vec<String>> {
+    let text = read_text(path)?;
+    let file = parse(path, &text)?;
+    Ok(file
+        .sets
+        .iter()
+        .filter(|set| timeline(set).is_some_and(|(_, _, frames)| frames < 2))
+        .map(|set| set.name.clone())
+        .collect())
+}
+
 /// Bake take `opts.take` of a `.x` file into a clip (id = file stem, caption empty).
 pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInfo)> {
     let text = read_text(path)?;

@@ -175,3 +175,17 @@ fn refuses_static_truncated_lying_deep_and_overlong_files() {
     let deep = format!("xof 0303txt 0032\n{}", "Frame a {\n".repeat(100_000));
     assert!(err(&deep).reason.contains("deeper"));
 }
+
+#[test]
+fn an_animation_set_on_one_key_time_is_a_pose_listed_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let walk = triangle_x(&[(0, [0.0, 1.0, 0.0]), (320, [0.0, 2.0, 0.0])], None);
+    let pose = triangle_x(&[(0, [0.0, 3.0, 0.0])], None).replace("AnimationSet lift", "AnimationSet aim");
+    let text = walk.clone() + &pose[pose.find("AnimationSet aim").unwrap()..];
+    let path = write(dir.path(), &text);
+    let names: Vec<String> = list_takes(&path).unwrap().into_iter().map(|t| t.name).collect();
+    assert_eq!(names, ["lift"]);
+    assert_eq!(one_frame_takes(&path).unwrap(), ["aim"]);
+    let path = write(dir.path(), &walk);
+    assert!(one_frame_takes(&path).unwrap().is_empty());
+}

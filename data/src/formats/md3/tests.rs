@@ -1,0 +1,313 @@
+//! The MD3 reader on files written by the tests: one file, a body part with its `animation.cfg`, and a player
+//! assembled through its tags.
+
+use std::path::Path;
+
+use super::*;
+use crate::formats::skeletal::TakeSel;
+
+#[test]
+fn reads_frames_and_refuses_bad_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("flag.md3");
+    let frames: Vec<Vec<[i16; 3]>> = (0..3).map(|f| vec![[0, 0, 0], [64, 0, 0], [0, 64, 64 * f]]).collect();
+    let good = write_test_md3(&frames, &[[0, 1, 2]]);
+    std::fs::write(&path, &good).unwrap();
+    assert_eq!(list_takes(&path).unwrap()[0].frames, 3);
+    let (clip, _, _) = read(&path, &ReadOptions::default()).unwrap();
+    // Frame 2, vertex 2 = (0, 1, 2) → Y-up (0, 2, −1).
+    assert_eq!(clip.frame(2)[2], [0.0, 2.0, -1.0]);
+    assert_eq!(clip.faces, vec![[0, 1, 2]]);
+    for cut in [3, 100, 150, good.len() - 2] {
+        std::fs::write(&path, &good[..cut]).unwrap();
+        assert!(read(&path, &ReadOptions::default()).is_err(), "cut {cut}");
+    }
+    std::fs::write(&path, write_test_md3(&frames[..1], &[[0, 1, 2]])).unwrap();
+    assert!(
+        read(&path, &ReadOptions::default())
+            .unwrap_err()
+            .reason
+            .contains("static mesh")
+    );
+}
+
+/// An `animation.cfg` laid out as Quake III's: the six `BOTH_*` lines (three 1-frame `DEAD` poses), seven
+/// 2-frame `TORSO_*` lines from frame 8, then `LEGS_WALKCR` and a backwards `LEGS_WALK` numbered after the
+/// torso's frames (22, 24: frames 8 and 10 of `lower.md3`).
+const CFG: &str = "// animation config file\nsex m\nfootsteps normal\n\
+    0 3 0 20 // BOTH_DEATH1\n2 1 0 20\n3 3 0 20\n5 1 0 20\n6 2 0 20\n7 1 0 20\n\
+    8 2 0 15\n10 2 0 15\n12 2 0 15\n14 2 0 15\n16 2 0 15\n18 2 0 15\n20 2 0 15\n\
+    22 2 2 25\n24 -2 2 25 // LEGS_WALK, backwards\n";
+
+/// An `.md3` of `n` frames whose vertex 2 sits at height = frame index (after the turn to Y-up).
+fn frames_md3(n: i16) -> Vec<u8> {
+    let frames: Vec<Vec<[i16; 3]>> = (0..n).map(|f| vec![[0, 0, 0], [64, 0, 0], [0, 64, 64 * f]]).collect();
+    write_test_md3(&frames, &[[0, 1, 2]])
+}
+
+#[test]
+fn player_takes_come_from_animation_cfg() {
+    let dir = tempfile::tempdir().unwrap();
+    let (lower, upper, other) = (
+        dir.path().join("lower.md3"),
+        dir.path().join("upper_1.md3"),
+        dir.path().join("flag.md3"),
+    );
+    std::fs::write(&lower, frames_md3(12)).unwrap();
+    std::fs::write(&upper, frames_md3(22)).unwrap();
+    std::fs::write(&other, frames_md3(5)).unwrap();
+    std::fs::write(dir.path().join("Animation.CFG"), CFG).unwrap();
+    let names = |p: &Path| list_takes(p).unwrap().into_iter().map(|t| t.name).collect::<Vec<_>>();
+    assert_eq!(
+        names(&lower),
+        ["BOTH_DEATH1", "BOTH_DEATH2", "BOTH_DEATH3", "LEGS_WALKCR", "LEGS_WALK"]
+    );
+    let upper_takes = names(&upper);
+    assert_eq!(upper_takes.len(), 10);
+    assert_eq!(upper_takes[3..5], ["TORSO_GESTURE", "TORSO_ATTACK"]);
+    assert_eq!(names(&other), ["all"]);
+    let opts = |take: &str| ReadOptions {
+        take: skeletal::TakeSel::parse(take),
+        ..ReadOptions::default()
+    };
+    let (clip, _, info) = read(&lower, &opts("LEGS_WALK")).unwrap();
+    assert_eq!((info.frames, info.fps), (2, 25.0));
+    // Frames 10 and 11 of lower.md3, played backwards.
+    assert_eq!([clip.frame(0)[2][1], clip.frame(1)[2][1]], [11.0, 10.0]);
+    let (clip, _, _) = read(&upper, &opts("TORSO_STAND2")).unwrap();
+    assert_eq!([clip.frame(0)[2][1], clip.frame(1)[2][1]], [20.0, 21.0]);
+    // A cfg that runs past the file, and a broken line.
+    std::fs::write(&lower, frames_md3(11)).unwrap();
+    let e = list_takes(&lower).unwrap_err();
+    assert!(e.field == "LEGS_WALK" && e.reason.contains("has 11"), "{e}");
+    std::fs::write(dir.path().join("Animation.CFG"), "0 3 x 20\n").unwrap();
+    let e = list_takes(&upper).unwrap_err();
+    assert!(e.field == "line 1" && e.reason.contains("\"x\""), "{e}");
+}
+
+#[test]
+fn an_animation_at_0_fps_plays_at_1_and_huge_first_frames_are_refused_without_overflow() {
+    let dir = tempfile::tempdir().unwrap();
+    let lower = dir.path().join("lower.md3");
+    std::fs::write(&lower, frames_md3(12)).unwrap();
+    // A real player's unused LEGS_TURN line: `192 0 0 0`; and a 2-frame LEGS_WALKCR listed at 0 fps.
+    let cfg = CFG.replace("22 2 2 25\n", "22 2 2 0\n") + "192 0 0 0 // LEGS_TURN\n";
+    std::fs::write(dir.path().join("animation.cfg"), cfg).unwrap();
+    let takes = list_takes(&lower).unwrap();
+    let walkcr = takes.iter().find(|t| t.name == "LEGS_WALKCR").unwrap();
+    assert_eq!((walkcr.frames, walkcr.fps), (2, 1.0));
+    for (line, needle) in [
+        (format!("{} 2 0 20\n", i64::MAX), "frames"),
+        ("0 2 0 -5\n".to_string(), "-5 fps"),
+        ("0 2 0 NaN\n".to_string(), "NaN fps"),
+        ("0 2 0 inf\n".to_string(), "inf fps"),
+    ] {
+        // BOTH_DEATH1 gets the hostile line; the legs' skip is computed from rows that are all present.
+        let cfg = CFG.replacen("0 3 0 20 // BOTH_DEATH1\n", &line, 1);
+        std::fs::write(dir.path().join("animation.cfg"), &cfg).unwrap();
+        let e = list_takes(&lower).unwrap_err();
+        assert!(e.to_string().contains(needle), "{line:?}: {e}");
+    }
+    // A legs line whose first frame lies below the torso's skip: refused, not wrapped around.
+    let cfg = CFG.replace("24 -2 2 25", "5 -2 2 25");
+    std::fs::write(dir.path().join("animation.cfg"), cfg).unwrap();
+    let e = list_takes(&lower).unwrap_err();
+    assert!(e.field == "LEGS_WALK" && e.reason.contains("frames -9..-7"), "{e}");
+}
+
+/// Axis rows of a quarter turn about z: the part's x points along the parent's y.
+const QUARTER_Z: [[f32; 3]; 3] = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+const STILL: [[f32; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+/// A player's cfg: `BOTH_DEATH1` on frames 0-1 of both parts, `TORSO_GESTURE` on upper frames 2-4,
+/// `TORSO_STAND` one pose (upper frame 5), `LEGS_WALKCR` at 6 (so the legs skip 4 frames), `LEGS_WALK` lower
+/// frames 2-5 at 20 fps and `LEGS_IDLE` lower frames 4-5 looping at 5 fps; every other animation one frame.
+fn player_cfg() -> String {
+    let mut lines = vec!["sex m".to_owned(), "0 2 0 10 // BOTH_DEATH1".to_owned()];
+    lines.extend(["1 1 0 10"; 5].map(str::to_owned));
+    lines.push("2 3 0 10 // TORSO_GESTURE".into());
+    lines.extend(["5 1 0 10"; 5].map(str::to_owned)); // TORSO_ATTACK .. TORSO_STAND (5)
+    lines.push("5 1 0 10 // TORSO_STAND2".into());
+    lines.push("6 1 0 10 // LEGS_WALKCR".into());
+    lines.push("6 4 4 20 // LEGS_WALK".into());
+    lines.extend(["6 1 0 10"; 7].map(str::to_owned)); // LEGS_RUN .. LEGS_LANDB
+    lines.push("8 2 2 5 // LEGS_IDLE".into());
+    lines.join("\n") + "\n"
+}
+
+/// Writes a player into `dir`: legs whose vertex 0 sits at height = frame and whose `tag_torso` rises from 100
+/// (a quarter turn at frame 3); a torso whose vertex 2 sits at height = frame and whose `tag_head` is 10 up; a
+/// one-frame head. Coarser copies and an unrelated flag lie beside them.
+fn write_player(dir: &Path) {
+    let part = |frames: usize, tags: &[TestTag]| {
+        let f: Vec<Vec<[i16; 3]>> = (0..frames as i16)
+            .map(|f| vec![[0, 0, 64 * f], [64, 0, 0], [0, 64, 64 * f]])
+            .collect();
+        write_test_md3_tags(&f, &[[0, 1, 2]], tags)
+    };
+    let torso: Vec<_> = (0..6)
+        .map(|f| ([0.0, 0.0, 100.0 + f as f32], if f == 3 { QUARTER_Z } else { STILL }))
+        .collect();
+    let head = vec![([0.0, 0.0, 10.0], STILL); 6];
+    let flag: Vec<Vec<[i16; 3]>> = (0..3).map(|f| vec![[0, 0, 0], [64, 0, 0], [0, 64, 64 * f]]).collect();
+    for (name, bytes) in [
+        ("lower.md3", part(6, &[("tag_torso", torso)])),
+        (
+            "upper.md3",
+            part(6, &[("tag_weapon", head.clone()), ("TAG_HEAD", head)]),
+        ),
+        ("head.md3", part(1, &[])),
+        ("lower_1.md3", part(6, &[])),
+        ("head_2.md3", part(1, &[])),
+        ("flag.md3", write_test_md3(&flag, &[[0, 1, 2]])),
+    ] {
+        std::fs::write(dir.join(name), bytes).unwrap();
+    }
+    std::fs::write(dir.join("animation.cfg"), player_cfg()).unwrap();
+}
+
+#[test]
+fn a_player_is_assembled_through_its_tags_and_each_part_plays_its_own_animation() {
+    let dir = tempfile::tempdir().unwrap();
+    let sarge = dir.path().join("sarge");
+    std::fs::create_dir(&sarge).unwrap();
+    write_player(&sarge);
+    let lower = sarge.join("lower.md3");
+    let names: Vec<String> = list_takes(&lower).unwrap().into_iter().map(|t| t.name).collect();
+    assert_eq!(names, ["BOTH_DEATH1", "TORSO_GESTURE", "LEGS_WALK", "LEGS_IDLE"]);
+    let read_take = |take: &str| {
+        read(
+            &lower,
+            &ReadOptions {
+                take: TakeSel::parse(take),
+                ..ReadOptions::default()
+            },
+        )
+        .unwrap()
+    };
+    let y = |clip: &Clip, k: usize, v: usize| clip.frame(k)[v];
+    // LEGS_WALK: legs frames 2..=5 at 20 fps, the torso holding TORSO_STAND (frame 5); 3 + 3 + 3 vertices.
+    let (clip, _, info) = read_take("LEGS_WALK");
+    assert_eq!(
+        (clip.id.as_str(), clip.n_vertices, info.frames, info.fps),
+        ("sarge", 9, 4, 20.0)
+    );
+    assert_eq!(clip.faces, [[0, 1, 2], [3, 4, 5], [6, 7, 8]]);
+    for k in 0..4 {
+        let legs = 2.0 + k as f32;
+        assert_eq!(y(&clip, k, 0), [0.0, legs, 0.0], "legs vertex 0 at step {k}");
+        // Torso vertex 2 = (0, 1, 5) hung at (0, 0, 100 + legs frame).
+        let turn = k == 1;
+        let torso_v2 = if turn {
+            [-1.0, 105.0 + legs, 0.0]
+        } else {
+            [0.0, 105.0 + legs, -1.0]
+        };
+        assert_eq!(y(&clip, k, 5), torso_v2, "torso vertex 2 at step {k}");
+        // Head vertex 1 = (1, 0, 0) hung 10 above the torso, turning with it.
+        let head_v1 = if turn {
+            [0.0, 110.0 + legs, -1.0]
+        } else {
+            [1.0, 110.0 + legs, 0.0]
+        };
+        assert_eq!(y(&clip, k, 7), head_v1, "head vertex 1 at step {k}");
+    }
+    // TORSO_GESTURE: torso frames 2..=4 at 10 fps while the legs idle on frames 4, 4, 5 (5 fps, looping).
+    let (clip, _, _) = read_take("TORSO_GESTURE");
+    let legs: Vec<f32> = (0..3).map(|k| y(&clip, k, 0)[1]).collect();
+    assert_eq!(legs, [4.0, 4.0, 5.0]);
+    let torso: Vec<f32> = (0..3).map(|k| y(&clip, k, 5)[1] - 100.0 - legs[k]).collect();
+    assert_eq!(torso, [2.0, 3.0, 4.0]);
+    // BOTH_DEATH1: frames 0 and 1 of both parts.
+    let (clip, _, _) = read_take("BOTH_DEATH1");
+    assert_eq!([y(&clip, 1, 0)[1], y(&clip, 1, 5)[1]], [1.0, 102.0]);
+    // The parts still read alone when named.
+    assert_eq!(list_takes(&sarge.join("upper.md3")).unwrap().len(), 2);
+    assert_eq!(
+        read(&sarge.join("head.md3"), &ReadOptions::default())
+            .unwrap_err()
+            .field,
+        "animations"
+    );
+}
+
+#[test]
+fn only_the_lower_body_of_a_player_is_an_import_source_and_the_character_is_one_object() {
+    let dir = tempfile::tempdir().unwrap();
+    let sarge = dir.path().join("sarge");
+    std::fs::create_dir(&sarge).unwrap();
+    write_player(&sarge);
+    let sources: Vec<&str> = [
+        "lower.md3",
+        "upper.md3",
+        "head.md3",
+        "lower_1.md3",
+        "head_2.md3",
+        "flag.md3",
+    ]
+    .into_iter()
+    .filter(|n| is_source(&sarge.join(n)))
+    .collect();
+    assert_eq!(sources, ["lower.md3", "flag.md3"]);
+    let store = dir.path().join("store");
+    let report = crate::store::import(
+        std::slice::from_ref(&sarge),
+        &store,
+        &crate::store::ImportOptions {
+            filter: crate::preprocess::VertexFilter { min: 3, max: 1024 },
+            frames: 2,
+            p: 3,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!((report.rejected.len(), report.sources), (0, 2), "{report}");
+    // The cfg's one-frame poses are listed as such, not dropped unseen.
+    assert!(
+        report.poses.iter().any(|p| p.ends_with("lower.md3#TORSO_STAND")),
+        "{report}"
+    );
+    assert!(
+        report.to_string().contains("one-frame animations not read as takes"),
+        "{report}"
+    );
+    assert_eq!(
+        one_frame_takes(&sarge.join("lower.md3")).unwrap().len(),
+        report.poses.len()
+    );
+    let store = crate::store::Store::open(&store).unwrap();
+    let mut captions: Vec<String> = (0..store.len())
+        .map(|i| store.get(i).unwrap().clip)
+        .filter(|c| c.source.contains("lower.md3"))
+        .map(|c| c.caption)
+        .collect();
+    captions.dedup();
+    assert!(captions.contains(&"a sarge walking".to_owned()), "{captions:?}");
+    assert!(captions.iter().all(|c| c.starts_with("a sarge")), "{captions:?}");
+}
+
+#[test]
+fn a_player_without_its_tags_or_with_a_hostile_cfg_is_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    write_player(dir.path());
+    let lower = dir.path().join("lower.md3");
+    let upper = std::fs::read(dir.path().join("upper.md3")).unwrap();
+    // A torso without tag_head while a head is present.
+    let f: Vec<Vec<[i16; 3]>> = (0..6).map(|f| vec![[0, 0, f], [64, 0, 0], [0, 64, 0]]).collect();
+    std::fs::write(dir.path().join("upper.md3"), write_test_md3(&f, &[[0, 1, 2]])).unwrap();
+    let e = read(&lower, &ReadOptions::default()).unwrap_err();
+    assert!(e.path.ends_with("upper.md3") && e.reason.contains("tag_head"), "{e}");
+    std::fs::write(dir.path().join("upper.md3"), upper).unwrap();
+    // A torso animation of 2^40 frames: refused by its range before anything is allocated for its steps.
+    let cfg = player_cfg().replace("2 3 0 10 // TORSO_GESTURE", "2 1099511627776 0 10");
+    std::fs::write(dir.path().join("animation.cfg"), cfg).unwrap();
+    let e = list_takes(&lower).unwrap_err();
+    assert!(e.field == "TORSO_GESTURE" && e.reason.contains("upper body"), "{e}");
+    // Tags past the end of the file.
+    let mut legs = std::fs::read(&lower).unwrap();
+    legs[96..100].copy_from_slice(&(1i32 << 20).to_le_bytes()); // ofs_tags
+    std::fs::write(&lower, legs).unwrap();
+    std::fs::write(dir.path().join("animation.cfg"), player_cfg()).unwrap();
+    let e = read(&lower, &ReadOptions::default()).unwrap_err();
+    assert_eq!(e.field, "tags", "{e}");
+}
