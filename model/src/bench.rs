@@ -195,7 +195,7 @@ fn time_reconstruct<V: crate::mesh_vae::MeshVae>(
 ///
 /// # Shapes
 /// - `frames` `[batch, frames, vertices, 3]`, `reference` `[batch, vertices, 3]`, `fps` `[batch, tokens]`
-fn synthetic_vae_batch(
+pub fn synthetic_vae_batch(
     batch: usize,
     vertices: usize,
     tokens: usize,

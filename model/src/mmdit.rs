@@ -665,6 +665,11 @@ impl Mmdit {
         self.in_channels
     }
 
+    /// Width of the text states this network reads.
+    pub fn text_dim(&self) -> usize {
+        self.text_dim
+    }
+
     /// What [`Mmdit::forward`] outputs: velocities or clean latents (docs/method.md §4.9).
     pub fn prediction(&self) -> Prediction {
         self.prediction

@@ -7,10 +7,12 @@ use std::process::ExitCode;
 
 use any4d_model::any_vae::AnyMeshVaeConfig;
 use any4d_model::bench::{BenchSizes, ModelTimings, StepTiming, time_networks};
+use any4d_model::interop::Names;
 use any4d_model::summary::{format_report, param_report};
 use any4d_train::backend::Backend;
 use any4d_train::bdlstm_loop::BdlstmVariant;
 use any4d_train::config::RunConfig;
+use any4d_train::interop::{MODEL_SAFETENSORS, export_run, import_file, probe_run};
 use any4d_train::pack::{Precision, pack_run};
 use anyhow::{Context, bail};
 use burn::prelude::Device;
@@ -27,6 +29,77 @@ pub enum ModelCmd {
     /// side files; no optimiser state), optionally in half precision. The result loads with `--vae`, `--rf`,
     /// `--baseline-rf`, `--aam` and `--bdlstm` like the run, but cannot resume.
     Pack(PackArgs),
+    /// Write a trained run's network as safetensors, under any4d's names or AnimateAnyMesh's PyTorch ones (the MMDiT
+    /// of an RF run, the VAE of a VAE run), with what any4d needs to read it back beside it.
+    Export(ExportArgs),
+    /// Make a packed run folder from a safetensors file (an export, or one written by PyTorch with `--config`).
+    Import(ImportArgs),
+    /// Run a trained network (an RF's MMDiT or a frame-wise VAE) on seeded random inputs and write inputs and
+    /// outputs as safetensors, for the PyTorch parity check (`scripts/torch_parity.py probe`).
+    Probe(ProbeArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct ProbeArgs {
+    /// The run folder (RF or frame-wise VAE; packed, imported or not).
+    #[arg(long)]
+    pub run: PathBuf,
+    /// The safetensors file to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seed of the random inputs.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+/// Whose parameter names a safetensors file uses.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum NamesArg {
+    /// any4d's module paths and burn's layouts.
+    Any4d,
+    /// AnimateAnyMesh's state_dict keys and PyTorch's layouts (loads with `load_state_dict(strict=True)`).
+    Animateanymesh,
+}
+
+impl NamesArg {
+    fn names(self) -> Names {
+        match self {
+            NamesArg::Any4d => Names::Any4d,
+            NamesArg::Animateanymesh => Names::AnimateAnyMesh,
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    /// The trained run folder (RF or VAE; packed or not).
+    #[arg(long)]
+    pub run: PathBuf,
+    /// The new folder to write (must not exist).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Whose names the file uses.
+    #[arg(long, value_enum, default_value = "any4d")]
+    pub names: NamesArg,
+    /// File format (only safetensors).
+    #[arg(long, default_value = "safetensors", value_parser = ["safetensors"])]
+    pub format: String,
+}
+
+#[derive(Args, Debug)]
+pub struct ImportArgs {
+    /// The safetensors file (`model.safetensors` of an export folder, or one saved from PyTorch).
+    #[arg(long)]
+    pub from: PathBuf,
+    /// The run config it was trained with (needed when the file does not carry any4d's header).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Whose names the file uses (default: what its header says).
+    #[arg(long, value_enum)]
+    pub names: Option<NamesArg>,
+    /// The new run folder to write (must not exist).
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -119,6 +192,18 @@ pub fn exec(cmd: ModelCmd) -> anyhow::Result<ExitCode> {
     match cmd {
         ModelCmd::Summary(args) => summary(&args.config, &args.overrides),
         ModelCmd::Pack(args) => pack(&args),
+        ModelCmd::Export(args) => export(&args),
+        ModelCmd::Import(args) => import(&args),
+        ModelCmd::Probe(args) => {
+            let network = probe_run(&args.run, &args.out, args.seed, &Device::flex())?;
+            println!(
+                "probed the {} of {} into {}",
+                network.name(),
+                args.run.display(),
+                args.out.display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
     }
 }
 
@@ -184,6 +269,44 @@ fn pack(args: &PackArgs) -> anyhow::Result<ExitCode> {
         if args.half { "f16" } else { "f32" },
         args.out.display(),
         packed.model_bytes as f64 / 1e6
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn export(args: &ExportArgs) -> anyhow::Result<ExitCode> {
+    let names = args.names.names();
+    let e = export_run(&args.run, &args.out, names, &Device::flex())?;
+    println!(
+        "exported the {} of {} step {} ({} parameters, {} tensors under {} names) to {}",
+        e.network.name(),
+        args.run.display(),
+        e.step,
+        if e.averaged { "averaged" } else { "trained" },
+        e.tensors,
+        names.name(),
+        args.out.join(MODEL_SAFETENSORS).display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
+    let names = args.names.map(NamesArg::names);
+    let i = import_file(&args.from, &args.out, args.config.as_deref(), names, &Device::flex())?;
+    let ignored = match i.ignored {
+        0 => String::new(),
+        n => format!("; {n} AnimateAnyMesh keys with no any4d counterpart ignored"),
+    };
+    println!(
+        "imported a {} ({} names, step {}) into the packed run {}{ignored}; side files: {}",
+        i.network.name(),
+        i.names.name(),
+        i.step,
+        args.out.display(),
+        if i.side_files.is_empty() {
+            "none".to_owned()
+        } else {
+            i.side_files.join(", ")
+        }
     );
     Ok(ExitCode::SUCCESS)
 }

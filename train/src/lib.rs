@@ -17,6 +17,7 @@ pub mod data_order;
 pub mod error;
 pub mod evaluate;
 pub mod grad_clip;
+pub mod interop;
 pub mod loop_common;
 pub mod multi_device;
 pub mod pack;

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use any4d_data::keyframes::TrainingKeyframes;
+use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::mmdit::KeyframeConditioning;
 use any4d_model::text::scratch::ScratchTokenizer;
 use any4d_train::backend::{Backend, Precision, device};
@@ -239,6 +240,87 @@ fn packed_runs_load_with_their_parameters_in_full_and_half_precision() {
     .to_string();
     assert!(err.contains("RF and latent BD-LSTM runs only"), "{err}");
     assert!(!bad.exists());
+}
+
+/// `model export` then `model import`, under any4d's names and AnimateAnyMesh's: the same parameters, config,
+/// statistics and side files come back, and what cannot be imported says why.
+#[test]
+fn exported_runs_import_with_their_parameters_under_both_names() {
+    use any4d_model::interop::Names;
+    use any4d_train::interop::{MODEL_SAFETENSORS, export_run, import_file};
+    let _g = serial();
+    let (run, _) = trained_rf();
+    let dev = inference_device();
+    let out = tempfile::tempdir().unwrap();
+    let original = load_rf_run(run, &dev).unwrap();
+    let vae = load_vae_run(&fixture().vae_run, &dev).unwrap();
+    for names in [Names::Any4d, Names::AnimateAnyMesh] {
+        let dir = out.path().join(names.name());
+        let e = export_run(run, &dir.join("rf-export"), names, &dev).unwrap();
+        assert_eq!((e.network.name(), e.step), ("mmdit", LOSS_STEPS));
+        let i = import_file(
+            &dir.join("rf-export").join(MODEL_SAFETENSORS),
+            &dir.join("rf"),
+            None,
+            None,
+            &dev,
+        )
+        .unwrap();
+        assert_eq!((i.names, i.step, i.ignored), (names, LOSS_STEPS, 0));
+        let back = load_rf_run(&dir.join("rf"), &dev).unwrap();
+        assert_eq!(back.config, original.config);
+        assert_eq!(params(&back.model), params(&original.model), "{names:?}");
+        let e = export_run(&fixture().vae_run, &dir.join("vae-export"), names, &dev).unwrap();
+        assert_eq!(e.network.name(), "frame_vae");
+        import_file(
+            &dir.join("vae-export").join(MODEL_SAFETENSORS),
+            &dir.join("vae"),
+            None,
+            None,
+            &dev,
+        )
+        .unwrap();
+        let back = load_vae_run(&dir.join("vae"), &dev).unwrap();
+        assert_eq!(back.stats, vae.stats);
+        let (a, b) = match (&back.model, &vae.model) {
+            (AnyMeshVae::Framewise(a), AnyMeshVae::Framewise(b)) => (params(a), params(b)),
+            _ => panic!("a frame-wise VAE"),
+        };
+        assert_eq!(a, b, "{names:?}");
+    }
+    // Under the other names' claim, with a config of another network, as a pickle, or without its side files.
+    let export = out.path().join("any4d/rf-export");
+    let model = export.join(MODEL_SAFETENSORS);
+    let err = |r: any4d_train::error::Result<_>| r.map(|_: any4d_train::interop::Imported| ()).unwrap_err().to_string();
+    let e = err(import_file(
+        &model,
+        &out.path().join("x1"),
+        None,
+        Some(Names::AnimateAnyMesh),
+        &dev,
+    ));
+    assert!(
+        e.contains("not a parameter of the mmdit under animateanymesh names"),
+        "{e}"
+    );
+    let vae_cfg = fixture().vae_run.join("config.toml");
+    let e = err(import_file(&model, &out.path().join("x2"), Some(&vae_cfg), None, &dev));
+    assert!(e.contains("model.safetensors"), "{e}");
+    let pt = out.path().join("model.pt");
+    std::fs::write(&pt, b"\x80\x02cos\nsystem\n").unwrap();
+    let e = err(import_file(&pt, &out.path().join("x3"), Some(&vae_cfg), None, &dev));
+    assert!(e.contains("pickle"), "{e}");
+    std::fs::remove_file(export.join("tokenizer.json")).unwrap();
+    let e = err(import_file(&model, &out.path().join("x4"), None, None, &dev));
+    assert!(e.contains("tokenizer.json"), "{e}");
+    for x in ["x1", "x2", "x3", "x4"] {
+        assert!(
+            !out.path().join(x).exists() && !out.path().join(format!(".tmp_import_{x}")).exists(),
+            "{x}"
+        );
+    }
+    let e = export_run(run, &export, Names::Any4d, &dev).unwrap_err().to_string();
+    assert!(e.contains("exists"), "{e}");
 }
 
 #[test]

@@ -1,0 +1,407 @@
+//! Parameters in and out of safetensors files, under any4d's own names or under the names and layouts of
+//! AnimateAnyMesh's PyTorch modules (docs/method.md §12), so that a network trained here opens there and back.
+//!
+//! The three networks with a PyTorch counterpart map tensor for tensor (docs/method.md §12 lists the rules):
+//! [`Network::Mmdit`] ↔ `DyMeshMMDiT` without its CLIP tower, [`Network::FrameVae`] ↔ the modules of a `DyMeshVAE`
+//! built at the frame-wise sizes (`T = 1`, offset input 3), [`Network::DyMeshVae`] ↔ `DyMeshVAE`. Under
+//! [`Names::AnimateAnyMesh`] a Linear weight is stored `[out, in]` (PyTorch's layout, burn keeps `[in, out]`), a
+//! LayerNorm's `gamma`/`beta` are `weight`/`bias`, every name is renamed by [`aam_rules`], and a VAE file also holds
+//! the two constant buffers AAM's `state_dict` carries (`point_embed.basis`, `traj_embed.freq_bands`), so that
+//! `load_state_dict(strict=True)` accepts it. Under [`Names::Any4d`] the file holds burn's own paths and layouts.
+//!
+//! Reading checks the whole file before anything is applied: its header (length, JSON, offsets) by the
+//! `safetensors` crate, then every tensor the network needs present, of a float dtype and of the network's shape,
+//! and no other tensor (AAM's buffers and CLIP keys excepted); each refusal names the file and the tensor.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use burn::store::burn_pack::Tensor as PackTensor;
+use burn::store::{BurnToPyTorchAdapter, ModuleAdapter, ModuleSnapshot, PyTorchToBurnAdapter};
+use burn::tensor::{Bytes, DType, TensorData};
+use regex::Regex;
+use safetensors::{Dtype, SafeTensors};
+
+/// Metadata key naming the network a file holds ([`Network::name`]).
+pub const META_NETWORK: &str = "any4d.network";
+/// Metadata key naming the convention of the file's names ([`Names::name`]).
+pub const META_NAMES: &str = "any4d.names";
+
+/// Largest safetensors file read: far above the paper-size RF (313 MB in f32).
+pub const MAX_FILE_BYTES: u64 = 8 << 30;
+
+/// A network that has a counterpart in AnimateAnyMesh.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Network {
+    /// The rectified-flow MMDiT (docs/method.md §4.3) ↔ `DyMeshMMDiT`.
+    Mmdit,
+    /// The frame-wise VAE (docs/method.md §3.2) ↔ `DyMeshVAE`'s modules at frame-wise sizes.
+    FrameVae,
+    /// The sequence-wise DyMeshVAE (docs/method.md §3.5) ↔ `DyMeshVAE`.
+    DyMeshVae,
+}
+
+impl Network {
+    pub fn name(self) -> &'static str {
+        match self {
+            Network::Mmdit => "mmdit",
+            Network::FrameVae => "frame_vae",
+            Network::DyMeshVae => "dymesh_vae",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        [Network::Mmdit, Network::FrameVae, Network::DyMeshVae]
+            .into_iter()
+            .find(|n| n.name() == name)
+    }
+}
+
+/// Which names (and layouts) a file uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Names {
+    /// burn's module paths and layouts (Linear `[in, out]`, LayerNorm `gamma`/`beta`).
+    Any4d,
+    /// AnimateAnyMesh's `state_dict` keys and PyTorch's layouts.
+    AnimateAnyMesh,
+}
+
+impl Names {
+    pub fn name(self) -> &'static str {
+        match self {
+            Names::Any4d => "any4d",
+            Names::AnimateAnyMesh => "animateanymesh",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        [Names::Any4d, Names::AnimateAnyMesh]
+            .into_iter()
+            .find(|n| n.name() == name)
+    }
+}
+
+/// Why a safetensors file could not be written or read.
+#[derive(Debug)]
+pub struct InteropError {
+    pub path: PathBuf,
+    /// The tensor (or header field) at fault; empty when the whole file is.
+    pub tensor: String,
+    pub reason: String,
+}
+
+impl fmt::Display for InteropError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.tensor.is_empty() {
+            true => write!(f, "{}: {}", self.path.display(), self.reason),
+            false => write!(f, "{}: tensor {:?}: {}", self.path.display(), self.tensor, self.reason),
+        }
+    }
+}
+
+impl std::error::Error for InteropError {}
+
+fn err(path: &Path, tensor: impl Into<String>, reason: impl Into<String>) -> InteropError {
+    InteropError {
+        path: path.to_path_buf(),
+        tensor: tensor.into(),
+        reason: reason.into(),
+    }
+}
+
+/// The renaming rules from any4d's paths (after PyTorch's layout is applied: LayerNorm `weight`/`bias`) to
+/// AnimateAnyMesh's keys, applied in order, each to the result of the one before (docs/method.md §12).
+pub fn aam_rules(network: Network) -> &'static [(&'static str, &'static str)] {
+    match network {
+        Network::Mmdit => MMDIT_RULES,
+        Network::FrameVae => FRAME_VAE_RULES,
+        Network::DyMeshVae => DYMESH_VAE_RULES,
+    }
+}
+
+const MMDIT_RULES: &[(&str, &str)] = &[
+    (r"^input_norm\.", "ln_pre."),
+    (r"^text_proj\.", "clip_token_mlp."),
+    (r"^text_norm\.", "ln_pre_text."),
+    (r"^time\.fc1\.", "time_embed.c_fc."),
+    (r"^time\.fc2\.", "time_embed.c_proj."),
+    (
+        r"^blocks\.(\d+)\.ada_motion\.",
+        "backbone.resblocks.${1}.adaln_x.linear.",
+    ),
+    (
+        r"^blocks\.(\d+)\.ada_text\.",
+        "backbone.resblocks.${1}.adaln_text.linear.",
+    ),
+    (r"^blocks\.(\d+)\.qkv\.", "backbone.resblocks.${1}.attn.c_qkv."),
+    (r"^blocks\.(\d+)\.proj\.", "backbone.resblocks.${1}.attn.c_proj."),
+    (r"^blocks\.(\d+)\.norm2_motion\.", "backbone.resblocks.${1}.ln_x."),
+    (r"^blocks\.(\d+)\.norm2_text\.", "backbone.resblocks.${1}.ln_text."),
+    (r"^blocks\.(\d+)\.fc1\.", "backbone.resblocks.${1}.mlp.c_fc."),
+    (r"^blocks\.(\d+)\.fc2\.", "backbone.resblocks.${1}.mlp.c_proj."),
+    (r"^final_norm\.", "ln_post."),
+];
+
+/// The VAE body's rules, shared by both VAEs: a Sync block's attention half is AAM's `.0.`, its FFN half `.1.`.
+macro_rules! vae_body_rules {
+    ($($extra:expr),* $(,)?) => {
+        &[
+            $($extra,)*
+            (r"^body\.point_embed\.linear\.", "point_embed.mlp."),
+            (r"^body\.neighbour\.(norm_q|norm_k|norm_v)\.", "neighbor_layers.0.${1}."),
+            (r"^body\.neighbour\.(to_q|to_k|to_v|to_out)\.", "neighbor_layers.0.fn.${1}."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.norm_q\.", "body.${1}.${2}.0.norm_q."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.norm_k\.", "body.${1}.${2}.0.norm_k."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.norm_v_shape\.", "body.${1}.${2}.0.norm_v1."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.norm_v_motion\.", "body.${1}.${2}.0.norm_v2."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.attn\.to_q\.", "body.${1}.${2}.0.attn.to_q."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.attn\.to_k\.", "body.${1}.${2}.0.attn.to_k."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.attn\.to_v\.0\.", "body.${1}.${2}.0.attn.to_v1."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.attn\.to_v\.1\.", "body.${1}.${2}.0.attn.to_v2."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.attn\.to_out\.0\.", "body.${1}.${2}.0.attn.to_out1."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.attn\.to_out\.1\.", "body.${1}.${2}.0.attn.to_out2."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.norm_ff_shape\.", "body.${1}.${2}.1.norm1."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.norm_ff_motion\.", "body.${1}.${2}.1.norm2."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.ff_shape\.proj_in\.", "body.${1}.${2}.1.ffn.ffn1.0."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.ff_shape\.proj_out\.", "body.${1}.${2}.1.ffn.ffn1.2."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.ff_motion\.proj_in\.", "body.${1}.${2}.1.ffn.ffn2.0."),
+            (r"^body\.(encoder|decoder)\.(\d+)\.ff_motion\.proj_out\.", "body.${1}.${2}.1.ffn.ffn2.2."),
+            (r"^body\.z0_head\.", "mean_fc_x0."),
+            (r"^body\.mu_head\.", "mean_fc_xt."),
+            (r"^body\.logvar_head\.", "logvar_fc_xt."),
+            (r"^body\.z0_in\.", "proj_x0."),
+            (r"^body\.z_in\.", "proj_xt."),
+            (r"^body\.query_proj\.", "fc_query."),
+            (r"^body\.query_norm\.", "decoder_final_ca.norm_q."),
+            (r"^body\.token_norm_k\.", "decoder_final_ca.norm_k."),
+            (r"^body\.token_norm_v\.", "decoder_final_ca.norm_v."),
+            (r"^body\.query_attn\.(to_q|to_k)\.", "decoder_final_ca.fn.${1}."),
+            (r"^body\.query_attn\.to_v\.0\.", "decoder_final_ca.fn.to_v."),
+            (r"^body\.query_attn\.to_out\.0\.", "decoder_final_ca.fn.to_out."),
+            (r"^body\.to_offsets\.", "to_outputs."),
+            (r"^body\.encoder\.", "enc_blocks."),
+            (r"^body\.decoder\.", "dec_blocks."),
+        ]
+    };
+}
+
+const FRAME_VAE_RULES: &[(&str, &str)] = vae_body_rules!((r"^offset_embed\.linear\.", "traj_embed.mlp."));
+const DYMESH_VAE_RULES: &[(&str, &str)] = vae_body_rules!((r"^traj_embed\.linear\.", "traj_embed.mlp."));
+
+/// Keys of an AnimateAnyMesh `state_dict` that no any4d parameter stands for: the VAEs' constant buffers and the
+/// MMDiT's CLIP text tower. Reading ignores them; everything else must match.
+fn aam_extra(network: Network, key: &str) -> bool {
+    match network {
+        Network::Mmdit => key.starts_with("clip_text_model."),
+        Network::FrameVae | Network::DyMeshVae => key == "point_embed.basis" || key == "traj_embed.freq_bands",
+    }
+}
+
+/// AnimateAnyMesh's two VAE buffers: `point_embed.basis` `[3, 3·point_freqs]` (row `i` holds `2^k·π`,
+/// k = 0..point_freqs, in its own block of columns) and `traj_embed.freq_bands` `[offset_freqs, 1]` (`2^k`), as
+/// its `PointEmbed` and `TrajEncoding` register them.
+pub fn aam_vae_buffers(point_freqs: usize, offset_freqs: usize) -> Vec<(String, Vec<usize>, Vec<f32>)> {
+    let k = point_freqs;
+    let mut basis = vec![0f32; 3 * 3 * k];
+    for row in 0..3 {
+        for j in 0..k {
+            basis[row * 3 * k + row * k + j] = 2f32.powi(j as i32) * std::f32::consts::PI;
+        }
+    }
+    let bands = (0..offset_freqs).map(|j| 2f32.powi(j as i32)).collect();
+    vec![
+        ("point_embed.basis".into(), vec![3, 3 * k], basis),
+        ("traj_embed.freq_bands".into(), vec![offset_freqs, 1], bands),
+    ]
+}
+
+/// One tensor as it goes into a file: its name there, shape and f32 values (little-endian bytes).
+pub struct FileTensor {
+    pub name: String,
+    pub shape: Vec<usize>,
+    pub bytes: Vec<u8>,
+}
+
+/// Renames a parameter's path (after the layout's adapter: LayerNorm `weight`/`bias` under AAM's names) to its
+/// name in a file under `names`.
+struct Renamer(Vec<(Regex, &'static str)>);
+
+impl Renamer {
+    fn new(network: Network, names: Names) -> Self {
+        Renamer(match names {
+            Names::Any4d => Vec::new(),
+            Names::AnimateAnyMesh => aam_rules(network)
+                .iter()
+                .map(|(from, to)| (Regex::new(from).expect("a valid built-in pattern"), *to))
+                .collect(),
+        })
+    }
+
+    fn rename(&self, path: &str) -> String {
+        let mut name = path.to_owned();
+        for (re, to) in &self.0 {
+            name = re.replace(&name, *to).into_owned();
+        }
+        name
+    }
+}
+
+fn adapter_to(names: Names) -> Option<Box<dyn ModuleAdapter>> {
+    match names {
+        Names::Any4d => None,
+        Names::AnimateAnyMesh => Some(Box::new(BurnToPyTorchAdapter)),
+    }
+}
+
+/// `(path after the adapter, name in the file, shape in the file's layout)` of every parameter of `module`, without
+/// reading any parameter's values.
+pub fn file_names<M: ModuleSnapshot>(module: &M, network: Network, names: Names) -> Vec<(String, String, Vec<usize>)> {
+    let renamer = Renamer::new(network, names);
+    module
+        .collect(None, adapter_to(names), false)
+        .into_iter()
+        .map(|t| {
+            let name = renamer.rename(&t.name);
+            (t.name, name, t.shape.to_vec())
+        })
+        .collect()
+}
+
+/// The tensors of `module` under `names`, in f32, sorted by name.
+pub fn collect_tensors<M: ModuleSnapshot>(module: &M, network: Network, names: Names) -> Vec<FileTensor> {
+    let renamer = Renamer::new(network, names);
+    let mut out: Vec<FileTensor> = module
+        .collect(None, adapter_to(names), false)
+        .into_iter()
+        .map(|t| {
+            let name = renamer.rename(&t.name);
+            let shape = t.shape.to_vec();
+            let dtype = t.dtype;
+            // A parameter the model cannot read back is a bug in burn or here, not bad input.
+            let bytes = t.into_bytes().expect("parameter bytes");
+            let data = TensorData::from_bytes_vec(bytes.to_vec(), shape.clone(), dtype).convert::<f32>();
+            FileTensor {
+                name,
+                shape,
+                bytes: data.as_bytes().to_vec(),
+            }
+        })
+        .collect();
+    out.sort_by(|a, b| a.name.cmp(&b.name));
+    out
+}
+
+/// Writes `tensors` (f32) and `metadata` as a safetensors file at `path`, atomically.
+pub fn write_file(path: &Path, tensors: &[FileTensor], metadata: BTreeMap<String, String>) -> Result<(), InteropError> {
+    let views: Vec<(String, safetensors::tensor::TensorView<'_>)> = tensors
+        .iter()
+        .map(|t| {
+            safetensors::tensor::TensorView::new(Dtype::F32, t.shape.clone(), &t.bytes)
+                .map(|v| (t.name.clone(), v))
+                .map_err(|e| err(path, &t.name, e.to_string()))
+        })
+        .collect::<Result<_, _>>()?;
+    let metadata: HashMap<String, String> = metadata.into_iter().collect();
+    let bytes = safetensors::tensor::serialize(views, Some(metadata)).map_err(|e| err(path, "", e.to_string()))?;
+    any4d_data::io::write_atomic(path, &bytes).map_err(|e| err(path, "", e.to_string()))
+}
+
+/// What [`read_file`] found besides the parameters it applied.
+#[derive(Debug, Default)]
+pub struct ReadReport {
+    /// The file's `__metadata__`.
+    pub metadata: BTreeMap<String, String>,
+    /// Keys ignored as AnimateAnyMesh extras (buffers, CLIP tower).
+    pub ignored: Vec<String>,
+}
+
+/// Reads the safetensors file at `path` (names under `names`) into `module`, whose sizes must be the file's: every
+/// parameter present with its shape and a float dtype (cast to f32), no key the network does not have (AAM's
+/// buffers and CLIP keys excepted). Nothing is applied unless the whole file passes.
+pub fn read_file<M: ModuleSnapshot>(
+    module: &mut M,
+    path: &Path,
+    network: Network,
+    names: Names,
+) -> Result<ReadReport, InteropError> {
+    let bytes = any4d_data::formats::read_file(path, MAX_FILE_BYTES).map_err(|e| err(path, "", e.reason))?;
+    let (_, header) =
+        SafeTensors::read_metadata(&bytes).map_err(|e| err(path, "", format!("not a safetensors file: {e}")))?;
+    let file = SafeTensors::deserialize(&bytes).map_err(|e| err(path, "", format!("not a safetensors file: {e}")))?;
+    let expected = file_names(module, network, names);
+    let wanted: HashMap<&str, (&str, &[usize])> = expected
+        .iter()
+        .map(|(path, name, shape)| (name.as_str(), (path.as_str(), shape.as_slice())))
+        .collect();
+    let mut report = ReadReport {
+        metadata: header.metadata().clone().unwrap_or_default().into_iter().collect(),
+        ..ReadReport::default()
+    };
+    let mut keys: Vec<&str> = file.names();
+    keys.sort_unstable();
+    for key in &keys {
+        if wanted.contains_key(key) {
+            continue;
+        }
+        if names == Names::AnimateAnyMesh && aam_extra(network, key) {
+            report.ignored.push((*key).to_owned());
+            continue;
+        }
+        return Err(err(
+            path,
+            *key,
+            format!("not a parameter of the {} under {} names", network.name(), names.name()),
+        ));
+    }
+    let mut tensors = Vec::with_capacity(expected.len());
+    for (burn_path, name, shape) in &expected {
+        let view = file.tensor(name).map_err(|_| {
+            err(
+                path,
+                name,
+                format!("missing (the {} needs it, shape {shape:?})", network.name()),
+            )
+        })?;
+        if view.shape() != shape.as_slice() {
+            return Err(err(
+                path,
+                name,
+                format!("shape {:?}, the network's is {shape:?}", view.shape()),
+            ));
+        }
+        let dtype = match view.dtype() {
+            Dtype::F32 => DType::F32,
+            Dtype::F16 => DType::F16,
+            Dtype::BF16 => DType::BF16,
+            Dtype::F64 => DType::F64,
+            other => {
+                return Err(err(
+                    path,
+                    name,
+                    format!("dtype {other:?}, a float parameter needs F32, F16, BF16 or F64"),
+                ));
+            }
+        };
+        let data = TensorData::from_bytes_vec(view.data().to_vec(), shape.clone(), dtype).convert::<f32>();
+        tensors.push(PackTensor::new(
+            burn_path.clone(),
+            DType::F32,
+            shape.clone(),
+            None,
+            Bytes::from_bytes_vec(data.as_bytes().to_vec()),
+        ));
+    }
+    let adapter: Option<Box<dyn ModuleAdapter>> = match names {
+        Names::Any4d => None,
+        Names::AnimateAnyMesh => Some(Box::new(PyTorchToBurnAdapter)),
+    };
+    let result = module.apply(tensors, None, adapter, false);
+    if let Some(e) = result.errors.first() {
+        return Err(err(path, "", format!("could not apply: {e}")));
+    }
+    if let Some((name, _)) = result.missing.first() {
+        return Err(err(path, name, "the network's parameter was not filled"));
+    }
+    Ok(report)
+}
