@@ -10,9 +10,13 @@ Usage:
       Builds the AAM module of an `any4d model export --names animateanymesh` folder at the export's sizes (from the
       config in its header) and loads `model.safetensors` with load_state_dict(strict=True); prints the result as
       JSON ({"network", "tensors", "params", "strict": true}).
+  python3 scripts/torch_parity.py random --aam DIR --export DIR --out FILE [--seed S]
+      AAM's module at the export's sizes with PyTorch's own random initialisation, saved as safetensors under AAM's
+      names: the PyTorch → any4d direction (`any4d model import --from FILE --config … --names animateanymesh`).
   python3 scripts/torch_parity.py probe --aam DIR --export DIR --probe FILE [--tol T]
       Runs the loaded AAM module on the inputs of FILE (written by `any4d model probe`) and compares its outputs
       with any4d's in FILE: max |difference| / max |any4d output| per output, failing (exit 1) above T (1e-5).
+      With --weights W the module loads W (AAM names, e.g. from `random`) instead of the export's weights.
 
 DIR is the user's own checkout of AnimateAnyMesh (github.com/JarrentWu1031/AnimateAnyMesh); nothing of it is part of
 this repository. `transformers` and `pytorch3d` are replaced by the stubs of scripts/bench_torch_reference.py, so
@@ -130,20 +134,12 @@ def read_export(export_dir):
     return meta, tensors
 
 
-def toml_loads(text):
-    try:
-        import tomllib  # noqa: PLC0415
-    except ImportError:
-        fail(3, "Python 3.11 or newer is needed (tomllib)")
-    return tomllib.loads(text)
-
-
 def module_for_export(torch, transformer, dymeshvae, meta):
     """The AAM module matching the sizes of an export's resolved config."""
     network = meta.get("any4d.network")
     if meta.get("any4d.names") != "animateanymesh":
         fail(2, "the export was not written with --names animateanymesh")
-    cfg = toml_loads(meta["any4d.config"])
+    cfg = json.loads(meta["any4d.config"])
     m = cfg["model"]
     if network == "mmdit":
         return network, build_mmdit(torch, transformer, m["frames"], m["channels"], m["width"], m["blocks"],
@@ -169,6 +165,25 @@ def cmd_load(args):
     print(json.dumps({"network": network, "tensors": len(tensors), "params": params, "strict": True}))
 
 
+def cmd_random(args):
+    """AAM's module at an export's sizes with its own random initialisation (torch.manual_seed) plus N(0, 0.02) noise,
+    saved as safetensors: the PyTorch → any4d direction (`any4d model import --names animateanymesh` reads it)."""
+    torch, _, transformer, dymeshvae, _ = setup(args.aam)
+    from safetensors.torch import save_file  # noqa: PLC0415
+
+    meta, _ = read_export(args.export)
+    torch.manual_seed(args.seed)
+    network, module = module_for_export(torch, transformer, dymeshvae, meta)
+    # AAM zero-initialises some output layers (the MMDiT's output projection): N(0, 0.02) on every parameter makes
+    # each one matter to the output that is compared.
+    with torch.no_grad():
+        for p in module.parameters():
+            p.add_(torch.randn_like(p) * 0.02)
+    state = {k: v.contiguous() for k, v in module.state_dict().items()}
+    save_file(state, args.out, metadata={"format": "pt"})
+    print(json.dumps({"network": network, "tensors": len(state), "seed": args.seed}))
+
+
 def chain_adjacency(torch, batch, vertices):
     """The dense (B, N, N) adjacency of the probe's chain mesh (vertex i joined to i + 1)."""
     i = torch.arange(vertices - 1)
@@ -182,7 +197,13 @@ def cmd_probe(args):
     torch, ref, transformer, dymeshvae, util = setup(args.aam)
     from safetensors.torch import load_file  # noqa: PLC0415
 
-    network, module, _ = load_export(torch, transformer, dymeshvae, args.export)
+    if args.weights:
+        meta, _ = read_export(args.export)
+        network, module = module_for_export(torch, transformer, dymeshvae, meta)
+        module.load_state_dict(load_file(args.weights), strict=True)
+        module.eval()
+    else:
+        network, module, _ = load_export(torch, transformer, dymeshvae, args.export)
     probe = load_file(args.probe)
     with torch.no_grad():
         if network == "mmdit":
@@ -196,6 +217,17 @@ def cmd_probe(args):
             tokens = VAE_PROBE_TOKENS
             idx = torch.arange(tokens).unsqueeze(0).expand(b, tokens).contiguous()
             out = ref.framewise_reconstruct(torch, module, reference, frames, chain_adjacency(torch, b, n), idx)
+        elif network == "dymesh_vae":
+            # AAM's own encode and decode, with the posterior's mean instead of a sample and the probe's first P
+            # vertices as tokens (its FPS stub returns them; index 0 is kept rather than replaced by a random one).
+            dymeshvae.DiagonalGaussianDistribution.sample = lambda self: self.mean
+            dymeshvae.replace_negative_indices = lambda idx, valid_len: idx
+            module.num_traj = VAE_PROBE_TOKENS
+            frames = probe["frames"]
+            b, _, n, _ = frames.shape
+            valid = torch.ones(b, n, dtype=torch.bool)
+            _, x, _, e0 = module.encode(frames, valid_mask=valid, adj_matrix=chain_adjacency(torch, b, n))
+            out = module.decode(x, frames[:, 0], e0)
         else:
             fail(2, f"no probe for a {network}")
     want = probe["output"]
@@ -220,13 +252,19 @@ def main(argv):
     ld = sub.add_parser("load")
     ld.add_argument("--aam", required=True)
     ld.add_argument("--export", required=True)
+    rd = sub.add_parser("random")
+    rd.add_argument("--aam", required=True)
+    rd.add_argument("--export", required=True)
+    rd.add_argument("--out", required=True)
+    rd.add_argument("--seed", type=int, default=0)
     pr = sub.add_parser("probe")
     pr.add_argument("--aam", required=True)
     pr.add_argument("--export", required=True)
     pr.add_argument("--probe", required=True)
     pr.add_argument("--tol", type=float, default=1e-5)
+    pr.add_argument("--weights", help="load these AAM-named weights instead of the export's (sizes from the export)")
     args = p.parse_args(argv)
-    {"keys": cmd_keys, "load": cmd_load, "probe": cmd_probe}[args.cmd](args)
+    {"keys": cmd_keys, "load": cmd_load, "random": cmd_random, "probe": cmd_probe}[args.cmd](args)
 
 
 if __name__ == "__main__":

@@ -40,7 +40,7 @@ enum Command {
     /// Clip files and datasets: convert, import, synth, inspect, render.
     #[command(subcommand)]
     Data(commands::data::DataCmd),
-    /// Model inspection: parameter counts.
+    /// Model inspection and exchange: parameter counts, pack, export to and import from PyTorch (safetensors).
     #[command(subcommand)]
     Model(commands::model::ModelCmd),
     /// Train the VAE or the rectified flow.

@@ -429,3 +429,47 @@ fn short_takes_loop_only_when_asked_and_only_when_they_cycle() {
     }
     assert_eq!(read_index(&out).unwrap()[0].object, "spin");
 }
+
+/// A store read with numpy alone (`scripts/read_any4d.py store`, the reader docs/pytorch.md shows): its T, P, clip
+/// count and the first clip's id, caption and array shapes are the store's.
+#[test]
+fn numpy_reads_a_store() {
+    let has_numpy = std::process::Command::new("python3")
+        .args(["-c", "import numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has_numpy {
+        println!("skipped: python3/numpy not available");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("store");
+    let cfg = SynthConfig {
+        clips: 3,
+        seed: 5,
+        frames: 4,
+        ..SynthConfig::default()
+    };
+    store::write_synth_with(&cfg, &out, 16, None).unwrap();
+    let s = Store::open(&out).unwrap();
+    let first = s.get(0).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/read_any4d.py");
+    let run = std::process::Command::new("python3")
+        .arg(&script)
+        .arg("store")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{stdout}{}", String::from_utf8_lossy(&run.stderr));
+    assert!(stdout.contains(&format!("T 4 P 16 clips {}", s.len())), "{stdout}");
+    let c = &first.clip;
+    let want = format!(
+        "first: {:?} {:?} vertices (4, {}, 3) faces ({}, 3) fps (16,)",
+        c.id,
+        c.caption,
+        c.n_vertices,
+        c.faces.len()
+    );
+    assert!(stdout.contains(&want.replace('"', "'")), "{stdout}\nwant {want}");
+}

@@ -91,12 +91,19 @@ pub struct InteropError {
     pub reason: String,
 }
 
+impl InteropError {
+    /// What went wrong, without the file: `tensor "name": reason`, or the reason alone.
+    pub fn what(&self) -> String {
+        match self.tensor.is_empty() {
+            true => self.reason.clone(),
+            false => format!("tensor {:?}: {}", self.tensor, self.reason),
+        }
+    }
+}
+
 impl fmt::Display for InteropError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self.tensor.is_empty() {
-            true => write!(f, "{}: {}", self.path.display(), self.reason),
-            false => write!(f, "{}: tensor {:?}: {}", self.path.display(), self.tensor, self.reason),
-        }
+        write!(f, "{}: {}", self.path.display(), self.what())
     }
 }
 
@@ -316,74 +323,177 @@ pub struct ReadReport {
     pub ignored: Vec<String>,
 }
 
-/// Reads the safetensors file at `path` (names under `names`) into `module`, whose sizes must be the file's: every
-/// parameter present with its shape and a float dtype (cast to f32), no key the network does not have (AAM's
-/// buffers and CLIP keys excepted). Nothing is applied unless the whole file passes.
+/// One tensor read from a file: name, dtype (when a float one), the file's name for its dtype, shape,
+/// little-endian bytes.
+struct Entry {
+    name: String,
+    float: Option<DType>,
+    dtype: String,
+    shape: Vec<usize>,
+    bytes: Vec<u8>,
+}
+
+/// Whether `path` names a PyTorch pickle (`torch.save`) rather than safetensors.
+pub fn is_pytorch_pickle(path: &Path) -> bool {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or_default()
+        .to_ascii_lowercase();
+    matches!(ext.as_str(), "pt" | "pth" | "ckpt")
+}
+
+fn safetensors_entries(path: &Path) -> Result<(BTreeMap<String, String>, Vec<Entry>), InteropError> {
+    let bytes = any4d_data::formats::read_file(path, MAX_FILE_BYTES).map_err(|e| err(path, "", e.reason))?;
+    let (_, header) =
+        SafeTensors::read_metadata(&bytes).map_err(|e| err(path, "", format!("not a safetensors file: {e}")))?;
+    let file = SafeTensors::deserialize(&bytes).map_err(|e| err(path, "", format!("not a safetensors file: {e}")))?;
+    let mut entries = Vec::new();
+    for (name, view) in file.tensors() {
+        let float = match view.dtype() {
+            Dtype::F32 => Some(DType::F32),
+            Dtype::F16 => Some(DType::F16),
+            Dtype::BF16 => Some(DType::BF16),
+            Dtype::F64 => Some(DType::F64),
+            _ => None,
+        };
+        entries.push(Entry {
+            name,
+            float,
+            dtype: format!("{:?}", view.dtype()),
+            shape: view.shape().to_vec(),
+            bytes: view.data().to_vec(),
+        });
+    }
+    Ok((
+        header.metadata().clone().unwrap_or_default().into_iter().collect(),
+        entries,
+    ))
+}
+
+/// The tensors of a PyTorch pickle, read by burn's reader (which never runs the pickle's code): the file's own
+/// dictionary, or its `model_state_dict` / `state_dict` entry (a training checkpoint), the `module.` prefix of a
+/// data-parallel model dropped.
+fn pytorch_entries(path: &Path) -> Result<Vec<Entry>, InteropError> {
+    use burn::store::{ModuleStore, PytorchStore};
+    let meta = std::fs::metadata(path).map_err(|e| err(path, "", e.to_string()))?;
+    if !meta.is_file() || meta.len() > MAX_FILE_BYTES {
+        return Err(err(
+            path,
+            "",
+            format!("not a regular file of at most {MAX_FILE_BYTES} bytes"),
+        ));
+    }
+    let mut last = String::new();
+    // A training checkpoint's model first (its optimiser state would otherwise be read as parameters), then the
+    // file's own dictionary; the error of the last try is the one that says what the file is.
+    for key in [Some("model_state_dict"), Some("state_dict"), None] {
+        let mut store = PytorchStore::from_file(path).map_indices_contiguous(false);
+        if let Some(k) = key {
+            store = store.with_top_level_key(k);
+        }
+        let all = match store.get_all_tensors() {
+            Ok(all) if !all.is_empty() => all,
+            Ok(_) => continue,
+            Err(e) => {
+                last = e.to_string();
+                continue;
+            }
+        };
+        let strip = all.keys().all(|k| k.starts_with("module."));
+        let mut entries = Vec::with_capacity(all.len());
+        for (name, t) in all {
+            let name = if strip {
+                name["module.".len()..].to_owned()
+            } else {
+                name.clone()
+            };
+            let bytes = t.to_bytes().map_err(|e| err(path, &name, e.to_string()))?;
+            let float = matches!(t.dtype, DType::F32 | DType::F16 | DType::BF16 | DType::F64).then_some(t.dtype);
+            entries.push(Entry {
+                float,
+                dtype: format!("{:?}", t.dtype),
+                shape: t.shape.to_vec(),
+                bytes: bytes.to_vec(),
+                name,
+            });
+        }
+        return Ok(entries);
+    }
+    Err(err(
+        path,
+        "",
+        format!(
+            "not a PyTorch state_dict burn's reader can read (a dictionary of tensors, or a checkpoint holding one under model_state_dict or state_dict): {last}"
+        ),
+    ))
+}
+
+/// Reads the file at `path` (safetensors, or a PyTorch pickle by its extension `.pt`/`.pth`/`.ckpt`; names under
+/// `names`) into `module`, whose sizes must be the file's: every parameter present with its shape and a float dtype
+/// (cast to f32), no key the network does not have (AAM's buffers and CLIP keys excepted). Nothing is applied unless
+/// the whole file passes.
 pub fn read_file<M: ModuleSnapshot>(
     module: &mut M,
     path: &Path,
     network: Network,
     names: Names,
 ) -> Result<ReadReport, InteropError> {
-    let bytes = any4d_data::formats::read_file(path, MAX_FILE_BYTES).map_err(|e| err(path, "", e.reason))?;
-    let (_, header) =
-        SafeTensors::read_metadata(&bytes).map_err(|e| err(path, "", format!("not a safetensors file: {e}")))?;
-    let file = SafeTensors::deserialize(&bytes).map_err(|e| err(path, "", format!("not a safetensors file: {e}")))?;
+    let (metadata, entries) = match is_pytorch_pickle(path) {
+        true => (BTreeMap::new(), pytorch_entries(path)?),
+        false => safetensors_entries(path)?,
+    };
     let expected = file_names(module, network, names);
-    let wanted: HashMap<&str, (&str, &[usize])> = expected
+    let wanted: HashMap<&str, &[usize]> = expected
         .iter()
-        .map(|(path, name, shape)| (name.as_str(), (path.as_str(), shape.as_slice())))
+        .map(|(_, name, shape)| (name.as_str(), shape.as_slice()))
         .collect();
     let mut report = ReadReport {
-        metadata: header.metadata().clone().unwrap_or_default().into_iter().collect(),
+        metadata,
         ..ReadReport::default()
     };
-    let mut keys: Vec<&str> = file.names();
-    keys.sort_unstable();
-    for key in &keys {
-        if wanted.contains_key(key) {
+    let mut by_name: HashMap<&str, &Entry> = HashMap::new();
+    let mut keys: Vec<&Entry> = entries.iter().collect();
+    keys.sort_unstable_by(|a, b| a.name.cmp(&b.name));
+    for e in keys {
+        if wanted.contains_key(e.name.as_str()) {
+            by_name.insert(&e.name, e);
             continue;
         }
-        if names == Names::AnimateAnyMesh && aam_extra(network, key) {
-            report.ignored.push((*key).to_owned());
+        if names == Names::AnimateAnyMesh && aam_extra(network, &e.name) {
+            report.ignored.push(e.name.clone());
             continue;
         }
         return Err(err(
             path,
-            *key,
+            &e.name,
             format!("not a parameter of the {} under {} names", network.name(), names.name()),
         ));
     }
     let mut tensors = Vec::with_capacity(expected.len());
     for (burn_path, name, shape) in &expected {
-        let view = file.tensor(name).map_err(|_| {
+        let e = by_name.get(name.as_str()).ok_or_else(|| {
             err(
                 path,
                 name,
                 format!("missing (the {} needs it, shape {shape:?})", network.name()),
             )
         })?;
-        if view.shape() != shape.as_slice() {
+        if &e.shape != shape {
             return Err(err(
                 path,
                 name,
-                format!("shape {:?}, the network's is {shape:?}", view.shape()),
+                format!("shape {:?}, the network's is {shape:?}", e.shape),
             ));
         }
-        let dtype = match view.dtype() {
-            Dtype::F32 => DType::F32,
-            Dtype::F16 => DType::F16,
-            Dtype::BF16 => DType::BF16,
-            Dtype::F64 => DType::F64,
-            other => {
-                return Err(err(
-                    path,
-                    name,
-                    format!("dtype {other:?}, a float parameter needs F32, F16, BF16 or F64"),
-                ));
-            }
+        let Some(dtype) = e.float else {
+            return Err(err(
+                path,
+                name,
+                format!("dtype {}, a float parameter needs F32, F16, BF16 or F64", e.dtype),
+            ));
         };
-        let data = TensorData::from_bytes_vec(view.data().to_vec(), shape.clone(), dtype).convert::<f32>();
+        let data = TensorData::from_bytes_vec(e.bytes.clone(), shape.clone(), dtype).convert::<f32>();
         tensors.push(PackTensor::new(
             burn_path.clone(),
             DType::F32,

@@ -6,6 +6,7 @@ use burn::prelude::*;
 use burn::tensor::Distribution;
 
 use crate::bench::synthetic_vae_batch;
+use crate::dymesh_vae::DyMeshVae;
 use crate::frame_vae::FrameVae;
 use crate::interop::FileTensor;
 use crate::mesh_vae::Posterior;
@@ -53,6 +54,22 @@ pub fn probe_frame_vae(model: &FrameVae, seed: u64, device: &Device) -> Result<V
     let (vertices, tokens, frames, batch) = VAE_PROBE;
     device.seed(seed);
     let b = synthetic_vae_batch(batch, vertices, tokens, frames, device)?;
+    let (output, _) = model.reconstruct(&b, Posterior::Mean);
+    Ok(vec![
+        file_tensor("reference", b.reference.clone()),
+        file_tensor("frames", b.frames.clone()),
+        file_tensor("output", output),
+    ])
+}
+
+/// The sequence-wise DyMeshVAE's encode + decode (posterior mean) of a synthetic clip of its own length drawn from
+/// `seed`, as [`probe_frame_vae`] but with the clip's frame 0 as the reference.
+pub fn probe_dymesh_vae(model: &DyMeshVae, seed: u64, device: &Device) -> Result<Vec<FileTensor>, String> {
+    let (vertices, tokens, _, batch) = VAE_PROBE;
+    device.seed(seed);
+    let mut b = synthetic_vae_batch(batch, vertices, tokens, model.frames(), device)?;
+    // The sequence-wise VAE's reference is the clip's frame 0 (AnimateAnyMesh reads it from the frames).
+    b.reference = b.frames.clone().narrow(1, 0, 1).squeeze_dim(1);
     let (output, _) = model.reconstruct(&b, Posterior::Mean);
     Ok(vec![
         file_tensor("reference", b.reference.clone()),

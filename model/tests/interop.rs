@@ -210,3 +210,105 @@ fn broken_and_lying_files_are_refused_naming_the_tensor_and_leave_the_network_un
     read_file(&mut target, &path, Network::FrameVae, Names::Any4d).unwrap();
     assert_eq!(values(&target), values(&original));
 }
+
+/// AnimateAnyMesh's training checkpoint (a dictionary holding `model_state_dict`, an optimiser state and argparse
+/// options) is read by burn's pickle reader; a pickle that would run code when loaded is refused without running it
+/// (both written by scripts/make_interop_fixtures.py).
+#[test]
+fn pytorch_checkpoints_are_read_by_burns_reader_and_code_in_a_pickle_never_runs() {
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+    let mut vae = tiny_vae(3);
+    let path = fixtures.join("aam_tiny_frame_vae.pth");
+    let report = read_file(&mut vae, &path, Network::FrameVae, Names::AnimateAnyMesh).unwrap();
+    assert_eq!(report.ignored, ["point_embed.basis", "traj_embed.freq_bands"]);
+    for t in collect_tensors(&vae, Network::FrameVae, Names::AnimateAnyMesh) {
+        for (i, b) in t.bytes.chunks_exact(4).enumerate() {
+            let want = (i % 97) as f32 / 97.0 - 0.5;
+            let got = f32::from_le_bytes(b.try_into().unwrap());
+            assert!(
+                (got - want).abs() < 1e-6,
+                "{}[{i}] = {got}, the file holds {want}",
+                t.name
+            );
+        }
+    }
+    let mut target = tiny_vae(3);
+    let before = values(&target);
+    let e = read_file(
+        &mut target,
+        &fixtures.join("evil.pt"),
+        Network::FrameVae,
+        Names::AnimateAnyMesh,
+    )
+    .unwrap_err();
+    assert!(e.reason.contains("burn's reader can read"), "{e}");
+    assert_eq!(values(&target), before);
+}
+
+/// The export read with numpy alone (`scripts/read_any4d.py`, the reader docs/pytorch.md shows): every tensor's
+/// AnimateAnyMesh name, shape and f32 values against the network's parameters in burn's layout, Linear weights
+/// transposed by the script itself.
+#[test]
+fn numpy_reads_an_aam_export_as_the_networks_parameters() {
+    let has_numpy = std::process::Command::new("python3")
+        .args(["-c", "import numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has_numpy {
+        println!("skipped: python3/numpy not available");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let vae = tiny_vae(4);
+    let path = dir.path().join("model.safetensors");
+    write_file(
+        &path,
+        &collect_tensors(&vae, Network::FrameVae, Names::AnimateAnyMesh),
+        BTreeMap::new(),
+    )
+    .unwrap();
+    let ours: BTreeMap<String, FileTensor> = collect_tensors(&vae, Network::FrameVae, Names::Any4d)
+        .into_iter()
+        .map(|t| (t.name.clone(), t))
+        .collect();
+    // The AAM name of each parameter: its path after PyTorch's adapter (a LayerNorm's gamma/beta read weight/bias).
+    let pairs: Vec<(String, String)> = file_names(&vae, Network::FrameVae, Names::AnimateAnyMesh)
+        .into_iter()
+        .map(|(adapted, aam, _)| {
+            let any4d = [("weight", "gamma"), ("bias", "beta")]
+                .iter()
+                .find_map(|(from, to)| {
+                    let ln = adapted.strip_suffix(from).map(|stem| format!("{stem}{to}"));
+                    ln.filter(|n| !ours.contains_key(&adapted) && ours.contains_key(n))
+                })
+                .unwrap_or(adapted);
+            (aam, any4d)
+        })
+        .collect();
+    let params: serde_json::Map<String, serde_json::Value> = ours
+        .iter()
+        .map(|(name, t)| {
+            let values: Vec<f32> = t
+                .bytes
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+                .collect();
+            (name.clone(), serde_json::json!({"shape": t.shape, "values": values}))
+        })
+        .collect();
+    let expected = dir.path().join("expected.json");
+    let json = serde_json::json!({"pairs": pairs, "params": params});
+    std::fs::write(&expected, serde_json::to_vec(&json).unwrap()).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/read_any4d.py");
+    let out = std::process::Command::new("python3")
+        .arg(&script)
+        .args(["check".as_ref(), path.as_os_str(), expected.as_os_str()])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        stdout.contains(&format!("ok: {} tensors match", ours.len())),
+        "{stdout}"
+    );
+}

@@ -7,13 +7,14 @@ use std::process::ExitCode;
 
 use any4d_model::any_vae::AnyMeshVaeConfig;
 use any4d_model::bench::{BenchSizes, ModelTimings, StepTiming, time_networks};
-use any4d_model::interop::Names;
+use any4d_model::interop::{Names, Network};
 use any4d_model::summary::{format_report, param_report};
 use any4d_train::backend::Backend;
 use any4d_train::bdlstm_loop::BdlstmVariant;
 use any4d_train::config::RunConfig;
 use any4d_train::interop::{MODEL_SAFETENSORS, export_run, import_file, probe_run};
 use any4d_train::pack::{Precision, pack_run};
+use any4d_train::vae_loop::LATENT_STATS_FILE;
 use anyhow::{Context, bail};
 use burn::prelude::Device;
 use clap::{Args, Subcommand, ValueEnum};
@@ -277,11 +278,15 @@ fn export(args: &ExportArgs) -> anyhow::Result<ExitCode> {
     let names = args.names.names();
     let e = export_run(&args.run, &args.out, names, &Device::flex())?;
     println!(
-        "exported the {} of {} step {} ({} parameters, {} tensors under {} names) to {}",
+        "exported the {} of {} step {} ({}, {} tensors under {} names) to {}",
         e.network.name(),
         args.run.display(),
         e.step,
-        if e.averaged { "averaged" } else { "trained" },
+        if e.averaged {
+            "its averaged parameters"
+        } else {
+            "the parameters it samples with"
+        },
         e.tensors,
         names.name(),
         args.out.join(MODEL_SAFETENSORS).display()
@@ -308,6 +313,12 @@ fn import(args: &ImportArgs) -> anyhow::Result<ExitCode> {
             i.side_files.join(", ")
         }
     );
+    if i.network != Network::Mmdit && !i.side_files.contains(&LATENT_STATS_FILE) {
+        println!(
+            "note: no latent statistics (`{LATENT_STATS_FILE}`, written by a finished any4d VAE run): the run samples \
+             and evaluates reconstructions, but an RF cannot be trained on its latents until they exist"
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -3,7 +3,7 @@
 //!
 //! An export folder holds `model.safetensors` (the network that has an AnimateAnyMesh counterpart: the MMDiT of an
 //! RF run, or the VAE of a VAE run; the newest checkpoint's sampling parameters, the average when the run keeps
-//! one), with the run's resolved config, network, names and step in its header, and beside it what any4d needs to
+//! one), with the run's resolved config (as JSON), network, names and step in its header, and beside it what any4d needs to
 //! use it again: `config.toml`, and for an RF `text_encoder.safetensors` (the scratch caption encoder, any4d's
 //! names), `tokenizer.json` and `vae_run.json`, for a VAE `latent_stats.json`. Import reads such a folder's
 //! `model.safetensors` (or a file written by PyTorch, with `--config`) back into a packed run folder that
@@ -27,7 +27,7 @@ use crate::data_order::DataOrder;
 use crate::error::{Result, TrainError, io_err, run_err};
 use crate::pack::{Precision, save_params};
 use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE};
-use crate::runs::{VAE_RUN_FILE, load_rf_run, load_vae_run};
+use crate::runs::{VAE_RUN_FILE, load_rf_run};
 use crate::vae_loop::{LATENT_STATS_FILE, VaeRunConfig};
 
 /// The exported network's file.
@@ -51,10 +51,18 @@ pub struct Exported {
 }
 
 fn interop_err(e: interop::InteropError) -> TrainError {
-    run_err(e.path.clone(), e.to_string())
+    run_err(e.path.clone(), e.what())
 }
 
+/// The header metadata of an export: `config` (the run's resolved `config.toml`) as JSON, so that a reader
+/// needs no TOML parser.
 fn metadata(network: Network, names: Names, config: String, step: u64) -> BTreeMap<String, String> {
+    // A run's own config.toml was written by this program from a parsed table: it parses, and JSON holds it.
+    let config = config
+        .parse::<toml::Table>()
+        .ok()
+        .and_then(|t| serde_json::to_string(&t).ok())
+        .unwrap_or(config);
     BTreeMap::from([
         // What PyTorch's `safetensors.torch.save_file` writes: loaders that check it accept the file.
         ("format".to_owned(), "pt".to_owned()),
@@ -124,9 +132,9 @@ fn export_into(run: &Path, tmp: &Path, names: Names, config_text: String, device
         }
         (Network::Mmdit, rf.step, tensors.len(), averaged)
     } else {
-        let vae = load_vae_run(run, device)?;
-        let averaged = vae.checkpoint.join(crate::checkpoint::EMA_FILE).is_file();
-        let (network, mut tensors, freqs) = match (&vae.model, &vae.config.model) {
+        let (model, config, ckpt, step) = load_vae_network(run, device)?;
+        let averaged = ckpt.join(crate::checkpoint::EMA_FILE).is_file();
+        let (network, mut tensors, freqs) = match (&model, &config.model) {
             (AnyMeshVae::Framewise(m), AnyMeshVaeConfig::Framewise(c)) => (
                 Network::FrameVae,
                 collect_tensors(m, Network::FrameVae, names),
@@ -146,10 +154,12 @@ fn export_into(run: &Path, tmp: &Path, names: Names, config_text: String, device
                 tensors.push(FileTensor { name, shape, bytes });
             }
         }
-        let meta = metadata(network, names, config_text, vae.step);
+        let meta = metadata(network, names, config_text, step);
         interop::write_file(&tmp.join(MODEL_SAFETENSORS), &tensors, meta).map_err(interop_err)?;
-        copy(&vae.run, LATENT_STATS_FILE)?;
-        (network, vae.step, tensors.len(), averaged)
+        if run.join(LATENT_STATS_FILE).is_file() {
+            copy(run, LATENT_STATS_FILE)?;
+        }
+        (network, step, tensors.len(), averaged)
     };
     copy(run, CONFIG_FILE)?;
     Ok(Exported {
@@ -202,8 +212,8 @@ fn read_metadata(path: &Path) -> Result<BTreeMap<String, String>> {
         .unwrap_or_default())
 }
 
-/// Imports `from` (a `model.safetensors` as [`export_run`] writes it, or one written by PyTorch) into the new run
-/// folder `out`. The network, names and config come from the file's header unless given; `config` is needed for a
+/// Imports `from` (a `model.safetensors` as [`export_run`] writes it, one written by PyTorch, or a PyTorch pickle
+/// `.pt`/`.pth`/`.ckpt` read by burn's reader, which runs none of its code) into the new run folder `out`. The network, names and config come from the file's header unless given; `config` is needed for a
 /// file without any4d's header. An RF needs its caption encoder, tokenizer and VAE record beside the file (as an
 /// export leaves them); a VAE's `latent_stats.json` is copied when it is there.
 pub fn import_file(
@@ -216,27 +226,23 @@ pub fn import_file(
     if out.exists() {
         return Err(run_err(out, "exists; import writes a new folder (remove it first)"));
     }
-    let ext = from
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or_default()
-        .to_ascii_lowercase();
-    if matches!(ext.as_str(), "pt" | "pth" | "bin" | "ckpt") {
-        return Err(run_err(
-            from,
-            "a PyTorch pickle: save it as safetensors in Python first (`safetensors.torch.save_file(\
-             model.state_dict(), \"model.safetensors\")`); a pickle can run code when opened and is not read",
-        ));
-    }
-    let meta = read_metadata(from)?;
+    // A PyTorch pickle carries no header of any4d's: its config and names are given.
+    let meta = match interop::is_pytorch_pickle(from) {
+        true => BTreeMap::new(),
+        false => read_metadata(from)?,
+    };
     let config_text = match config {
         Some(p) => fs::read_to_string(p).map_err(io_err("read", p))?,
-        None => meta.get(META_CONFIG).cloned().ok_or_else(|| {
-            run_err(
-                from,
-                "the file carries no any4d config: give the run config it was trained with (--config)",
-            )
-        })?,
+        None => meta
+            .get(META_CONFIG)
+            .map(|json| config_from_json(from, json))
+            .transpose()?
+            .ok_or_else(|| {
+                run_err(
+                    from,
+                    "the file carries no any4d config: give the run config it was trained with (--config)",
+                )
+            })?,
     };
     let names = match names {
         Some(n) => n,
@@ -346,7 +352,9 @@ fn import_into(what: &Import, tmp: &Path, device: &Device) -> Result<Imported> {
                 (Network::DyMeshVae, r)
             }
         };
-        if dir.join(LATENT_STATS_FILE).is_file() {
+        // The statistics belong to the weights an export wrote (its header names their step); beside a file
+        // written elsewhere they would describe other weights, so they are not taken.
+        if meta.contains_key(META_STEP) && dir.join(LATENT_STATS_FILE).is_file() {
             fs::copy(dir.join(LATENT_STATS_FILE), tmp.join(LATENT_STATS_FILE))
                 .map_err(io_err("copy", dir.join(LATENT_STATS_FILE)))?;
             side_files.push(LATENT_STATS_FILE);
@@ -383,7 +391,7 @@ fn import_into(what: &Import, tmp: &Path, device: &Device) -> Result<Imported> {
     })
 }
 
-/// Runs the network of the run folder `run` (an RF's MMDiT, or a frame-wise VAE) on the probe inputs of `seed`
+/// Runs the network of the run folder `run` (an RF's MMDiT, or a VAE of either kind) on the probe inputs of `seed`
 /// (`any4d_model::probe`) and writes inputs and outputs to the safetensors file `out`, for
 /// `scripts/torch_parity.py probe`.
 pub fn probe_run(run: &Path, out: &Path, seed: u64, device: &Device) -> Result<Network> {
@@ -394,18 +402,17 @@ pub fn probe_run(run: &Path, out: &Path, seed: u64, device: &Device) -> Result<N
             any4d_model::probe::probe_mmdit(&rf.model.mmdit, seed, device),
         )
     } else {
-        match load_vae_run(run, device)?.model {
+        // The network alone: a VAE imported from PyTorch has no latent statistics yet, and a probe needs none.
+        let probe = |r: std::result::Result<Vec<FileTensor>, String>| r.map_err(|e| run_err(run, e));
+        match load_vae_network(run, device)?.0 {
             AnyMeshVae::Framewise(m) => (
                 Network::FrameVae,
-                any4d_model::probe::probe_frame_vae(&m, seed, device).map_err(|e| run_err(run, e))?,
+                probe(any4d_model::probe::probe_frame_vae(&m, seed, device))?,
             ),
-            AnyMeshVae::Sequencewise(_) => {
-                return Err(run_err(
-                    run,
-                    "a sequence-wise DyMeshVAE: AnimateAnyMesh's encoder samples its posterior, so there is no \
-                     output to compare; export it and check the load (`torch_parity.py load`) instead",
-                ));
-            }
+            AnyMeshVae::Sequencewise(m) => (
+                Network::DyMeshVae,
+                probe(any4d_model::probe::probe_dymesh_vae(&m, seed, device))?,
+            ),
         }
     };
     let meta = BTreeMap::from([
@@ -414,4 +421,26 @@ pub fn probe_run(run: &Path, out: &Path, seed: u64, device: &Device) -> Result<N
     ]);
     interop::write_file(out, &tensors, meta).map_err(interop_err)?;
     Ok(network)
+}
+
+/// A VAE run's network with its newest checkpoint's sampling parameters, its config, that checkpoint and its step;
+/// unlike `runs::load_vae_run` it needs no latent statistics (a VAE imported from PyTorch has none yet).
+fn load_vae_network(run: &Path, device: &Device) -> Result<(AnyMeshVae, VaeRunConfig, std::path::PathBuf, u64)> {
+    let config = VaeRunConfig::parse(
+        &fs::read_to_string(run.join(CONFIG_FILE)).map_err(io_err("read", run.join(CONFIG_FILE)))?,
+        &run.join(CONFIG_FILE),
+    )?;
+    let (ckpt, step) = crate::runs::newest_checkpoint(run)?;
+    let model = match config.model.init(device) {
+        AnyMeshVae::Framewise(m) => AnyMeshVae::Framewise(crate::checkpoint::load_for_sampling(m, &ckpt)?.0),
+        AnyMeshVae::Sequencewise(m) => AnyMeshVae::Sequencewise(crate::checkpoint::load_for_sampling(m, &ckpt)?.0),
+    };
+    Ok((model, config, ckpt, step))
+}
+
+/// The run config an export's header carries as JSON, back as TOML text.
+fn config_from_json(from: &Path, json: &str) -> Result<String> {
+    let value: serde_json::Value = serde_json::from_str(json)
+        .map_err(|e| run_err(from, format!("the header's `{META_CONFIG}` is not JSON: {e}")))?;
+    toml::to_string(&value).map_err(|e| run_err(from, format!("the header's `{META_CONFIG}` is not a run config: {e}")))
 }
