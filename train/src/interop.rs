@@ -90,15 +90,7 @@ pub fn export_run(run: &Path, out: &Path, names: Names, device: &Device) -> Resu
             "a BD-LSTM run: it has no PyTorch counterpart to export to",
         ));
     }
-    let tmp = out.with_file_name(format!(
-        ".tmp_export_{}",
-        out.file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    ));
-    if tmp.exists() {
-        fs::remove_dir_all(&tmp).map_err(io_err("remove stale temporary folder", &tmp))?;
-    }
+    let tmp = temp_sibling(out, "export")?;
     fs::create_dir_all(&tmp).map_err(io_err("create", &tmp))?;
     let result = export_into(run, &tmp, names, config_text, device);
     if result.is_err() {
@@ -257,15 +249,7 @@ pub fn import_file(
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
     let config_path = config.map_or_else(|| from.to_path_buf(), Path::to_path_buf);
-    let tmp = out.with_file_name(format!(
-        ".tmp_import_{}",
-        out.file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    ));
-    if tmp.exists() {
-        fs::remove_dir_all(&tmp).map_err(io_err("remove stale temporary folder", &tmp))?;
-    }
+    let tmp = temp_sibling(out, "import")?;
     let what = Import {
         from,
         dir,
@@ -443,4 +427,15 @@ fn config_from_json(from: &Path, json: &str) -> Result<String> {
     let value: serde_json::Value = serde_json::from_str(json)
         .map_err(|e| run_err(from, format!("the header's `{META_CONFIG}` is not JSON: {e}")))?;
     toml::to_string(&value).map_err(|e| run_err(from, format!("the header's `{META_CONFIG}` is not a run config: {e}")))
+}
+
+/// The temporary sibling `.tmp_<what>_<name>` that `out` is written as before it is renamed into place; a stale one
+/// (left by a killed run of the same command: ours, incomplete) is removed.
+fn temp_sibling(out: &Path, what: &str) -> Result<std::path::PathBuf> {
+    let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let tmp = out.with_file_name(format!(".tmp_{what}_{name}"));
+    if tmp.exists() {
+        fs::remove_dir_all(&tmp).map_err(io_err("remove stale temporary folder", &tmp))?;
+    }
+    Ok(tmp)
 }
