@@ -8,6 +8,7 @@
 # weights near their initialisation are what is compared, not a trained model).
 #
 #   AAM=DIR PY=PYTHON bash experiments/2026-12-07-torch-parity/run.sh SCRATCH    # ANY4D_BIN=... if not target/debug/any4d
+#   bash scripts/torch_parity.sh DIR SCRATCH    # the same, with a fresh venv of torch from the package registry
 #
 # DIR is a checkout of github.com/JarrentWu1031/AnimateAnyMesh (nothing of it is committed here); PYTHON has torch,
 # einops, numpy and safetensors. SCRATCH (outside the repository) receives stores, runs and exports; results.csv and
