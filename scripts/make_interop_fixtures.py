@@ -10,6 +10,8 @@ scripts/torch_parity.py):
   a dictionary with `model_state_dict`, an optimiser state and the argparse options (an object that is not a
   tensor).
 - model/tests/fixtures/evil.pt: a pickle whose loading would run `os.system` (it must be refused, never run).
+- model/tests/fixtures/huge_view.pt: {"x": a stride-0 view of one float standing for 2^31 of them} (a few hundred
+  bytes that would cost 8 GiB if read before being checked; burn's reader itself refuses views of over 10 GiB).
 """
 
 import argparse
@@ -47,6 +49,7 @@ def main():
     }
     torch.save(checkpoint, os.path.join(OUT, "aam_tiny_frame_vae.pth"))
     torch.save(Evil(), os.path.join(OUT, "evil.pt"))
+    torch.save({"x": torch.zeros(1).expand(2**31)}, os.path.join(OUT, "huge_view.pt"))
 
 
 if __name__ == "__main__":

@@ -37,6 +37,12 @@ def read_safetensors(path):
     tensors = {}
     for name, info in header.items():
         start, end = info["data_offsets"]
+        if info["dtype"] == "BF16":  # numpy has no bfloat16: its 16 bits are the top half of a float32
+            raw = np.frombuffer(body[start:end], dtype="<u2").astype(np.uint32) << 16
+            tensors[name] = raw.view(np.float32).reshape(info["shape"])
+            continue
+        if info["dtype"] not in DTYPES:
+            raise ValueError(f"{path}: tensor {name}: dtype {info['dtype']} is not read here")
         dtype = DTYPES[info["dtype"]]
         tensors[name] = np.frombuffer(body[start:end], dtype=np.dtype(dtype).newbyteorder("<")).reshape(info["shape"])
     return meta, tensors

@@ -61,12 +61,13 @@ TIME_SINUSOID = 512
 VAE_PROBE_TOKENS = 64
 
 
-def build_mmdit(torch, transformer, frames, channels, width, blocks, heads, text_dim):
-    """AAM's DyMeshMMDiT with any4d's input-mask channel layout (docs/method.md §4.1)."""
+def build_mmdit(torch, transformer, frames, channels, width, blocks, heads, text_dim, mask_channels=True):
+    """AAM's DyMeshMMDiT with any4d's channel layout (docs/method.md §4.1): (T + 1) slots of C latent channels, plus
+    one mask channel per slot for the input-mask and impute-until conditionings."""
     model = transformer.DyMeshMMDiT(
         device="cpu",
         dtype=torch.float32,
-        input_channels=(frames + 1) * (channels + 1),
+        input_channels=(frames + 1) * (channels + int(mask_channels)),
         output_channels=frames * channels,
         width=width,
         layers=blocks,
@@ -142,8 +143,9 @@ def module_for_export(torch, transformer, dymeshvae, meta):
     cfg = json.loads(meta["any4d.config"])
     m = cfg["model"]
     if network == "mmdit":
+        mask = m.get("conditioning", "input_mask") in ("input_mask", "impute_until")
         return network, build_mmdit(torch, transformer, m["frames"], m["channels"], m["width"], m["blocks"],
-                                    m["heads"], m["text_dim"])
+                                    m["heads"], m["text_dim"], mask)
     body = m["body"]
     framewise = network == "frame_vae"
     frames = 1 if framewise else m["frames"]

@@ -330,7 +330,23 @@ struct Entry {
     float: Option<DType>,
     dtype: String,
     shape: Vec<usize>,
-    bytes: Vec<u8>,
+    data: EntryData,
+}
+
+/// A tensor's bytes: read with the file (safetensors), or read on demand (a pickle's tensor, which may be a strided
+/// view whose full size is only paid once its name and shape have been checked against the network's).
+enum EntryData {
+    Read(Vec<u8>),
+    Lazy(PackTensor),
+}
+
+impl Entry {
+    fn bytes(&self) -> Result<Vec<u8>, String> {
+        match &self.data {
+            EntryData::Read(b) => Ok(b.clone()),
+            EntryData::Lazy(t) => t.to_bytes().map(|b| b.to_vec()).map_err(|e| e.to_string()),
+        }
+    }
 }
 
 /// Whether `path` names a PyTorch pickle (`torch.save`) rather than safetensors.
@@ -362,7 +378,7 @@ fn safetensors_entries(path: &Path) -> Result<(BTreeMap<String, String>, Vec<Ent
             float,
             dtype: format!("{:?}", view.dtype()),
             shape: view.shape().to_vec(),
-            bytes: view.data().to_vec(),
+            data: EntryData::Read(view.data().to_vec()),
         });
     }
     Ok((
@@ -408,13 +424,13 @@ fn pytorch_entries(path: &Path) -> Result<Vec<Entry>, InteropError> {
             } else {
                 name.clone()
             };
-            let bytes = t.to_bytes().map_err(|e| err(path, &name, e.to_string()))?;
             let float = matches!(t.dtype, DType::F32 | DType::F16 | DType::BF16 | DType::F64).then_some(t.dtype);
+            // No bytes yet: a hostile pickle's stride-0 view can stand for gigabytes.
             entries.push(Entry {
                 float,
                 dtype: format!("{:?}", t.dtype),
                 shape: t.shape.to_vec(),
-                bytes: bytes.to_vec(),
+                data: EntryData::Lazy(t.clone()),
                 name,
             });
         }
@@ -431,13 +447,16 @@ fn pytorch_entries(path: &Path) -> Result<Vec<Entry>, InteropError> {
 
 /// Reads the file at `path` (safetensors, or a PyTorch pickle by its extension `.pt`/`.pth`/`.ckpt`; names under
 /// `names`) into `module`, whose sizes must be the file's: every parameter present with its shape and a float dtype
-/// (cast to f32), no key the network does not have (AAM's buffers and CLIP keys excepted). Nothing is applied unless
-/// the whole file passes.
+/// (cast to f32), no key the network does not have (AAM's CLIP keys excepted), and AAM's constant buffers, where the
+/// file has them, equal to `constants` (the module's own, [`aam_vae_buffers`]): a module built with other
+/// frequencies computes another function. A tensor's bytes are read only once its name, shape and dtype have passed;
+/// the module is changed only after every tensor has.
 pub fn read_file<M: ModuleSnapshot>(
     module: &mut M,
     path: &Path,
     network: Network,
     names: Names,
+    constants: &[(String, Vec<usize>, Vec<f32>)],
 ) -> Result<ReadReport, InteropError> {
     let (metadata, entries) = match is_pytorch_pickle(path) {
         true => (BTreeMap::new(), pytorch_entries(path)?),
@@ -461,6 +480,9 @@ pub fn read_file<M: ModuleSnapshot>(
             continue;
         }
         if names == Names::AnimateAnyMesh && aam_extra(network, &e.name) {
+            if let Some((_, shape, values)) = constants.iter().find(|c| c.0 == e.name) {
+                check_constant(path, e, shape, values)?;
+            }
             report.ignored.push(e.name.clone());
             continue;
         }
@@ -493,7 +515,8 @@ pub fn read_file<M: ModuleSnapshot>(
                 format!("dtype {}, a float parameter needs F32, F16, BF16 or F64", e.dtype),
             ));
         };
-        let data = TensorData::from_bytes_vec(e.bytes.clone(), shape.clone(), dtype).convert::<f32>();
+        let bytes = e.bytes().map_err(|why| err(path, name, why))?;
+        let data = TensorData::from_bytes_vec(bytes, shape.clone(), dtype).convert::<f32>();
         tensors.push(PackTensor::new(
             burn_path.clone(),
             DType::F32,
@@ -514,4 +537,37 @@ pub fn read_file<M: ModuleSnapshot>(
         return Err(err(path, name, "the network's parameter was not filled"));
     }
     Ok(report)
+}
+
+/// Refuses an AnimateAnyMesh buffer whose shape or values (within 10⁻⁶ relative) are not the module's own.
+fn check_constant(path: &Path, e: &Entry, shape: &[usize], values: &[f32]) -> Result<(), InteropError> {
+    let differs = |why: String| {
+        err(
+            path,
+            &e.name,
+            format!("{why}: built with other frequencies than this network"),
+        )
+    };
+    if e.shape != shape {
+        return Err(differs(format!("shape {:?}, the network's is {shape:?}", e.shape)));
+    }
+    let Some(dtype) = e.float else {
+        return Err(differs(format!("dtype {}", e.dtype)));
+    };
+    let bytes = e.bytes().map_err(|why| err(path, &e.name, why))?;
+    let got = TensorData::from_bytes_vec(bytes, shape.to_vec(), dtype).convert::<f32>();
+    let got: Vec<f32> = got
+        .try_to_vec::<f32>()
+        .map_err(|why| err(path, &e.name, format!("{why:?}")))?;
+    match got
+        .iter()
+        .zip(values)
+        .position(|(a, b)| (a - b).abs() > 1e-6 * b.abs().max(1.0))
+    {
+        Some(i) => Err(differs(format!(
+            "value {i} is {}, the network's is {}",
+            got[i], values[i]
+        ))),
+        None => Ok(()),
+    }
 }

@@ -105,7 +105,7 @@ fn a_network_round_trips_under_both_names_and_aam_layouts_are_transposed() {
         write_file(&path, &tensors, BTreeMap::from([("k".to_owned(), "v".to_owned())])).unwrap();
         let mut other = tiny_vae(2);
         assert_ne!(values(&other), values(&original));
-        let report = read_file(&mut other, &path, Network::FrameVae, names).unwrap();
+        let report = read_file(&mut other, &path, Network::FrameVae, names, &[]).unwrap();
         assert_eq!(values(&other), values(&original), "{names:?}");
         assert_eq!(report.metadata["k"], "v");
     }
@@ -191,7 +191,7 @@ fn broken_and_lying_files_are_refused_naming_the_tensor_and_leave_the_network_un
         std::fs::write(&path, bytes).unwrap();
         let mut target = tiny_vae(2);
         let before = values(&target);
-        let e = read_file(&mut target, &path, Network::FrameVae, Names::Any4d).unwrap_err();
+        let e = read_file(&mut target, &path, Network::FrameVae, Names::Any4d, &[]).unwrap_err();
         assert_eq!(e.tensor, tensor, "{what}: {e}");
         assert!(e.to_string().contains(&*path.display().to_string()), "{what}: {e}");
         assert_eq!(values(&target), before, "{what}: the network changed");
@@ -207,8 +207,29 @@ fn broken_and_lying_files_are_refused_naming_the_tensor_and_leave_the_network_un
     let path = dir.path().join("f64.safetensors");
     std::fs::write(&path, file(&wide)).unwrap();
     let mut target = tiny_vae(2);
-    read_file(&mut target, &path, Network::FrameVae, Names::Any4d).unwrap();
+    read_file(&mut target, &path, Network::FrameVae, Names::Any4d, &[]).unwrap();
     assert_eq!(values(&target), values(&original));
+    // In f16 too, within its rounding.
+    let mut half = entries.clone();
+    let h = &mut half[0];
+    h.1 = "F16";
+    let floats: Vec<f32> =
+        h.3.chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect();
+    let n16 = floats.len();
+    h.3 = burn::tensor::TensorData::new(floats, [n16])
+        .convert_dtype(burn::tensor::DType::F16)
+        .as_bytes()
+        .to_vec();
+    let path = dir.path().join("f16.safetensors");
+    std::fs::write(&path, file(&half)).unwrap();
+    read_file(&mut target, &path, Network::FrameVae, Names::Any4d, &[]).unwrap();
+    let first = &good[0];
+    let n = first.bytes.len() / 4;
+    for (got, want) in values(&target)[..n].iter().zip(values(&original)[..n].iter()) {
+        assert!((got - want).abs() <= 1e-3 * want.abs().max(1e-2), "{got} vs {want}");
+    }
 }
 
 /// AnimateAnyMesh's training checkpoint (a dictionary holding `model_state_dict`, an optimiser state and argparse
@@ -219,7 +240,9 @@ fn pytorch_checkpoints_are_read_by_burns_reader_and_code_in_a_pickle_never_runs(
     let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
     let mut vae = tiny_vae(3);
     let path = fixtures.join("aam_tiny_frame_vae.pth");
-    let report = read_file(&mut vae, &path, Network::FrameVae, Names::AnimateAnyMesh).unwrap();
+    let tiny = FrameVaeConfig::tiny();
+    let constants = aam_vae_buffers(tiny.body.point_freqs, tiny.offset_freqs);
+    let report = read_file(&mut vae, &path, Network::FrameVae, Names::AnimateAnyMesh, &constants).unwrap();
     assert_eq!(report.ignored, ["point_embed.basis", "traj_embed.freq_bands"]);
     for t in collect_tensors(&vae, Network::FrameVae, Names::AnimateAnyMesh) {
         for (i, b) in t.bytes.chunks_exact(4).enumerate() {
@@ -234,15 +257,59 @@ fn pytorch_checkpoints_are_read_by_burns_reader_and_code_in_a_pickle_never_runs(
     }
     let mut target = tiny_vae(3);
     let before = values(&target);
-    let e = read_file(
-        &mut target,
-        &fixtures.join("evil.pt"),
-        Network::FrameVae,
-        Names::AnimateAnyMesh,
-    )
-    .unwrap_err();
+    let read = |file: &str, target: &mut FrameVae| {
+        read_file(
+            target,
+            &fixtures.join(file),
+            Network::FrameVae,
+            Names::AnimateAnyMesh,
+            &constants,
+        )
+        .unwrap_err()
+    };
+    let e = read("evil.pt", &mut target);
     assert!(e.reason.contains("burn's reader can read"), "{e}");
+    // A stride-0 view standing for 2^31 floats (8 GiB) under a name the network does not have: refused by its
+    // name before any of its bytes is made.
+    let e = read("huge_view.pt", &mut target);
+    assert_eq!(e.tensor, "x", "{e}");
     assert_eq!(values(&target), before);
+}
+
+/// AnimateAnyMesh's VAE buffers are constants of its module: a file whose frequency bands are not the network's
+/// describes another function and is refused, naming the buffer.
+#[test]
+fn aam_buffers_with_other_frequencies_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let vae = tiny_vae(5);
+    let tiny = FrameVaeConfig::tiny();
+    let constants = aam_vae_buffers(tiny.body.point_freqs, tiny.offset_freqs);
+    let write = |bands: Vec<f32>| {
+        let mut tensors = collect_tensors(&vae, Network::FrameVae, Names::AnimateAnyMesh);
+        for (name, shape, mut values) in constants.clone() {
+            if name == "traj_embed.freq_bands" {
+                values = bands.clone();
+            }
+            let bytes = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+            tensors.push(FileTensor { name, shape, bytes });
+        }
+        let path = dir.path().join("v.safetensors");
+        write_file(&path, &tensors, BTreeMap::new()).unwrap();
+        path
+    };
+    let ours = constants[1].2.clone();
+    let path = write(ours.clone());
+    let mut target = tiny_vae(6);
+    read_file(&mut target, &path, Network::FrameVae, Names::AnimateAnyMesh, &constants).unwrap();
+    // AnimateAnyMesh's `log_sampling=False`: bands spaced linearly from 1 to 2^(n-1).
+    let n = ours.len();
+    let linear: Vec<f32> = (0..n)
+        .map(|i| 1.0 + i as f32 * (2f32.powi(n as i32 - 1) - 1.0) / (n - 1) as f32)
+        .collect();
+    let path = write(linear);
+    let e = read_file(&mut target, &path, Network::FrameVae, Names::AnimateAnyMesh, &constants).unwrap_err();
+    assert_eq!(e.tensor, "traj_embed.freq_bands", "{e}");
+    assert!(e.reason.contains("other frequencies"), "{e}");
 }
 
 /// The export read with numpy alone (`scripts/read_any4d.py`, the reader docs/pytorch.md shows): every tensor's

@@ -33,16 +33,17 @@ pub enum ModelCmd {
     /// Write a trained run's network as safetensors, under any4d's names or AnimateAnyMesh's PyTorch ones (the MMDiT
     /// of an RF run, the VAE of a VAE run), with what any4d needs to read it back beside it.
     Export(ExportArgs),
-    /// Make a packed run folder from a safetensors file (an export, or one written by PyTorch with `--config`).
+    /// Make a packed run folder from a safetensors file (an export, or one written by PyTorch, with `--config`) or a
+    /// PyTorch checkpoint (`.pt`/`.pth`/`.ckpt`, read without running any of its code).
     Import(ImportArgs),
-    /// Run a trained network (an RF's MMDiT or a frame-wise VAE) on seeded random inputs and write inputs and
+    /// Run a trained network (an RF's MMDiT or a VAE of either kind) on seeded random inputs and write inputs and
     /// outputs as safetensors, for the PyTorch parity check (`scripts/torch_parity.py probe`).
     Probe(ProbeArgs),
 }
 
 #[derive(Args, Debug)]
 pub struct ProbeArgs {
-    /// The run folder (RF or frame-wise VAE; packed, imported or not).
+    /// The run folder (RF or VAE; packed, imported or not).
     #[arg(long)]
     pub run: PathBuf,
     /// The safetensors file to write.
@@ -89,7 +90,7 @@ pub struct ExportArgs {
 
 #[derive(Args, Debug)]
 pub struct ImportArgs {
-    /// The safetensors file (`model.safetensors` of an export folder, or one saved from PyTorch).
+    /// The weight file: `model.safetensors` of an export folder, one saved from PyTorch, or a PyTorch checkpoint.
     #[arg(long)]
     pub from: PathBuf,
     /// The run config it was trained with (needed when the file does not carry any4d's header).

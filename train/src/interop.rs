@@ -98,7 +98,7 @@ pub fn export_run(run: &Path, out: &Path, names: Names, device: &Device) -> Resu
         let _ = fs::remove_dir_all(&tmp);
     }
     let exported = result?;
-    fs::rename(&tmp, out).map_err(io_err("rename export folder into place", out))?;
+    rename_into_place(&tmp, out)?;
     Ok(exported)
 }
 
@@ -265,7 +265,7 @@ pub fn import_file(
         let _ = fs::remove_dir_all(&tmp);
     }
     let imported = result?;
-    fs::rename(&tmp, out).map_err(io_err("rename imported run into place", out))?;
+    rename_into_place(&tmp, out)?;
     Ok(imported)
 }
 
@@ -294,6 +294,24 @@ fn import_into(what: &Import, tmp: &Path, device: &Device) -> Result<Imported> {
     let table: toml::Table = config_text
         .parse()
         .map_err(|e| run_err(config_path, format!("not TOML: {e}")))?;
+    // The network the file says it holds must be the one the config describes, before any tensor is read.
+    let described = match table.get("vae").and_then(|v| v.get("kind")).and_then(|k| k.as_str()) {
+        _ if table.contains_key("rf") => Network::Mmdit,
+        Some("sequencewise") => Network::DyMeshVae,
+        _ => Network::FrameVae,
+    };
+    if let Some(claimed) = meta.get(META_NETWORK).and_then(|n| Network::from_name(n))
+        && claimed != described
+    {
+        return Err(run_err(
+            from,
+            format!(
+                "holds a {} but the config describes a {}",
+                claimed.name(),
+                described.name()
+            ),
+        ));
+    }
     let ckpt = tmp.join(CHECKPOINTS_DIR).join(step_dir_name(step));
     fs::create_dir_all(&ckpt).map_err(io_err("create", &ckpt))?;
     let mut side_files = Vec::new();
@@ -311,7 +329,7 @@ fn import_into(what: &Import, tmp: &Path, device: &Device) -> Result<Imported> {
         }
         let tokenizer = ScratchTokenizer::load(dir)?;
         let mut model = rf_config.model_config(tokenizer.vocab_size()).init(device);
-        let report = interop::read_file(&mut model.mmdit, from, Network::Mmdit, names).map_err(interop_err)?;
+        let report = interop::read_file(&mut model.mmdit, from, Network::Mmdit, names, &[]).map_err(interop_err)?;
         let text = dir.join(TEXT_SAFETENSORS);
         if !text.is_file() {
             return Err(run_err(
@@ -319,19 +337,23 @@ fn import_into(what: &Import, tmp: &Path, device: &Device) -> Result<Imported> {
                 format!("an RF needs its caption encoder `{TEXT_SAFETENSORS}` beside its file"),
             ));
         }
-        interop::read_file(&mut model.text, &text, Network::Mmdit, Names::Any4d).map_err(interop_err)?;
+        interop::read_file(&mut model.text, &text, Network::Mmdit, Names::Any4d, &[]).map_err(interop_err)?;
         save_params(model, &ckpt.join(MODEL_FILE), Precision::Full)?;
         (Network::Mmdit, report)
     } else {
         let vae_config = VaeRunConfig::parse(config_text, config_path)?;
+        let constants = match &vae_config.model {
+            AnyMeshVaeConfig::Framewise(c) => aam_vae_buffers(c.body.point_freqs, c.offset_freqs),
+            AnyMeshVaeConfig::Sequencewise(c) => aam_vae_buffers(c.body.point_freqs, c.offset_freqs),
+        };
         let (network, report) = match vae_config.model.init(device) {
             AnyMeshVae::Framewise(mut m) => {
-                let r = interop::read_file(&mut m, from, Network::FrameVae, names).map_err(interop_err)?;
+                let r = interop::read_file(&mut m, from, Network::FrameVae, names, &constants).map_err(interop_err)?;
                 save_params(m, &ckpt.join(MODEL_FILE), Precision::Full)?;
                 (Network::FrameVae, r)
             }
             AnyMeshVae::Sequencewise(mut m) => {
-                let r = interop::read_file(&mut m, from, Network::DyMeshVae, names).map_err(interop_err)?;
+                let r = interop::read_file(&mut m, from, Network::DyMeshVae, names, &constants).map_err(interop_err)?;
                 save_params(m, &ckpt.join(MODEL_FILE), Precision::Full)?;
                 (Network::DyMeshVae, r)
             }
@@ -345,18 +367,6 @@ fn import_into(what: &Import, tmp: &Path, device: &Device) -> Result<Imported> {
         }
         (network, report)
     };
-    if let Some(claimed) = meta.get(META_NETWORK).and_then(|n| Network::from_name(n))
-        && claimed != network
-    {
-        return Err(run_err(
-            from,
-            format!(
-                "holds a {} but the config describes a {}",
-                claimed.name(),
-                network.name()
-            ),
-        ));
-    }
     let state = TrainState {
         step,
         rng: ChaCha8Rng::seed_from_u64(0),
@@ -432,10 +442,22 @@ fn config_from_json(from: &Path, json: &str) -> Result<String> {
 /// The temporary sibling `.tmp_<what>_<name>` that `out` is written as before it is renamed into place; a stale one
 /// (left by a killed run of the same command: ours, incomplete) is removed.
 fn temp_sibling(out: &Path, what: &str) -> Result<std::path::PathBuf> {
-    let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let tmp = out.with_file_name(format!(".tmp_{what}_{name}"));
     if tmp.exists() {
         fs::remove_dir_all(&tmp).map_err(io_err("remove stale temporary folder", &tmp))?;
     }
     Ok(tmp)
+}
+
+/// Renames the finished temporary folder to `out`; if that fails, the temporary folder is removed (best effort: it
+/// is ours and would only be left behind).
+fn rename_into_place(tmp: &Path, out: &Path) -> Result<()> {
+    fs::rename(tmp, out).map_err(|e| {
+        let _ = fs::remove_dir_all(tmp);
+        io_err("rename into place", out)(e)
+    })
 }

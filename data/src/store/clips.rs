@@ -62,7 +62,14 @@ pub(super) fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
         Err(e) => return Outcome::Rejected(reason(&e, source)),
     };
     if takes.is_empty() {
-        return Outcome::Rejected("animations: no animation: a static mesh is not a clip".into());
+        let poses = formats::one_frame_takes(path).unwrap_or_default();
+        return Outcome::Rejected(match poses.is_empty() {
+            true => "animations: no animation: a static mesh is not a clip".into(),
+            false => format!(
+                "animations: only one-frame animations (poses, no motion): {}",
+                poses.join(", ")
+            ),
+        });
     }
     let asset = job
         .provenance()

@@ -3,8 +3,8 @@
 //! Takes: the `lower.md3` of a Quake III player folder (`lower.md3` and `upper.md3` beside an `animation.cfg`)
 //! stands for the whole character, assembled through its tags as the game draws it, one take per animation of the
 //! cfg ([`player`]); the player's other parts and their coarser copies are not import sources of their own
-//! ([`is_source`]), but each reads alone when named. A body part read alone (`lower*.md3`, `upper*.md3` with an
-//! `animation.cfg` beside it) has the takes that file lists for it ([`cfg_takes`]); any other `.md3` has one
+//! ([`is_source`]), but each reads alone when named. A body part read alone (`lower.md3`, `upper.md3` or a coarser copy
+//! such as `upper_1.md3`, with an `animation.cfg` beside it) has the takes that file lists for it ([`cfg_takes`]); any other `.md3` has one
 //! take, `all`, holding every frame. All surfaces go into one vertex list; every surface must have the file's
 //! frame count. Coordinates go from Z-up to Y-up ([`super::skeletal::z_up_to_y_up`]).
 //!
@@ -188,7 +188,7 @@ impl Md3 {
         Ok(())
     }
 
-    /// Index of the tag named `name` (case-insensitive, as the game compares it), every frame's tags checked to
+    /// Index of the tag named `name` (compared exactly, as the game's `strcmp` does), every frame's tags checked to
     /// lie inside the file; an error when there is none.
     fn tag_index(&self, path: &str, data: &[u8], name: &str) -> Result<usize> {
         let mut b = Bytes::new(path, data);
@@ -199,7 +199,7 @@ impl Md3 {
         b.check_count_at(self.ofs_tags, count, TAG_BYTES, "tags")?;
         for t in 0..self.tags {
             b.seek(self.ofs_tags + t * TAG_BYTES, "tags")?;
-            if b.name(64, "tags")?.eq_ignore_ascii_case(name) {
+            if b.name(64, "tags")? == name {
                 return Ok(t);
             }
         }

@@ -246,10 +246,10 @@ pub(super) fn one_frame_animations(cfg: &Path, part: Option<&str>) -> Result<Vec
         .collect())
 }
 
-/// The `animation.cfg` beside a player's `lower*.md3` or `upper*.md3`, and which part the file is.
+/// The `animation.cfg` beside a player's body part (`lower.md3`, `upper_1.md3`, …), and which part the file is.
 pub(super) fn part_cfg(path: &Path) -> Option<(PathBuf, &'static str)> {
     let stem = path.file_stem()?.to_string_lossy().to_ascii_lowercase();
-    let part = ["lower", "upper"].into_iter().find(|p| stem.starts_with(p))?;
+    let part = ["lower", "upper"].into_iter().find(|p| part_stem(&stem, p))?;
     Some((beside(path, "animation.cfg")?, part))
 }
 
@@ -268,7 +268,7 @@ fn beside(path: &Path, name: &str) -> Option<PathBuf> {
 }
 
 /// The takes of a body part read alone, from the player's `animation.cfg` (`None` when the file is not a
-/// `lower*`/`upper*` part with a cfg beside it).
+/// `lower`/`upper` part with a cfg beside it).
 pub(super) fn part_ranges(path: &Path, frames: usize) -> Result<Option<Vec<Range>>> {
     let Some((cfg, part)) = part_cfg(path) else {
         return Ok(None);
@@ -313,13 +313,16 @@ pub fn is_part_name(path: &Path) -> bool {
     let Some(stem) = path.file_stem().map(|s| s.to_string_lossy().to_ascii_lowercase()) else {
         return false;
     };
-    ["lower", "upper", "head"].iter().any(|p| {
-        stem.strip_prefix(p).is_some_and(|rest| {
-            rest.is_empty()
-                || rest
-                    .strip_prefix('_')
-                    .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
-        })
+    ["lower", "upper", "head"].iter().any(|p| part_stem(&stem, p))
+}
+
+/// Whether the lower-case `stem` names body part `part` or one of its coarser copies (`part`, `part_1`, …).
+fn part_stem(stem: &str, part: &str) -> bool {
+    stem.strip_prefix(part).is_some_and(|rest| {
+        rest.is_empty()
+            || rest
+                .strip_prefix('_')
+                .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
     })
 }
 

@@ -118,6 +118,8 @@ fn an_animation_at_0_fps_plays_at_1_and_huge_first_frames_are_refused_without_ov
 /// Axis rows of a quarter turn about z: the part's x points along the parent's y.
 const QUARTER_Z: [[f32; 3]; 3] = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
 const STILL: [[f32; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+/// Axis rows of a quarter turn about x: the part's y points along the parent's z.
+const QUARTER_X: [[f32; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]];
 
 /// A player's cfg: `BOTH_DEATH1` on frames 0-1 of both parts, `TORSO_GESTURE` on upper frames 2-4,
 /// `TORSO_STAND` one pose (upper frame 5), `LEGS_WALKCR` at 6 (so the legs skip 4 frames), `LEGS_WALK` lower
@@ -136,8 +138,8 @@ fn player_cfg() -> String {
 }
 
 /// Writes a player into `dir`: legs whose vertex 0 sits at height = frame and whose `tag_torso` rises from 100
-/// (a quarter turn at frame 3); a torso whose vertex 2 sits at height = frame and whose `tag_head` is 10 up; a
-/// one-frame head. Coarser copies and an unrelated flag lie beside them.
+/// (a quarter turn at frame 3); a torso whose vertex 2 sits at height = frame and whose `tag_head` is at (5, 0, 10)
+/// turned a quarter about x; a one-frame head. Coarser copies and an unrelated flag lie beside them.
 fn write_player(dir: &Path) {
     let part = |frames: usize, tags: &[TestTag]| {
         let f: Vec<Vec<[i16; 3]>> = (0..frames as i16)
@@ -148,13 +150,13 @@ fn write_player(dir: &Path) {
     let torso: Vec<_> = (0..6)
         .map(|f| ([0.0, 0.0, 100.0 + f as f32], if f == 3 { QUARTER_Z } else { STILL }))
         .collect();
-    let head = vec![([0.0, 0.0, 10.0], STILL); 6];
+    let head = vec![([5.0, 0.0, 10.0], QUARTER_X); 6];
     let flag: Vec<Vec<[i16; 3]>> = (0..3).map(|f| vec![[0, 0, 0], [64, 0, 0], [0, 64, 64 * f]]).collect();
     for (name, bytes) in [
         ("lower.md3", part(6, &[("tag_torso", torso)])),
         (
             "upper.md3",
-            part(6, &[("tag_weapon", head.clone()), ("TAG_HEAD", head)]),
+            part(6, &[("tag_weapon", head.clone()), ("tag_head", head)]),
         ),
         ("head.md3", part(1, &[])),
         ("lower_1.md3", part(6, &[])),
@@ -204,13 +206,18 @@ fn a_player_is_assembled_through_its_tags_and_each_part_plays_its_own_animation(
             [0.0, 105.0 + legs, -1.0]
         };
         assert_eq!(y(&clip, k, 5), torso_v2, "torso vertex 2 at step {k}");
-        // Head vertex 1 = (1, 0, 0) hung 10 above the torso, turning with it.
-        let head_v1 = if turn {
-            [0.0, 110.0 + legs, -1.0]
+        // The head hangs on tag_head = (5, 0, 10) turned a quarter about x, composed as Quake III's
+        // CG_PositionEntityOnTag does: origin = torso origin + Σ tag.origin[i]·torso.axis[i], axis = tag.axis ×
+        // torso.axis. Still torso: origin (5, 0, 110 + legs), axis rows x, z, −y. Turned torso: origin
+        // (0, 5, 110 + legs) (the tag's x offset turned onto y), axis rows y, z, x. Head vertices 1 = (1, 0, 0) and
+        // 2 = (0, 1, 0), then turned Y-up. A swapped product or an unturned tag origin gives other numbers.
+        let (head_v1, head_v2) = if turn {
+            ([0.0, 110.0 + legs, -6.0], [0.0, 111.0 + legs, -5.0])
         } else {
-            [1.0, 110.0 + legs, 0.0]
+            ([6.0, 110.0 + legs, 0.0], [5.0, 111.0 + legs, 0.0])
         };
         assert_eq!(y(&clip, k, 7), head_v1, "head vertex 1 at step {k}");
+        assert_eq!(y(&clip, k, 8), head_v2, "head vertex 2 at step {k}");
     }
     // TORSO_GESTURE: torso frames 2..=4 at 10 fps while the legs idle on frames 4, 4, 5 (5 fps, looping).
     let (clip, _, _) = read_take("TORSO_GESTURE");
