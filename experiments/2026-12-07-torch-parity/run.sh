@@ -76,7 +76,7 @@ rev = subprocess.run(["git", "-C", aam, "rev-parse", "HEAD"], capture_output=Tru
 manifest = {
     "command": "AAM=DIR PY=PYTHON bash experiments/2026-12-07-torch-parity/run.sh SCRATCH",
     "any4d_commit": subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip(),
-    "animateanymesh_commit": rev or "a0e1d824e59f (the checkout has no git metadata)",
+    "animateanymesh_commit": rev or "unknown (the checkout has no git metadata; see README.md)",
     "torch": torch.__version__,
     "probe": "model/src/probe.rs: MMDiT B 2, P 64, L 8; VAEs a 256-vertex chain mesh, 64 tokens",
 }
