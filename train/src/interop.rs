@@ -25,7 +25,7 @@ use rand_chacha::ChaCha8Rng;
 use crate::checkpoint::{MODEL_FILE, STATE_FILE, TrainState, step_dir_name};
 use crate::data_order::DataOrder;
 use crate::error::{Result, TrainError, io_err, run_err};
-use crate::pack::{Precision, save_params};
+use crate::pack::{Precision, save_params, temp_sibling};
 use crate::run_folder::{CHECKPOINTS_DIR, CONFIG_FILE};
 use crate::runs::{VAE_RUN_FILE, load_rf_run};
 use crate::vae_loop::{LATENT_STATS_FILE, VaeRunConfig};
@@ -437,20 +437,6 @@ fn config_from_json(from: &Path, json: &str) -> Result<String> {
     let value: serde_json::Value = serde_json::from_str(json)
         .map_err(|e| run_err(from, format!("the header's `{META_CONFIG}` is not JSON: {e}")))?;
     toml::to_string(&value).map_err(|e| run_err(from, format!("the header's `{META_CONFIG}` is not a run config: {e}")))
-}
-
-/// The temporary sibling `.tmp_<what>_<name>` that `out` is written as before it is renamed into place; a stale one
-/// (left by a killed run of the same command: ours, incomplete) is removed.
-fn temp_sibling(out: &Path, what: &str) -> Result<std::path::PathBuf> {
-    let name = out
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = out.with_file_name(format!(".tmp_{what}_{name}"));
-    if tmp.exists() {
-        fs::remove_dir_all(&tmp).map_err(io_err("remove stale temporary folder", &tmp))?;
-    }
-    Ok(tmp)
 }
 
 /// Renames the finished temporary folder to `out`; if that fails, the temporary folder is removed (best effort: it

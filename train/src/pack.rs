@@ -98,14 +98,7 @@ pub fn pack_run(
         let text = fs::read_to_string(&config).map_err(io_err("read", &config))?;
         text.parse::<toml::Table>().is_ok_and(|t| t.contains_key("bdlstm"))
     };
-    let name = out
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = out.with_file_name(format!(".tmp_pack_{name}"));
-    if tmp.exists() {
-        fs::remove_dir_all(&tmp).map_err(io_err("remove stale temporary folder", &tmp))?;
-    }
+    let tmp = temp_sibling(out, "pack")?;
     let packed = if is_acap {
         let bd = load_acap_bdlstm_run(run, device)?;
         let (ckpt, _) = newest_checkpoint(&bd.run)?;
@@ -187,4 +180,18 @@ fn finish(kind: &'static str, step: u64, averaged: bool, ckpt_out: &Path) -> Res
         averaged,
         model_bytes,
     })
+}
+
+/// The temporary sibling `.tmp_<what>_<name>` that the folder `out` is written as before it is renamed into place;
+/// a stale one (left by a killed run of the same command: ours, incomplete) is removed.
+pub(crate) fn temp_sibling(out: &Path, what: &str) -> Result<PathBuf> {
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = out.with_file_name(format!(".tmp_{what}_{name}"));
+    if tmp.exists() {
+        fs::remove_dir_all(&tmp).map_err(io_err("remove stale temporary folder", &tmp))?;
+    }
+    Ok(tmp)
 }
