@@ -22,6 +22,7 @@ pub mod preprocess;
 pub mod real_corpus;
 pub mod render;
 pub mod rng;
+pub mod scene;
 pub mod store;
 pub mod synth;
 

@@ -12,5 +12,6 @@ pub mod plot;
 pub mod protocol;
 pub mod render;
 pub mod rollout;
+pub mod scene_metrics;
 pub mod tables;
 pub mod view;

@@ -1,0 +1,193 @@
+//! Scene metrics (docs/method.md §6.5, (E8)–(E10)): how a clip sits in its static scene — how often and how deep it
+//! passes into the scene's solid parts, and how much the vertices that touch the ground slide.
+//!
+//! A point is inside the scene when its generalized winding number, Σ over triangles of the solid angle the triangle
+//! subtends (Van Oosterom–Strackee) / 4π, exceeds ½: exactly 1 inside a closed, outward-wound part and 0 outside,
+//! robust to small gaps. Its depth is the distance to the nearest triangle (exact point–triangle distance). Both
+//! visit every triangle for every vertex: O(T·N·M), with frames in parallel.
+
+use any4d_data::scene::Scene;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::metrics::{EvalError, Motion, Result};
+
+/// Distances of (E10): a vertex touches the ground within `contact` of the scene's surface (outside or inside), and
+/// skates when it moves more than `slide` along the ground (x–z) between two frames in which it touches.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ContactThresholds {
+    pub contact: f64,
+    pub slide: f64,
+}
+
+impl Default for ContactThresholds {
+    /// 2 % and 1 % of the unit half-extent that normalisation (D1)–(D3) gives frame 0.
+    fn default() -> Self {
+        ContactThresholds {
+            contact: 0.02,
+            slide: 0.01,
+        }
+    }
+}
+
+/// (E8)–(E10) of one clip in its scene.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SceneMetrics {
+    /// (E8) fraction of frames with at least one vertex inside the scene.
+    pub collision_frames: f64,
+    /// (E8) fraction of (frame, vertex) pairs inside the scene.
+    pub collision_vertices: f64,
+    /// (E9) deepest penetration: the largest distance from an inside vertex to the scene's surface (0 without any).
+    pub max_penetration: f64,
+    /// (E10) fraction of consecutive frame pairs in which a vertex touching the ground at both skates.
+    pub foot_skating: f64,
+}
+
+/// Winding number of `p` with respect to `scene` ((E8)): ≈ 1 inside a closed outward-wound part, ≈ 0 outside.
+pub fn winding_number(scene: &Scene, p: [f64; 3]) -> f64 {
+    let mut total = 0.0;
+    for f in &scene.faces {
+        let [a, b, c] = f.map(|v| sub(scene.vertices[v as usize].map(f64::from), p));
+        let (la, lb, lc) = (norm(a), norm(b), norm(c));
+        let num = dot(a, cross(b, c));
+        let den = la * lb * lc + dot(a, b) * lc + dot(a, c) * lb + dot(b, c) * la;
+        total += 2.0 * num.atan2(den);
+    }
+    total / (4.0 * std::f64::consts::PI)
+}
+
+/// Distance from `p` to the nearest triangle of `scene` ((E9)).
+pub fn surface_distance(scene: &Scene, p: [f64; 3]) -> f64 {
+    scene
+        .faces
+        .iter()
+        .map(|f| {
+            let [a, b, c] = f.map(|v| scene.vertices[v as usize].map(f64::from));
+            norm(sub(p, closest_on_triangle(p, a, b, c)))
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Signed distance to the scene's surface: negative inside ((E8)–(E9)).
+pub fn signed_distance(scene: &Scene, p: [f64; 3]) -> f64 {
+    let d = surface_distance(scene, p);
+    if winding_number(scene, p) > 0.5 { -d } else { d }
+}
+
+/// (E8)–(E10) of `motion` in `scene` (y up, as every clip of the project).
+pub fn scene_metrics(motion: Motion, scene: &Scene, thresholds: ContactThresholds) -> Result<SceneMetrics> {
+    let (t, n) = (motion.frames(), motion.n_vertices());
+    for (name, value) in [("contact", thresholds.contact), ("slide", thresholds.slide)] {
+        if !(value.is_finite() && value > 0.0) {
+            return Err(EvalError::Parameter {
+                name,
+                reason: format!("{value}: must be positive and finite"),
+            });
+        }
+    }
+    if t < 2 {
+        return Err(EvalError::TooFewFrames {
+            metric: "scene metrics",
+            needed: 2,
+            frames: t,
+        });
+    }
+    let sd: Vec<Vec<f64>> = (0..t)
+        .into_par_iter()
+        .map(|f| {
+            motion
+                .frame(f)
+                .iter()
+                .map(|p| signed_distance(scene, p.map(f64::from)))
+                .collect()
+        })
+        .collect();
+    let inside: usize = sd.iter().flatten().filter(|&&d| d < 0.0).count();
+    let frames_hit = sd.iter().filter(|row| row.iter().any(|&d| d < 0.0)).count();
+    let deepest = sd.iter().flatten().fold(0.0f64, |m, &d| m.max(-d));
+    let touching = |f: usize, v: usize| sd[f][v].abs() <= thresholds.contact;
+    let skating = (0..t - 1)
+        .filter(|&f| {
+            (0..n).any(|v| {
+                let (a, b) = (motion.frame(f)[v], motion.frame(f + 1)[v]);
+                let slide = f64::from(b[0] - a[0]).hypot(f64::from(b[2] - a[2]));
+                touching(f, v) && touching(f + 1, v) && slide > thresholds.slide
+            })
+        })
+        .count();
+    Ok(SceneMetrics {
+        collision_frames: frames_hit as f64 / t as f64,
+        collision_vertices: inside as f64 / (t * n) as f64,
+        max_penetration: deepest,
+        foot_skating: skating as f64 / (t - 1) as f64,
+    })
+}
+
+/// The point of triangle `abc` nearest to `p` (Ericson, Real-Time Collision Detection, §5.1.5).
+fn closest_on_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
+    let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
+    let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = sub(p, b);
+    let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return add(a, scale(ab, d1 / (d1 - d3)));
+    }
+    let cp = sub(p, c);
+    let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return add(a, scale(ac, d2 / (d2 - d6)));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return add(b, scale(sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6))));
+    }
+    let denom = va + vb + vc;
+    if denom.abs() < 1e-300 {
+        // A degenerate (zero-area) triangle whose edges were all passed: its nearest vertex.
+        return [a, b, c]
+            .into_iter()
+            .min_by(|x, y| norm(sub(p, *x)).total_cmp(&norm(sub(p, *y))))
+            .unwrap_or(a);
+    }
+    let (v, w) = (vb / denom, vc / denom);
+    add(a, add(scale(ab, v), scale(ac, w)))
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
