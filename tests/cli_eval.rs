@@ -200,3 +200,70 @@ fn eval_run_refuses_item_flags_beside_a_manifest() {
     }
     assert!(!out.exists(), "nothing written");
 }
+
+/// `any4d eval scene` (docs/method.md §6.5): a cube of 8 vertices (frame 0 spans [−1, 1]³, so normalisation is the
+/// identity) that sinks 0.5 into a floor slab in its middle frames, scored in JSON; and the errors of a scene file
+/// that is not one.
+#[test]
+fn eval_scene_scores_a_clip_sinking_into_a_floor() {
+    let dir = tempfile::tempdir().unwrap();
+    let corner = |i: usize| -> [f32; 3] {
+        let s = |b: usize| if (i >> b) & 1 == 1 { 1.0 } else { -1.0 };
+        [s(0), s(1), s(2)]
+    };
+    // Frames 0..16; frames 6..=9 lowered by 2.5: the bottom corners (y = −1) reach y = −3.5.
+    let vertices: Vec<[f32; 3]> = (0..FRAMES)
+        .flat_map(|f| {
+            let dy = if (6..=9).contains(&f) { -2.5 } else { 0.0 };
+            (0..8).map(corner).map(move |p| [p[0], p[1] + dy, p[2]])
+        })
+        .collect();
+    let clip = write(dir.path(), "cube.bin", vertices, 8);
+    // The floor: a slab whose top is at y = −3 (0.5 above the sunk corners), 10 wide.
+    let scene = dir.path().join("floor.obj");
+    let mut obj = String::new();
+    for i in 0..8 {
+        let (x, y, z) = (
+            if i & 1 == 1 { 5.0 } else { -5.0 },
+            if i & 2 == 2 { -3.0 } else { -4.0 },
+            if i & 4 == 4 { 5.0 } else { -5.0 },
+        );
+        obj += &format!("v {x} {y} {z}\n");
+    }
+    // The outward-wound faces of any4d_data::scene::Scene::cuboid, 1-based.
+    for f in [
+        [0, 2, 3],
+        [0, 3, 1],
+        [4, 5, 7],
+        [4, 7, 6],
+        [0, 1, 5],
+        [0, 5, 4],
+        [2, 6, 7],
+        [2, 7, 3],
+        [0, 4, 6],
+        [0, 6, 2],
+        [1, 3, 7],
+        [1, 7, 5],
+    ] {
+        obj += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+    }
+    std::fs::write(&scene, obj).unwrap();
+    let (c, sc) = (clip.to_str().unwrap(), scene.to_str().unwrap());
+    let out = any4d(&["eval", "scene", c, sc, "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let m: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let close = |k: &str, want: f64| {
+        let got = m[k].as_f64().unwrap();
+        assert!((got - want).abs() < 1e-5, "{k}: {got} vs {want}");
+    };
+    close("collision_frames", 4.0 / 16.0);
+    close("collision_vertices", 4.0 * 4.0 / (16.0 * 8.0));
+    close("max_penetration", 0.5);
+    close("foot_skating", 0.0);
+    let table = any4d(&["eval", "scene", c, sc]);
+    assert!(String::from_utf8_lossy(&table.stdout).contains("max penetration (E9)"));
+    std::fs::write(&scene, "v 0 0 0\n").unwrap();
+    let bad = any4d(&["eval", "scene", c, sc]);
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("at least one triangle"));
+}

@@ -35,6 +35,9 @@ pub enum EvalCmd {
     Run(Box<RunArgs>),
     /// Redraw the strips and the RMSE-vs-K_x plot of an earlier `eval run`.
     Render(RenderArgs),
+    /// How a clip sits in a static scene: collision frame and vertex ratios, deepest penetration and foot skating,
+    /// (E8)–(E10) (docs/method.md §6.5), both normalised by the clip's frame 0 (D1)–(D3).
+    Scene(super::scene::SceneArgs),
 }
 
 /// How `eval metrics` prints its result.
@@ -80,6 +83,7 @@ pub fn exec(cmd: EvalCmd) -> anyhow::Result<ExitCode> {
         EvalCmd::Metrics(args) => metrics(args),
         EvalCmd::Run(args) => run(*args),
         EvalCmd::Render(args) => render(args),
+        EvalCmd::Scene(args) => super::scene::scene(args),
     }
 }
 

@@ -12,6 +12,7 @@ pub mod data;
 pub mod eval;
 pub mod model;
 pub mod quickstart;
+pub mod scene;
 pub mod timing;
 pub mod train;
 pub mod view;
