@@ -24,7 +24,6 @@ const CRATES: &[(&str, &str)] = &[
 /// shrinks: breaking a circle means deleting its entry.
 const KNOWN_CIRCLES: &[(&str, &[&str])] = &[
     ("data", &["formats::bvh", "formats::iqm"]),
-    ("model", &["anchor", "mmdit"]),
     ("model", &["any_vae", "dymesh_vae", "frame_vae", "mesh_vae"]),
     ("eval", &["methods", "tables"]),
     ("eval", &["metrics", "nearest"]),

@@ -37,10 +37,6 @@ const LONG_FILES: &[(&str, &str)] = &[
         "(E1)–(E7) and their shared checks, the pure functions of one table",
     ),
     (
-        "model/src/mmdit.rs",
-        "the MMDiT reads top to bottom like the paper's appendix, with its FLOP count",
-    ),
-    (
         "model/tests/rf.rs",
         "the flow conventions and every sampler mode, tested against one oracle set-up",
     ),
