@@ -25,7 +25,7 @@ use crate::data_order::WholeClips;
 use crate::error::{Result, TrainError, io_err, run_err};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, RunOptions};
 use crate::multi_device::run_devices;
-use crate::rf_loop::{LatentDraw, LatentSet, encode_latents};
+use crate::rf_loop::{LatentDraw, LatentSet, encode_latents_on_workers};
 use crate::run_folder::{CONFIG_FILE, RunFolder, open_for_resume};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 
@@ -271,15 +271,22 @@ impl BdlstmObjective {
     pub fn new(cfg: &BdlstmRunConfig, data: &Path, vae: &LoadedVae, device: &Device) -> Result<Self> {
         let store = open_store(data, cfg, vae)?;
         vae.frame_vae()?;
+        // On a CPU, one encoding worker per core (the latents are the same as one worker's).
+        let workers = if cfg.device.backend.is_cpu() {
+            rayon::current_num_threads()
+        } else {
+            1
+        };
         let encode = |split: Split| {
             let indices = store.indices(split);
-            encode_latents(
+            encode_latents_on_workers(
                 &vae.model,
                 &store,
                 &indices,
                 cfg.train.micro_batch,
                 vae.tokens(),
                 device,
+                workers,
             )
         };
         let (train, valid) = (encode(Split::Train)?, encode(Split::Val)?);
