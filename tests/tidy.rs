@@ -29,10 +29,6 @@ const LONG_FILES: &[(&str, &str)] = &[
         "the body both VAEs share, its config and (V1)–(V3): one trait's building blocks",
     ),
     (
-        "eval/src/learned.rs",
-        "the VAE codec and the samplers built on it are one pipeline: encode, sample, decode",
-    ),
-    (
         "eval/src/metrics.rs",
         "(E1)–(E7) and their shared checks, the pure functions of one table",
     ),
