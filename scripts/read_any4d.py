@@ -51,12 +51,13 @@ def read_safetensors(path):
 def read_store(store_dir):
     """(T, P, [clip dicts]) of a store's clips.bin (layout in data/src/store/mod.rs): each clip with `id`, `caption`,
     `source`, `vertices` (T, N, 3) float32 normalised, `faces` (M, 3) uint32, `fps` (P,) uint32, `center` (3,),
-    `scale`, and `split` ("train" or "val"). Positions in the file's units are `vertices * scale + center`."""
+    `scale`, `split` ("train" or "val") and `scene` (None, or `vertices` (S, 3) and `faces` (M, 3) of the static scene,
+    normalised as the clip). Positions in the file's units are `vertices * scale + center`."""
     with open(f"{store_dir}/clips.bin", "rb") as f:
         data = f.read()
     if data[:8] != b"A4DSTORE" or data[-8:] != b"A4DTABLE":
         raise ValueError(f"{store_dir}/clips.bin: not an any4d store (or a truncated one)")
-    version, t, p, _ = struct.unpack_from("<4I", data, 8)
+    version, t, p, flags = struct.unpack_from("<4I", data, 8)
     if version != 1:
         raise ValueError(f"{store_dir}/clips.bin: layout version {version}, this reader knows 1")
     table, count = struct.unpack_from("<QQ", data, len(data) - 24)
@@ -83,9 +84,15 @@ def read_store(store_dir):
         fps = take("<u4", cp, (cp,))
         center = take("<f4", 3, (3,))
         (scale,) = take("<f4", 1, (1,))
+        scene = None
+        if flags & 1:  # a scene section: counts, then vertices (normalised as the clip) and faces; 0, 0 = none
+            sv, sm = struct.unpack_from("<2I", data, at)
+            at += 8
+            sverts, sfaces = take("<f4", sv * 3, (sv, 3)), take("<u4", sm * 3, (sm, 3))
+            scene = {"vertices": sverts, "faces": sfaces} if sv or sm else None
         clips.append({"id": fields[0], "caption": fields[1], "source": fields[2], "vertices": vertices,
                       "faces": faces, "fps": fps, "center": center, "scale": float(scale),
-                      "split": "val" if split else "train"})
+                      "split": "val" if split else "train", "scene": scene})
     return t, p, clips
 
 
@@ -118,6 +125,8 @@ def main(argv):
             c = clips[0]
             print(f"first: {c['id']!r} {c['caption']!r} vertices {c['vertices'].shape} faces {c['faces'].shape} "
                   f"fps {c['fps'].shape} split {c['split']}")
+            scenes = sum(c["scene"] is not None for c in clips)
+            print(f"scenes {scenes}")
     elif len(argv) >= 2 and argv[0] == "weights":
         meta, tensors = read_safetensors(argv[1])
         print(json.dumps({k: v for k, v in meta.items() if k != "any4d.config"}))

@@ -123,10 +123,11 @@ impl Augment {
         };
         let (sin, cos) = yaw.sin_cos();
         let sx = if mirror { -s[0] } else { s[0] };
-        for p in &mut clip.vertices {
+        let place = |p: &mut [f32; 3]| {
             let (x, y, z) = (p[0] * sx, p[1] * s[1], p[2] * s[2]);
             *p = [cos * x + sin * z, y, -sin * x + cos * z];
-        }
+        };
+        clip.vertices.iter_mut().for_each(place);
         if mirror {
             for f in &mut clip.faces {
                 f.swap(1, 2);
@@ -134,6 +135,19 @@ impl Augment {
         }
         let norm = Normalization::from_frame(&clip.vertices[..n]);
         norm.apply(clip);
+        // The scene moves with the clip (the same scale, mirror and turn, then the same re-normalisation); it is
+        // static, so time reversal and speed leave it as it is.
+        if let Some(scene) = &mut item.scene {
+            scene.vertices.iter_mut().for_each(place);
+            if mirror {
+                scene.faces.iter_mut().for_each(|f| f.swap(1, 2));
+            }
+            for p in &mut scene.vertices {
+                for (x, c) in p.iter_mut().zip(norm.center) {
+                    *x = (*x - c) / norm.scale;
+                }
+            }
+        }
     }
 }
 
@@ -167,6 +181,7 @@ mod tests {
             fps: vec![0, 3],
             normalization,
             split: Split::Train,
+            scene: None,
         }
     }
 
@@ -197,6 +212,34 @@ mod tests {
         Augment::default().apply(&mut a, &mut r);
         assert_eq!(a, b);
         assert_eq!(r, rng(1, 0));
+    }
+
+    /// A scene made of the clip's own frame-0 points stays on them through every spatial augmentation (turn,
+    /// mirror, scale and the re-normalisation), whatever the draw; time reversal and speed do not move it.
+    #[test]
+    fn the_scene_moves_with_its_clip() {
+        let aug = Augment {
+            yaw_degrees: 180.0,
+            mirror: 0.5,
+            scale: [0.7, 1.3],
+            ..Augment::default()
+        };
+        for seed in 0..8 {
+            let mut a = item();
+            let frame0 = a.clip.frame(0).to_vec();
+            a.scene = Some(crate::scene::Scene {
+                vertices: frame0,
+                faces: vec![[0, 1, 2]],
+            });
+            aug.apply(&mut a, &mut rng(seed, 1));
+            let scene = a.scene.as_ref().unwrap();
+            for (p, q) in scene.vertices.iter().zip(a.clip.frame(0)) {
+                assert!(
+                    p.iter().zip(q).all(|(x, y)| (x - y).abs() < 1e-5),
+                    "seed {seed}: {p:?} vs {q:?}"
+                );
+            }
+        }
     }
 
     #[test]

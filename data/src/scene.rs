@@ -12,6 +12,23 @@ use crate::error::{DataError, Result};
 /// Most triangles a scene may have.
 pub const MAX_SCENE_TRIANGLES: usize = 1 << 16;
 
+pub use crate::formats::obj::{SCENE_SUFFIX, is_scene_file};
+
+/// The scene file beside the import source `source` (a file or an OBJ folder), when there is one inside its folder.
+pub fn scene_beside(source: &Path) -> Option<std::path::PathBuf> {
+    let name = source.file_name()?.to_string_lossy().into_owned();
+    let stem = match source.is_dir() {
+        true => name,
+        false => name.split('.').next().unwrap_or_default().to_owned(),
+    };
+    let dir = source
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let path = dir.join(format!("{stem}{SCENE_SUFFIX}"));
+    crate::formats::skeletal::sidecar_inside(dir, &path).then_some(path)
+}
+
 /// A static triangle mesh in a clip's coordinates.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scene {
@@ -82,6 +99,19 @@ impl Scene {
             [1, 7, 5], // x = hi
         ];
         Scene { vertices, faces }
+    }
+
+    /// The scene in a window's normalised frame (D1)–(D3) (`(x − c) / s`), or `None` when that is not finite.
+    pub fn normalized(&self, n: &crate::preprocess::Normalization) -> Option<Scene> {
+        let vertices: Vec<[f32; 3]> = self
+            .vertices
+            .iter()
+            .map(|p| std::array::from_fn(|k| (p[k] - n.center[k]) / n.scale))
+            .collect();
+        vertices.iter().flatten().all(|x| x.is_finite()).then(|| Scene {
+            vertices,
+            faces: self.faces.clone(),
+        })
     }
 
     /// This scene and `other` as one (their parts side by side).

@@ -18,6 +18,16 @@ pub const CAPTION_FILE: &str = "caption.txt";
 /// Largest caption file read: 1 MiB (captions are a sentence).
 pub const MAX_CAPTION_BYTES: u64 = 1 << 20;
 
+/// Ending of a scene file beside an import source (docs/method.md §6.5): `walk.scene.obj` for `walk.bin`,
+/// `walk.glb` or the OBJ folder `walk/`.
+pub const SCENE_SUFFIX: &str = ".scene.obj";
+
+/// Whether `path` names a scene file (read with the source it sits beside, never as a clip or an OBJ frame).
+pub fn is_scene_file(path: &Path) -> bool {
+    path.file_name()
+        .is_some_and(|n| n.to_string_lossy().to_ascii_lowercase().ends_with(SCENE_SUFFIX))
+}
+
 /// Read an OBJ sequence folder. The id is the folder name, the source the folder path.
 pub fn read_obj_seq(dir: &Path) -> Result<Clip> {
     let files = frame_files(dir)?;
@@ -99,7 +109,8 @@ fn frame_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
     for entry in entries {
         let path = entry.map_err(|e| DataError::io(dir, e))?.path();
-        if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) {
+        // A scene file beside the frames is the clip's scene, not a frame (docs/method.md §6.5).
+        if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj")) || is_scene_file(&path) {
             continue;
         }
         if !path.is_file() {

@@ -51,8 +51,15 @@ pub(super) fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
     if let Err(e) = provenance {
         return Outcome::Rejected(reason(e, source));
     }
+    // The scene beside the source, if any (docs/method.md §6.5): every window carries it, normalised with it.
+    let scene = match crate::scene::scene_beside(path).map(|p| crate::scene::Scene::read_obj(&p)) {
+        Some(Err(e)) => return Outcome::Rejected(reason(&e, source)),
+        Some(Ok(s)) => Some(s),
+        None => None,
+    };
+    let scene = scene.as_ref();
     if !format.has_takes() {
-        return match formats::read_clip(path).and_then(|c| accept(c, source.clone(), opts)) {
+        return match formats::read_clip(path).and_then(|c| accept(c, source.clone(), opts, scene)) {
             Ok(windows) => Outcome::Clips(windows, Vec::new(), SkinStats::default(), Vec::new()),
             Err(e) => Outcome::Rejected(reason(&e, source)),
         };
@@ -97,7 +104,7 @@ pub(super) fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
             if !own {
                 clip.caption = caption::caption(&asset, &take.name);
             }
-            Ok((accept(clip, take_source.clone(), opts)?, t.stats))
+            Ok((accept(clip, take_source.clone(), opts, scene)?, t.stats))
         });
         match result {
             Ok((w, stats)) => {
@@ -164,7 +171,12 @@ fn object_name(path: &Path) -> String {
 }
 
 /// Weld, filter and cut one clip into preprocessed windows.
-fn accept(mut clip: Clip, source: String, opts: &ImportOptions) -> Result<Vec<(StoredClip, String)>> {
+fn accept(
+    mut clip: Clip,
+    source: String,
+    opts: &ImportOptions,
+    scene: Option<&crate::scene::Scene>,
+) -> Result<Vec<(StoredClip, String)>> {
     clip.source = source;
     let clip = opts.weld.apply(clip)?;
     opts.filter.check(&clip)?;
@@ -189,11 +201,11 @@ fn accept(mut clip: Clip, source: String, opts: &ImportOptions) -> Result<Vec<(S
             ),
         ));
     }
-    preprocess_windows(&clip, opts.frames, opts.stride, opts.p)
+    preprocess_windows(&clip, opts.frames, opts.stride, opts.p, scene)
 }
 
-/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3), run FPS on normalised frame 0 and assign
-/// the split of the clip's object (module doc of [`crate::store`]). Returns each window with its object uid, or
+/// Cut `clip` into windows, normalise each by its frame 0 (D1)–(D3) (and `scene`, when the clip has one, with it),
+/// run FPS on normalised frame 0 and assign the split of the clip's object (module doc of [`crate::store`]). Returns each window with its object uid, or
 /// an error (field `vertices`) when a window does not normalise to finite numbers (finite coordinates near ±3.4e38
 /// overflow f32).
 pub(super) fn preprocess_windows(
@@ -201,6 +213,7 @@ pub(super) fn preprocess_windows(
     frames: usize,
     stride: usize,
     p: usize,
+    scene: Option<&crate::scene::Scene>,
 ) -> Result<Vec<(StoredClip, String)>> {
     // The uid of the whole clip, so every window of one animation shares its split.
     let object = object_uid(&clip.id).to_owned();
@@ -223,6 +236,17 @@ pub(super) fn preprocess_windows(
                 ),
             ));
         }
+        let scene = match scene.map(|s| s.normalized(&normalization)) {
+            Some(None) => {
+                return Err(DataError::new(
+                    &clip.source,
+                    "scene",
+                    format!("normalising the scene by window {k}'s frame 0 gives non-finite coordinates"),
+                ));
+            }
+            Some(s) => s,
+            None => None,
+        };
         let fps = farthest_point_sampling(clip.frame(0), p);
         out.push((
             StoredClip {
@@ -230,6 +254,7 @@ pub(super) fn preprocess_windows(
                 fps,
                 normalization,
                 split,
+                scene,
             },
             object.clone(),
         ));

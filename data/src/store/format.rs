@@ -8,9 +8,7 @@ use std::fs::File;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
-use crate::clip::Clip;
 use crate::error::{DataError, Result};
-use crate::preprocess::Normalization;
 
 use super::{Split, StoredClip};
 
@@ -20,8 +18,10 @@ pub const MAGIC: &[u8; 8] = b"A4DSTORE";
 pub const END_MAGIC: &[u8; 8] = b"A4DTABLE";
 /// Layout version written in the header.
 pub const VERSION: u32 = 1;
-/// Header: magic (8) + version, T, P, reserved (4 × u32).
+/// Header: magic (8) + version, T, P, flags (4 × u32).
 pub const HEADER_LEN: u64 = 24;
+/// Header flag: every record ends with a scene section (docs/method.md §6.5; layout in the [`crate::store`] doc).
+pub const FLAG_SCENES: u32 = 1;
 /// Trailer: table offset (u64) + clip count (u64) + end magic (8).
 pub const TRAILER_LEN: u64 = 24;
 /// One table entry: record offset (u64) + split (u8).
@@ -42,12 +42,19 @@ pub struct StoreWriter {
     entries: Vec<(u64, Split)>,
     frames: u32,
     p: u32,
+    /// Whether records carry a scene section ([`FLAG_SCENES`]).
+    scenes: bool,
 }
 
 impl StoreWriter {
     /// Start `dest` (written as `dest` + `.tmp` until [`StoreWriter::finish`]) for clips of `frames` frames and
     /// `p` FPS indices.
     pub fn create(dest: &Path, frames: usize, p: usize) -> Result<Self> {
+        Self::create_with(dest, frames, p, false)
+    }
+
+    /// [`StoreWriter::create`] for a store whose records carry a scene section ([`FLAG_SCENES`]) when `scenes`.
+    pub fn create_with(dest: &Path, frames: usize, p: usize, scenes: bool) -> Result<Self> {
         let tmp = dest.with_extension("bin.tmp");
         let file = File::create(&tmp).map_err(|e| DataError::io(&tmp, e))?;
         let frames = u32_field(frames, dest, "header.frames")?;
@@ -61,10 +68,12 @@ impl StoreWriter {
             entries: Vec::new(),
             frames,
             p,
+            scenes,
         };
         let mut header = Vec::with_capacity(HEADER_LEN as usize);
         header.extend_from_slice(MAGIC);
-        for v in [VERSION, frames, p, 0] {
+        let flags = if scenes { FLAG_SCENES } else { 0 };
+        for v in [VERSION, frames, p, flags] {
             header.extend_from_slice(&v.to_le_bytes());
         }
         w.write(&header)?;
@@ -98,7 +107,17 @@ impl StoreWriter {
                 ),
             ));
         }
-        let bytes = encode(clip, &self.dest)?;
+        if clip.scene.is_some() && !self.scenes {
+            return Err(DataError::new(
+                &clip.clip.source,
+                "scene",
+                format!(
+                    "clip {} has a scene; this store was started without scenes",
+                    clip.clip.id
+                ),
+            ));
+        }
+        let bytes = encode_with(clip, &self.dest, self.scenes)?;
         self.append_encoded(&bytes, clip.split)
     }
 
@@ -166,8 +185,14 @@ fn u32_field(v: usize, path: &Path, field: &str) -> Result<u32> {
     u32::try_from(v).map_err(|_| DataError::new(path, field, format!("{v} does not fit in u32")))
 }
 
-/// Encode one clip as a record (layout in the module doc of [`crate::store`]); `path` only labels errors.
+/// Encode one clip as a record of a store without scenes (layout in the module doc of [`crate::store`]); `path`
+/// only labels errors.
 pub fn encode(c: &StoredClip, path: &Path) -> Result<Vec<u8>> {
+    encode_with(c, path, false)
+}
+
+/// [`encode`], followed by the clip's scene section (empty for a clip without a scene) when `scenes`.
+pub fn encode_with(c: &StoredClip, path: &Path, scenes: bool) -> Result<Vec<u8>> {
     let clip = &c.clip;
     let mut b = Vec::with_capacity(64 + clip.vertices.len() * 12 + clip.faces.len() * 12 + c.fps.len() * 4);
     for (field, s) in [("id", &clip.id), ("caption", &clip.caption), ("source", &clip.source)] {
@@ -198,6 +223,23 @@ pub fn encode(c: &StoredClip, path: &Path) -> Result<Vec<u8>> {
     for x in c.normalization.center.iter().chain([&c.normalization.scale]) {
         b.extend_from_slice(&x.to_le_bytes());
     }
+    if scenes {
+        let (vertices, faces) = c
+            .scene
+            .as_ref()
+            .map_or((&[][..], &[][..]), |s| (&s.vertices[..], &s.faces[..]));
+        for (field, v) in [("scene vertices", vertices.len()), ("scene faces", faces.len())] {
+            b.extend_from_slice(&u32_field(v, path, field)?.to_le_bytes());
+        }
+        vertices
+            .iter()
+            .flatten()
+            .for_each(|x| b.extend_from_slice(&x.to_le_bytes()));
+        faces
+            .iter()
+            .flatten()
+            .for_each(|i| b.extend_from_slice(&i.to_le_bytes()));
+    }
     Ok(b)
 }
 
@@ -219,6 +261,8 @@ pub struct Catalog {
     pub frames: usize,
     /// FPS indices per clip P.
     pub p: usize,
+    /// Whether records carry a scene section ([`FLAG_SCENES`]).
+    pub scenes: bool,
     /// One entry per clip, in file order.
     pub entries: Vec<Entry>,
 }
@@ -233,23 +277,6 @@ pub fn read_catalog(path: &Path) -> Result<Catalog> {
 /// [`read_catalog`] of a `clips.bin` held in memory; `path` names it in errors.
 pub fn read_catalog_bytes(bytes: &[u8], path: &Path) -> Result<Catalog> {
     catalog_of(&mut std::io::Cursor::new(bytes), bytes.len() as u64, path)
-}
-
-/// Decode clip `index` of a `clips.bin` held in memory, as [`super::Store::get`] decodes it from the file.
-pub fn decode_clip_bytes(bytes: &[u8], catalog: &Catalog, index: usize, path: &Path) -> Result<StoredClip> {
-    let e = catalog.entries.get(index).copied().ok_or_else(|| {
-        DataError::new(
-            path,
-            "clip index",
-            format!("clip {index} requested, the store holds {}", catalog.entries.len()),
-        )
-    })?;
-    let record = usize::try_from(e.offset)
-        .ok()
-        .zip(usize::try_from(e.offset + e.len).ok())
-        .and_then(|(start, end)| bytes.get(start..end))
-        .ok_or_else(|| DataError::new(path, format!("clip {index}"), "record lies outside these bytes"))?;
-    decode(record, e.offset, path, index, e.split, catalog.frames, catalog.p)
 }
 
 fn catalog_of<R: Read + Seek>(file: &mut R, size: u64, path: &Path) -> Result<Catalog> {
@@ -289,6 +316,13 @@ fn catalog_of<R: Read + Seek>(file: &mut R, size: u64, path: &Path) -> Result<Ca
         ));
     }
     let (frames, p) = (word(1) as usize, word(2) as usize);
+    if word(3) & !FLAG_SCENES != 0 {
+        return Err(err(
+            "header.flags at byte 20",
+            format!("flags {:#x} name features this build does not read", word(3)),
+        ));
+    }
+    let scenes = word(3) & FLAG_SCENES != 0;
     let trailer_at = size - TRAILER_LEN;
     let trailer = read_at(file, path, trailer_at, TRAILER_LEN as usize, "trailer")?;
     if &trailer[16..] != END_MAGIC {
@@ -339,7 +373,12 @@ fn catalog_of<R: Read + Seek>(file: &mut R, size: u64, path: &Path) -> Result<Ca
             split,
         });
     }
-    Ok(Catalog { frames, p, entries })
+    Ok(Catalog {
+        frames,
+        p,
+        scenes,
+        entries,
+    })
 }
 
 fn as_text(b: &[u8]) -> String {
@@ -394,151 +433,4 @@ pub fn read_source<R: Read + Seek>(file: &mut R, path: &Path, offset: u64, len: 
     let n = string_len(at, "source")?;
     let bytes = read_at(file, path, at + 4, n as usize, "source")?;
     String::from_utf8(bytes).map_err(|e| err("source", at + 4, e.to_string()))
-}
-
-/// A bounds-checked little-endian reader over one record that names the field and absolute offset on error.
-struct Cursor<'a> {
-    bytes: &'a [u8],
-    at: usize,
-    base: u64,
-    path: &'a Path,
-    clip: usize,
-}
-
-impl Cursor<'_> {
-    fn take(&mut self, n: usize, field: &str) -> Result<&[u8]> {
-        if self.bytes.len() - self.at < n {
-            return Err(self.error(
-                field,
-                format!(
-                    "needs {n} bytes but the record has {} left (corrupt or truncated)",
-                    self.bytes.len() - self.at
-                ),
-            ));
-        }
-        self.at += n;
-        Ok(&self.bytes[self.at - n..self.at])
-    }
-
-    fn error(&self, field: &str, reason: String) -> DataError {
-        DataError::new(
-            self.path,
-            format!("clip {} {field} at byte {}", self.clip, self.base + self.at as u64),
-            reason,
-        )
-    }
-
-    fn u32(&mut self, field: &str) -> Result<u32> {
-        let b = self.take(4, field)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-
-    fn string(&mut self, field: &str) -> Result<String> {
-        let n = self.u32(field)? as usize;
-        let start = self.at;
-        let b = self.take(n, field)?.to_vec();
-        String::from_utf8(b).map_err(|e| {
-            DataError::new(
-                self.path,
-                format!("clip {} {field} at byte {}", self.clip, self.base + start as u64),
-                e.to_string(),
-            )
-        })
-    }
-
-    /// `count` little-endian 4-byte words; the length is checked before anything is allocated.
-    fn words(&mut self, count: Option<usize>, field: &str) -> Result<&[u8]> {
-        let n = count
-            .and_then(|c| c.checked_mul(4))
-            .ok_or_else(|| self.error(field, "element count overflows".into()))?;
-        self.take(n, field)
-    }
-}
-
-/// Decode record `index` (bytes `record`, starting at absolute `offset` of `path`) with its `split`.
-pub fn decode(
-    record: &[u8],
-    offset: u64,
-    path: &Path,
-    index: usize,
-    split: Split,
-    frames: usize,
-    p: usize,
-) -> Result<StoredClip> {
-    let mut c = Cursor {
-        bytes: record,
-        at: 0,
-        base: offset,
-        path,
-        clip: index,
-    };
-    let id = c.string("id")?;
-    let caption = c.string("caption")?;
-    let source = c.string("source")?;
-    let t = c.u32("frames")? as usize;
-    let n = c.u32("vertices")? as usize;
-    let m = c.u32("faces")? as usize;
-    let np = c.u32("fps")? as usize;
-    if t != frames || np != p {
-        return Err(c.error(
-            "frames/fps",
-            format!("clip {id} has T = {t}, P = {np}; the header says T = {frames}, P = {p}"),
-        ));
-    }
-    let vertices: Vec<[f32; 3]> = c
-        .words(t.checked_mul(n).and_then(|x| x.checked_mul(3)), "vertices")?
-        .chunks_exact(12)
-        .map(|b| [0, 4, 8].map(|k| f32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
-        .collect();
-    let faces: Vec<[u32; 3]> = c
-        .words(m.checked_mul(3), "faces")?
-        .chunks_exact(12)
-        .map(|b| [0, 4, 8].map(|k| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
-        .collect();
-    let fps_at = c.at;
-    let fps: Vec<u32> = c
-        .words(Some(np), "fps")?
-        .chunks_exact(4)
-        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
-    if let Some(bad) = fps.iter().find(|&&i| i as usize >= n) {
-        return Err(DataError::new(
-            path,
-            format!("clip {index} fps at byte {}", offset + fps_at as u64),
-            format!("index {bad} ≥ {n} vertices"),
-        ));
-    }
-    let norm: Vec<f32> = c
-        .words(Some(4), "normalization")?
-        .chunks_exact(4)
-        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-        .collect();
-    if c.at != record.len() {
-        return Err(c.error("end", format!("{} unread bytes after the record", record.len() - c.at)));
-    }
-    let clip = Clip::new(id, vertices, t, n, faces, caption, source)
-        .map_err(|e| DataError::new(path, format!("clip {index} at byte {offset}: {}", e.field), e.reason))?;
-    let normalization = Normalization {
-        center: [norm[0], norm[1], norm[2]],
-        scale: norm[3],
-    };
-    if !(norm.iter().all(|x| x.is_finite()) && normalization.scale > 0.0) {
-        return Err(DataError::new(
-            path,
-            format!(
-                "clip {index} normalization at byte {}",
-                offset + record.len() as u64 - 16
-            ),
-            format!(
-                "center {:?} and scale {} do not undo a normalisation",
-                normalization.center, normalization.scale
-            ),
-        ));
-    }
-    Ok(StoredClip {
-        clip,
-        fps,
-        normalization,
-        split,
-    })
 }

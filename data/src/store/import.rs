@@ -210,7 +210,7 @@ pub fn write_synth_windows(
         Job::Synth { source, index } => match synth::generate_one(&cfg, *index) {
             Ok(mut clip) => {
                 clip.source = source.clone();
-                match preprocess_windows(&clip, window, stride, p) {
+                match preprocess_windows(&clip, window, stride, p, None) {
                     Ok(windows) => Outcome::Clips(windows, Vec::new(), SkinStats::default(), Vec::new()),
                     Err(e) => Outcome::Rejected(reason(&e, source)),
                 }
@@ -361,7 +361,10 @@ fn walk(
             }
         };
     entries.sort();
-    if entries.iter().any(|p| p.is_file() && extension(p) == "obj") {
+    if entries
+        .iter()
+        .any(|p| p.is_file() && extension(p) == "obj" && !formats::obj::is_scene_file(p))
+    {
         found.push((dir.to_path_buf(), Format::from_path(dir)));
     }
     for p in entries {
@@ -447,7 +450,13 @@ fn run_jobs(
 ) -> Result<ImportReport> {
     let replaced: HashSet<&str> = jobs.iter().map(Job::source).collect();
     // Dropped without `finish` (any error below), the writer removes its temporary file.
-    let mut writer = StoreWriter::create(&out.join(CLIPS_FILE), limits.frames, limits.p)?;
+    // Records carry a scene section when a source has a scene beside it or the existing store's records do.
+    let scenes = existing.as_ref().is_some_and(|(store, _)| store.catalog.scenes)
+        || jobs.iter().any(|j| match j {
+            Job::File { path, .. } => crate::scene::scene_beside(path).is_some(),
+            _ => false,
+        });
+    let mut writer = StoreWriter::create_with(&out.join(CLIPS_FILE), limits.frames, limits.p, scenes)?;
     let mut ok_rows = Vec::new();
     let mut rejected_rows = Vec::new();
     let mut kept = 0;
@@ -470,8 +479,13 @@ fn run_jobs(
                     ),
                 ));
             }
-            let sum = writer.append_encoded(&raw, store.split(i)?)?;
-            if row.checksum.is_some_and(|old| old != sum) {
+            let old_sum = super::checksum(&raw);
+            let sum = match store.catalog.scenes == scenes {
+                true => writer.append_encoded(&raw, store.split(i)?)?,
+                // An old store without scenes joined by sources with them: its records gain an empty scene section.
+                false => writer.append(&store.get(i)?)?,
+            };
+            if row.checksum.is_some_and(|old| old != old_sum) {
                 return Err(DataError::new(
                     out.join(CLIPS_FILE),
                     format!("clip {i} ({})", row.id),

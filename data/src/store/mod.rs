@@ -21,12 +21,15 @@
 //!
 //! # `clips.bin` layout (version 1, all integers and floats little-endian)
 //! ```text
-//! header   magic "A4DSTORE" (8 bytes) | version u32 = 1 | T u32 | P u32 | reserved u32 = 0
+//! header   magic "A4DSTORE" (8 bytes) | version u32 = 1 | T u32 | P u32 | flags u32 (bit 0: records carry a
+//!          scene section; stores without scenes write 0, as before flags existed)
 //! records  one per clip, back to back:
 //!            id_len u32 | id (UTF-8) | caption_len u32 | caption | source_len u32 | source
 //!            T u32 | N u32 | M u32 | P u32
 //!            vertices f32 × T·N·3 (frame-major, normalised) | faces u32 × M·3 | fps u32 × P
 //!            center c f32 × 3 | scale s f32            (x = x̄ · s + c undoes (D3))
+//!            [flags bit 0: scene vertices S_v u32 | scene faces S_m u32 | f32 × S_v·3 (normalised as the clip) |
+//!             u32 × S_m·3; S_v = S_m = 0 for a clip without a scene]
 //! table    per clip: record offset u64 | split u8 (0 = train, 1 = val)
 //! trailer  table offset u64 | clip count u64 | end magic "A4DTABLE" (8 bytes)
 //! ```
@@ -52,6 +55,7 @@ mod index;
 mod jobs;
 mod options;
 mod provenance;
+mod record;
 mod verify;
 
 use std::fs::File;
@@ -61,12 +65,15 @@ use crate::clip::Clip;
 use crate::error::{DataError, Result};
 use crate::preprocess::Normalization;
 
-pub use format::{Catalog, Entry, StoreWriter, checksum, decode_clip_bytes, encode, read_catalog, read_catalog_bytes};
+pub use format::{
+    Catalog, Entry, FLAG_SCENES, StoreWriter, checksum, encode, encode_with, read_catalog, read_catalog_bytes,
+};
 pub use import::{
     FILE_TIME_LIMIT, ImportOptions, ImportReport, PROVENANCE_FILE, Progress, Provenance, Rejected, Weld, import,
     import_with_progress, write_synth, write_synth_windows, write_synth_with,
 };
 pub use index::{CHECKSUM_COLUMN, IndexRow, Status, read_index, write_index};
+pub use record::decode_clip_bytes;
 pub use verify::{Problem, VerifyReport, check_index, record_len, verify_store};
 
 /// File name of the clip records inside a store folder.
@@ -149,6 +156,8 @@ pub struct StoredClip {
     pub normalization: Normalization,
     /// Train or validation.
     pub split: Split,
+    /// The static scene the clip moves in, normalised with it (docs/method.md §6.5); `None` without one.
+    pub scene: Option<crate::scene::Scene>,
 }
 
 /// A store opened for reading: the catalogue is in memory, clips are read from disk on demand.
@@ -243,19 +252,16 @@ impl Store {
         Ok(group_by_source(&self.sources(indices)?))
     }
 
+    /// Whether the store's records carry scenes (docs/method.md §6.5).
+    pub fn has_scenes(&self) -> bool {
+        self.catalog.scenes
+    }
+
     /// Read and decode clip `i`.
     pub fn get(&self, i: usize) -> Result<StoredClip> {
         let bytes = self.raw(i)?;
         let e = self.catalog.entries[i];
-        format::decode(
-            &bytes,
-            e.offset,
-            &self.path,
-            i,
-            e.split,
-            self.catalog.frames,
-            self.catalog.p,
-        )
+        record::decode(&bytes, e.offset, &self.path, i, e.split, &self.catalog)
     }
 
     /// Position of the clip with this id, if any (reads every clip until found).

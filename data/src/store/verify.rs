@@ -4,11 +4,11 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use super::format::{self, checksum};
+use super::format::checksum;
 use super::{CLIPS_FILE, INDEX_FILE, IndexRow, Status, Store, read_index};
 use crate::error::{DataError, Result};
 
-/// Length of the record [`format::encode`] writes for the clip of `row` in a store of `p` FPS tokens, from the
+/// Length of the record [`super::format::encode`] writes for the clip of `row` in a store of `p` FPS tokens, from the
 /// index alone; `None` for a rejected row or one whose sizes overflow.
 pub fn record_len(row: &IndexRow, p: usize) -> Option<u64> {
     let (t, n, m) = (row.frames? as u64, row.vertices? as u64, row.faces? as u64);
@@ -38,7 +38,13 @@ pub fn check_index(store: &Store, rows: &[IndexRow]) -> Result<()> {
     }
     for (i, (row, entry)) in ok.iter().zip(&store.catalog.entries).enumerate() {
         let want = record_len(row, store.p());
-        if want != Some(entry.len) || row.frames != Some(store.frames() as u32) {
+        // A record of a store with scenes adds its scene section (8 bytes and the scene), which the index does not
+        // size: it must hold at least the clip and the section's counts; `data verify` decodes it whole.
+        let fits = match store.catalog.scenes {
+            false => want == Some(entry.len),
+            true => want.and_then(|w| w.checked_add(8)).is_some_and(|w| entry.len >= w),
+        };
+        if !fits || row.frames != Some(store.frames() as u32) {
             return Err(DataError::new(
                 dir.join(CLIPS_FILE),
                 format!("clip {i} ({})", row.id),
@@ -154,7 +160,7 @@ fn verify_clip(store: &Store, i: usize, row: &IndexRow, with_checksum: &mut usiz
         }
     }
     let e = store.catalog.entries[i];
-    let c = format::decode(&raw, e.offset, &store.path, i, e.split, store.frames(), store.p())
+    let c = super::record::decode(&raw, e.offset, &store.path, i, e.split, &store.catalog)
         .map_err(|e| format!("{}: {}", e.field, e.reason))?;
     let found = (
         c.clip.id.as_str(),

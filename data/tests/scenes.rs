@@ -1,0 +1,194 @@
+//! Scenes in the store (docs/method.md §6.5): a clip imported with `<name>.scene.obj` beside it keeps the scene in
+//! every window, normalised with the window; a store without scenes joined by such a source keeps its clips; a
+//! record whose scene section lies, or a header with flags this build does not know, is refused by name.
+
+use std::path::Path;
+
+use any4d_data::Clip;
+use any4d_data::formats;
+use any4d_data::preprocess::VertexFilter;
+use any4d_data::scene::Scene;
+use any4d_data::store::{self, ImportOptions, Store, check_index, read_index, verify_store};
+
+/// A wave over a 6 × 6 sheet, 8 frames, far from the origin (so normalisation moves it).
+fn sheet(id: &str) -> Clip {
+    let n = 36;
+    let vertices = (0..8)
+        .flat_map(|f| {
+            (0..n).map(move |v| {
+                let (x, z) = ((v % 6) as f32, (v / 6) as f32);
+                [10.0 + x, 2.0 + 0.3 * (x + 0.5 * f as f32).sin(), -4.0 + z]
+            })
+        })
+        .collect();
+    let faces = (0..5u32)
+        .flat_map(|r| {
+            (0..5u32).flat_map(move |c| {
+                let i = r * 6 + c;
+                [[i, i + 6, i + 1], [i + 1, i + 6, i + 7]]
+            })
+        })
+        .collect();
+    Clip::new(id, vertices, 8, n, faces, "a sheet waving", "test").unwrap()
+}
+
+fn opts() -> ImportOptions {
+    ImportOptions {
+        filter: VertexFilter { min: 3, max: 1024 },
+        frames: 4,
+        stride: 4,
+        p: 8,
+        ..Default::default()
+    }
+}
+
+fn write_obj(path: &Path, s: &Scene) {
+    let mut text = String::new();
+    for v in &s.vertices {
+        text += &format!("v {} {} {}\n", v[0], v[1], v[2]);
+    }
+    for f in &s.faces {
+        text += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn an_imported_scene_travels_with_every_window_normalised_with_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src");
+    std::fs::create_dir(&src).unwrap();
+    formats::write_clip(&src.join("wave.bin"), &sheet("wave")).unwrap();
+    let floor = Scene::cuboid([8.0, 0.0, -6.0], [17.0, 1.5, 3.0]);
+    write_obj(&src.join("wave.scene.obj"), &floor);
+    let out = dir.path().join("store");
+    let report = store::import(std::slice::from_ref(&src), &out, &opts()).unwrap();
+    // The scene file is read with its clip: not a source, not a skipped file, not an OBJ folder.
+    assert_eq!(
+        (report.sources, report.rejected.len(), report.added),
+        (1, 0, 2),
+        "{report}"
+    );
+    assert!(report.skipped.is_empty(), "{report}");
+    let s = Store::open(&out).unwrap();
+    assert!(s.has_scenes());
+    for i in 0..s.len() {
+        let c = s.get(i).unwrap();
+        let scene = c.scene.expect("every window carries the scene");
+        assert_eq!(scene, floor.normalized(&c.normalization).unwrap(), "window {i}");
+    }
+    check_index(&s, &read_index(&out).unwrap()).unwrap();
+    assert!(verify_store(&out).unwrap().problems.is_empty());
+    // A second source without a scene joins the store: its windows have none.
+    let more = dir.path().join("more");
+    std::fs::create_dir(&more).unwrap();
+    formats::write_clip(&more.join("calm.bin"), &sheet("calm")).unwrap();
+    store::import(std::slice::from_ref(&more), &out, &opts()).unwrap();
+    let s = Store::open(&out).unwrap();
+    let with: usize = (0..s.len()).filter(|&i| s.get(i).unwrap().scene.is_some()).count();
+    assert_eq!((s.len(), with), (4, 2));
+    assert!(verify_store(&out).unwrap().problems.is_empty());
+}
+
+#[test]
+fn a_store_without_scenes_joined_by_a_source_with_one_keeps_its_clips() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    std::fs::create_dir(&a).unwrap();
+    std::fs::create_dir(&b).unwrap();
+    formats::write_clip(&a.join("calm.bin"), &sheet("calm")).unwrap();
+    formats::write_clip(&b.join("wave.bin"), &sheet("wave")).unwrap();
+    write_obj(
+        &b.join("wave.scene.obj"),
+        &Scene::cuboid([8.0, 0.0, -6.0], [17.0, 1.5, 3.0]),
+    );
+    let out = dir.path().join("store");
+    store::import(std::slice::from_ref(&a), &out, &opts()).unwrap();
+    let before = Store::open(&out).unwrap();
+    assert!(!before.has_scenes());
+    let kept: Vec<_> = (0..before.len()).map(|i| before.get(i).unwrap().clip).collect();
+    store::import(std::slice::from_ref(&b), &out, &opts()).unwrap();
+    let after = Store::open(&out).unwrap();
+    assert!(after.has_scenes());
+    let calm: Vec<_> = (0..after.len())
+        .map(|i| after.get(i).unwrap())
+        .filter(|c| c.clip.source.contains("calm"))
+        .collect();
+    assert_eq!(calm.iter().map(|c| c.clip.clone()).collect::<Vec<_>>(), kept);
+    assert!(calm.iter().all(|c| c.scene.is_none()));
+    check_index(&after, &read_index(&out).unwrap()).unwrap();
+}
+
+#[test]
+fn lying_scene_sections_and_unknown_flags_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src");
+    std::fs::create_dir(&src).unwrap();
+    formats::write_clip(&src.join("wave.bin"), &sheet("wave")).unwrap();
+    write_obj(
+        &src.join("wave.scene.obj"),
+        &Scene::cuboid([8.0, 0.0, -6.0], [17.0, 1.5, 3.0]),
+    );
+    let out = dir.path().join("store");
+    store::import(std::slice::from_ref(&src), &out, &opts()).unwrap();
+    let bin = out.join("clips.bin");
+    let good = std::fs::read(&bin).unwrap();
+    let s = Store::open(&out).unwrap();
+    let raw = s.raw(0).unwrap();
+    // The scene section's counts sit right after the 16-byte normalisation: 8 vertices, 12 faces.
+    let record_at = good.windows(raw.len()).position(|w| w == raw.as_slice()).unwrap();
+    let counts_at = record_at + raw.len() - (8 + 8 * 12 + 12 * 12);
+    assert_eq!(&good[counts_at..counts_at + 8], &[8, 0, 0, 0, 12, 0, 0, 0]);
+    let mut lying = good.clone();
+    lying[counts_at..counts_at + 4].copy_from_slice(&u32::MAX.to_le_bytes());
+    std::fs::write(&bin, &lying).unwrap();
+    let e = Store::open(&out).unwrap().get(0).unwrap_err();
+    assert!(e.field.contains("scene vertices"), "{e}");
+    let mut face = good.clone();
+    let last_face = counts_at + 8 + 8 * 12;
+    face[last_face..last_face + 4].copy_from_slice(&99u32.to_le_bytes());
+    std::fs::write(&bin, &face).unwrap();
+    let e = Store::open(&out).unwrap().get(0).unwrap_err();
+    assert!(e.field.contains("scene") && e.reason.contains("indexes past"), "{e}");
+    let mut flags = good.clone();
+    flags[20..24].copy_from_slice(&2u32.to_le_bytes());
+    std::fs::write(&bin, &flags).unwrap();
+    let e = Store::open(&out).unwrap_err();
+    assert!(e.field.contains("flags"), "{e}");
+}
+
+/// numpy alone reads a store with scenes (`scripts/read_any4d.py store`).
+#[test]
+fn numpy_reads_a_store_with_scenes() {
+    let has_numpy = std::process::Command::new("python3")
+        .args(["-c", "import numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has_numpy {
+        println!("skipped: python3/numpy not available");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src");
+    std::fs::create_dir(&src).unwrap();
+    formats::write_clip(&src.join("wave.bin"), &sheet("wave")).unwrap();
+    write_obj(
+        &src.join("wave.scene.obj"),
+        &Scene::cuboid([8.0, 0.0, -6.0], [17.0, 1.5, 3.0]),
+    );
+    let out = dir.path().join("store");
+    store::import(std::slice::from_ref(&src), &out, &opts()).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/read_any4d.py");
+    let run = std::process::Command::new("python3")
+        .arg(&script)
+        .arg("store")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "{stdout}{}", String::from_utf8_lossy(&run.stderr));
+    assert!(
+        stdout.contains("T 4 P 8 clips 2") && stdout.contains("scenes 2"),
+        "{stdout}"
+    );
+}
