@@ -20,6 +20,7 @@ pub mod keyframes;
 pub mod limits;
 pub mod preprocess;
 pub mod real_corpus;
+pub mod reference;
 pub mod render;
 pub mod rng;
 pub mod scene;

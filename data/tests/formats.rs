@@ -168,11 +168,7 @@ fn write_bin_round_trips_exactly() {
 
 #[test]
 fn python_reads_written_bin() {
-    let has_numpy = Command::new("python3")
-        .args(["-c", "import numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !has_numpy {
+    if !any4d_data::reference::python3_with(&["numpy"]) {
         println!("skipped: python3/numpy not available");
         return;
     }

@@ -53,13 +53,29 @@ fn write_obj(path: &Path, s: &Scene) {
     std::fs::write(path, text).unwrap();
 }
 
+/// The floor slab every test puts `wave.bin` on.
+fn floor() -> Scene {
+    Scene::cuboid([8.0, 0.0, -6.0], [17.0, 1.5, 3.0])
+}
+
+/// `dir/src` with `wave.bin` and `wave.scene.obj` (the floor), imported into `dir/store`, which is returned.
+fn scene_store(dir: &Path) -> std::path::PathBuf {
+    let src = dir.join("src");
+    std::fs::create_dir(&src).unwrap();
+    formats::write_clip(&src.join("wave.bin"), &sheet("wave")).unwrap();
+    write_obj(&src.join("wave.scene.obj"), &floor());
+    let out = dir.join("store");
+    store::import(std::slice::from_ref(&src), &out, &opts()).unwrap();
+    out
+}
+
 #[test]
 fn an_imported_scene_travels_with_every_window_normalised_with_it() {
     let dir = tempfile::tempdir().unwrap();
     let src = dir.path().join("src");
     std::fs::create_dir(&src).unwrap();
     formats::write_clip(&src.join("wave.bin"), &sheet("wave")).unwrap();
-    let floor = Scene::cuboid([8.0, 0.0, -6.0], [17.0, 1.5, 3.0]);
+    let floor = floor();
     write_obj(&src.join("wave.scene.obj"), &floor);
     let out = dir.path().join("store");
     let report = store::import(std::slice::from_ref(&src), &out, &opts()).unwrap();
@@ -98,10 +114,7 @@ fn a_store_without_scenes_joined_by_a_source_with_one_keeps_its_clips() {
     std::fs::create_dir(&b).unwrap();
     formats::write_clip(&a.join("calm.bin"), &sheet("calm")).unwrap();
     formats::write_clip(&b.join("wave.bin"), &sheet("wave")).unwrap();
-    write_obj(
-        &b.join("wave.scene.obj"),
-        &Scene::cuboid([8.0, 0.0, -6.0], [17.0, 1.5, 3.0]),
-    );
+    write_obj(&b.join("wave.scene.obj"), &floor());
     let out = dir.path().join("store");
     store::import(std::slice::from_ref(&a), &out, &opts()).unwrap();
     let before = Store::open(&out).unwrap();
@@ -122,15 +135,7 @@ fn a_store_without_scenes_joined_by_a_source_with_one_keeps_its_clips() {
 #[test]
 fn lying_scene_sections_and_unknown_flags_are_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
-    let src = dir.path().join("src");
-    std::fs::create_dir(&src).unwrap();
-    formats::write_clip(&src.join("wave.bin"), &sheet("wave")).unwrap();
-    write_obj(
-        &src.join("wave.scene.obj"),
-        &Scene::cuboid([8.0, 0.0, -6.0], [17.0, 1.5, 3.0]),
-    );
-    let out = dir.path().join("store");
-    store::import(std::slice::from_ref(&src), &out, &opts()).unwrap();
+    let out = scene_store(dir.path());
     let bin = out.join("clips.bin");
     let good = std::fs::read(&bin).unwrap();
     let s = Store::open(&out).unwrap();
@@ -160,24 +165,12 @@ fn lying_scene_sections_and_unknown_flags_are_refused_by_name() {
 /// numpy alone reads a store with scenes (`scripts/read_any4d.py store`).
 #[test]
 fn numpy_reads_a_store_with_scenes() {
-    let has_numpy = std::process::Command::new("python3")
-        .args(["-c", "import numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !has_numpy {
+    if !any4d_data::reference::python3_with(&["numpy"]) {
         println!("skipped: python3/numpy not available");
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let src = dir.path().join("src");
-    std::fs::create_dir(&src).unwrap();
-    formats::write_clip(&src.join("wave.bin"), &sheet("wave")).unwrap();
-    write_obj(
-        &src.join("wave.scene.obj"),
-        &Scene::cuboid([8.0, 0.0, -6.0], [17.0, 1.5, 3.0]),
-    );
-    let out = dir.path().join("store");
-    store::import(std::slice::from_ref(&src), &out, &opts()).unwrap();
+    let out = scene_store(dir.path());
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/read_any4d.py");
     let run = std::process::Command::new("python3")
         .arg(&script)

@@ -434,11 +434,7 @@ fn short_takes_loop_only_when_asked_and_only_when_they_cycle() {
 /// count and the first clip's id, caption and array shapes are the store's.
 #[test]
 fn numpy_reads_a_store() {
-    let has_numpy = std::process::Command::new("python3")
-        .args(["-c", "import numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !has_numpy {
+    if !any4d_data::reference::python3_with(&["numpy"]) {
         println!("skipped: python3/numpy not available");
         return;
     }

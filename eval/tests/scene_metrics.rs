@@ -70,11 +70,7 @@ fn a_clip_that_dips_into_the_floor_and_slides_on_it() {
 
 #[test]
 fn the_metrics_agree_with_an_independent_numpy_version() {
-    let has_numpy = std::process::Command::new("python3")
-        .args(["-c", "import numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !has_numpy {
+    if !any4d_data::reference::python3_with(&["numpy"]) {
         println!("skipped: python3/numpy not available");
         return;
     }

@@ -317,11 +317,7 @@ fn aam_buffers_with_other_frequencies_are_refused() {
 /// transposed by the script itself.
 #[test]
 fn numpy_reads_an_aam_export_as_the_networks_parameters() {
-    let has_numpy = std::process::Command::new("python3")
-        .args(["-c", "import numpy"])
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !has_numpy {
+    if !any4d_data::reference::python3_with(&["numpy"]) {
         println!("skipped: python3/numpy not available");
         return;
     }
