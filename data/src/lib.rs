@@ -18,6 +18,7 @@ pub mod inspect;
 pub mod io;
 pub mod keyframes;
 pub mod limits;
+pub mod mat3;
 pub mod preprocess;
 pub mod real_corpus;
 pub mod reference;

@@ -37,7 +37,6 @@
 //!   affine on every one-ring. Features do not see translations: the smallest vertex is pinned while solving and
 //!   the result is moved so that its centroid equals the reference centroid.
 
-mod mat3;
 mod reconstruct;
 mod scaling;
 
@@ -47,7 +46,7 @@ pub use reconstruct::Reconstruction;
 pub use scaling::{AcapScaling, ScalingGranularity};
 
 use crate::error::{DataError, Result};
-use mat3::{Mat3, Vec3};
+use crate::mat3::{self, Mat3, Vec3};
 
 /// Channels of one vertex's feature: rotation vector (3) and the upper triangle of S (6).
 pub const ACAP_CHANNELS: usize = 9;

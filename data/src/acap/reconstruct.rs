@@ -6,9 +6,9 @@ use faer::sparse::linalg::solvers::Llt;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Mat, Side};
 
-use super::mat3::{self, Mat3, Vec3};
 use super::{ACAP_CHANNELS, AcapTopology};
 use crate::error::{DataError, Result};
+use crate::mat3::{self, Mat3, Vec3};
 
 /// Which least-squares problem turns features back into positions (both pin one vertex per component and
 /// centre each component on its reference centroid).

@@ -22,6 +22,7 @@ use super::bytes::Bytes;
 use super::skeletal::{self, ReadOptions, SkinStats, TakeInfo, z_up_to_y_up};
 use crate::clip::Clip;
 use crate::error::Result;
+use crate::mat3;
 pub use player::{ANIMATIONS, MAX_CFG_BYTES, Player, cfg_takes};
 
 /// Most surfaces an MD3 may have (the format's own limit).
@@ -47,31 +48,29 @@ struct Md3 {
 }
 
 /// Where a part is drawn: Quake III's `orientation_t`, an origin and three axis rows; a point `v` of the part
-/// lies at `origin + Σ_i v[i]·axis[i]` (Z-up file coordinates).
+/// lies at `origin + Σ_i v[i]·axis[i]` = `origin + axisᵀ v` (Z-up file coordinates).
 #[derive(Debug, Clone, Copy)]
 struct Place {
     origin: [f64; 3],
-    axis: [[f64; 3]; 3],
+    axis: mat3::Mat3,
 }
 
 impl Place {
     const ROOT: Place = Place {
         origin: [0.0; 3],
-        axis: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        axis: mat3::IDENTITY,
     };
 
     fn point(&self, v: [f64; 3]) -> [f64; 3] {
-        std::array::from_fn(|j| self.origin[j] + (0..3).map(|i| v[i] * self.axis[i][j]).sum::<f64>())
+        mat3::add_scaled(self.origin, mat3::mat_vec(&mat3::transpose(&self.axis), v), 1.0)
     }
 
     /// The place of a part hung on this one's `tag` (Quake III's `CG_PositionEntityOnTag`): the tag's origin
-    /// taken into this place, its axes multiplied by this place's.
+    /// taken into this place, its axes multiplied by this place's (`tag.axis × axis`).
     fn attach(&self, tag: &Place) -> Place {
         Place {
             origin: self.point(tag.origin),
-            axis: std::array::from_fn(|i| {
-                std::array::from_fn(|j| (0..3).map(|k| tag.axis[i][k] * self.axis[k][j]).sum())
-            }),
+            axis: mat3::mat_mul(&tag.axis, &self.axis),
         }
     }
 }
@@ -173,12 +172,31 @@ impl Md3 {
         }
         out
     }
+}
 
-    /// The vertices of frame `f` (in range), all surfaces in order, in Z-up file units, into `out`.
-    fn points(&self, path: &str, data: &[u8], f: usize, out: &mut Vec<[f64; 3]>) -> Result<()> {
-        out.clear();
-        let mut b = Bytes::new(path, data);
-        for (k, s) in self.surfaces.iter().enumerate() {
+/// One `.md3` read and parsed: its path as text (for errors), header and surfaces, and its bytes.
+struct Md3File {
+    path: String,
+    md3: Md3,
+    data: Vec<u8>,
+}
+
+impl Md3File {
+    fn open(path: &Path) -> Result<Md3File> {
+        let data = super::read_clip_file(path)?;
+        let path = path.display().to_string();
+        let md3 = parse(&mut Bytes::new(&path, &data))?;
+        Ok(Md3File { path, md3, data })
+    }
+
+    fn bytes(&self) -> Bytes<'_> {
+        Bytes::new(&self.path, &self.data)
+    }
+
+    /// The vertices of frame `f` (in range), all surfaces in order, in Z-up file units, appended to `out`.
+    fn points(&self, f: usize, out: &mut Vec<[f64; 3]>) -> Result<()> {
+        let mut b = self.bytes();
+        for (k, s) in self.md3.surfaces.iter().enumerate() {
             b.seek(s.ofs_xyz + f * s.verts * 8, &format!("surfaces[{k}].xyz"))?;
             for _ in 0..s.verts {
                 out.push([b.i16("xyz")?, b.i16("xyz")?, b.i16("xyz")?].map(|c| c as f64 / 64.0));
@@ -190,15 +208,15 @@ impl Md3 {
 
     /// Index of the tag named `name` (compared exactly, as the game's `strcmp` does), every frame's tags checked to
     /// lie inside the file; an error when there is none.
-    fn tag_index(&self, path: &str, data: &[u8], name: &str) -> Result<usize> {
-        let mut b = Bytes::new(path, data);
-        let count = self
+    fn tag_index(&self, name: &str) -> Result<usize> {
+        let (m, mut b) = (&self.md3, self.bytes());
+        let count = m
             .frames
-            .checked_mul(self.tags)
+            .checked_mul(m.tags)
             .ok_or_else(|| b.err("num_tags", "frames × tags overflows"))?;
-        b.check_count_at(self.ofs_tags, count, TAG_BYTES, "tags")?;
-        for t in 0..self.tags {
-            b.seek(self.ofs_tags + t * TAG_BYTES, "tags")?;
+        b.check_count_at(m.ofs_tags, count, TAG_BYTES, "tags")?;
+        for t in 0..m.tags {
+            b.seek(m.ofs_tags + t * TAG_BYTES, "tags")?;
             if b.name(64, "tags")? == name {
                 return Ok(t);
             }
@@ -206,10 +224,10 @@ impl Md3 {
         Err(b.err("tags", format!("no {name}: the part hung on it cannot be placed")))
     }
 
-    /// Tag `t` (from [`Md3::tag_index`]) at frame `f` (in range).
-    fn tag(&self, path: &str, data: &[u8], t: usize, f: usize) -> Result<Place> {
-        let mut b = Bytes::new(path, data);
-        b.seek(self.ofs_tags + (f * self.tags + t) * TAG_BYTES + 64, "tags")?;
+    /// Tag `t` (from [`Md3File::tag_index`]) at frame `f` (in range).
+    fn tag(&self, t: usize, f: usize) -> Result<Place> {
+        let (m, mut b) = (&self.md3, self.bytes());
+        b.seek(m.ofs_tags + (f * m.tags + t) * TAG_BYTES + 64, "tags")?;
         let origin = b.f32s::<3>("tags")?.map(f64::from);
         let a = b.f32s::<9>("tags")?.map(f64::from);
         Ok(Place {
@@ -217,14 +235,6 @@ impl Md3 {
             axis: [[a[0], a[1], a[2]], [a[3], a[4], a[5]], [a[6], a[7], a[8]]],
         })
     }
-}
-
-/// Read and parse one `.md3`: its path as text, the parsed header and surfaces, and its bytes.
-fn open_part(path: &Path) -> Result<(String, Md3, Vec<u8>)> {
-    let data = super::read_clip_file(path)?;
-    let s = path.display().to_string();
-    let m = parse(&mut Bytes::new(&s, &data))?;
-    Ok((s, m, data))
 }
 
 /// Whether an import reads `path` as a clip: not when it is a part of a player folder other than its
@@ -257,8 +267,8 @@ pub fn list_takes(path: &Path) -> Result<Vec<TakeInfo>> {
     if let Some(p) = Player::of(path) {
         return player::list_player_takes(&p);
     }
-    let (_, m, _) = open_part(path)?;
-    Ok(ranges(path, m.frames)?.into_iter().map(|r| r.info).collect())
+    let frames = Md3File::open(path)?.md3.frames;
+    Ok(ranges(path, frames)?.into_iter().map(|r| r.info).collect())
 }
 
 /// The one-frame animations (poses, not takes) of a player's or body part's `animation.cfg`, by name; none for
@@ -279,7 +289,8 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     if let Some(p) = Player::of(path) {
         return player::read_player(&p, opts);
     }
-    let (s, m, data) = open_part(path)?;
+    let part = Md3File::open(path)?;
+    let m = &part.md3;
     let takes = ranges(path, m.frames)?;
     let infos: Vec<TakeInfo> = takes.iter().map(|r| r.info.clone()).collect();
     let take = &takes[skeletal::pick(path, &infos, &opts.take)?];
@@ -290,7 +301,8 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
     let mut vertices = Vec::with_capacity(info.frames * n);
     let mut points = Vec::new();
     for &f in &take.frames {
-        m.points(&s, &data, f, &mut points)?;
+        points.clear();
+        part.points(f, &mut points)?;
         vertices.extend(points.iter().map(|&p| z_up_to_y_up(p).map(|x| x as f32)));
     }
     let clip = Clip::new(
@@ -300,7 +312,7 @@ pub fn read(path: &Path, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInf
         n,
         m.faces(0),
         "",
-        s.clone(),
+        part.path.clone(),
     )?;
     Ok((clip, SkinStats::default(), info))
 }

@@ -8,7 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{Md3, Place, open_part};
+use super::{Md3File, Place};
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
 use crate::formats::skeletal::{self, ReadOptions, SkinStats, TakeInfo, z_up_to_y_up};
@@ -370,8 +370,8 @@ pub(super) fn player_takes(cfg: &Path, lower: usize, upper: usize) -> Result<Vec
 
 /// The takes of the player `p`, for `data inspect` and `--take`.
 pub fn list_player_takes(p: &Player) -> Result<Vec<TakeInfo>> {
-    let (lower, upper) = (open_part(&p.lower)?, open_part(&p.upper)?);
-    Ok(player_takes(&p.cfg, lower.1.frames, upper.1.frames)?
+    let (lower, upper) = (Md3File::open(&p.lower)?, Md3File::open(&p.upper)?);
+    Ok(player_takes(&p.cfg, lower.md3.frames, upper.md3.frames)?
         .into_iter()
         .map(|t| t.info)
         .collect())
@@ -381,50 +381,50 @@ pub fn list_player_takes(p: &Player) -> Result<Vec<TakeInfo>> {
 /// `tag_torso` of that step and the head's (its first frame) at the torso's `tag_head`, in the order lower, upper,
 /// head, turned Y-up. The clip is named after the player's folder.
 pub fn read_player(p: &Player, opts: &ReadOptions) -> Result<(Clip, SkinStats, TakeInfo)> {
-    let lower = open_part(&p.lower)?;
-    let upper = open_part(&p.upper)?;
-    let head = p.head.as_deref().map(open_part).transpose()?;
-    let takes = player_takes(&p.cfg, lower.1.frames, upper.1.frames)?;
+    let lower = Md3File::open(&p.lower)?;
+    let upper = Md3File::open(&p.upper)?;
+    let head = p.head.as_deref().map(Md3File::open).transpose()?;
+    let takes = player_takes(&p.cfg, lower.md3.frames, upper.md3.frames)?;
     let infos: Vec<TakeInfo> = takes.iter().map(|t| t.info.clone()).collect();
     let take = &takes[skeletal::pick(&p.lower, &infos, &opts.take)?];
     let steps = take.info.frames;
     skeletal::check_frames(&p.lower, &take.info.name, steps, opts.max_frames)?;
-    let torso_tag = lower.1.tag_index(&lower.0, &lower.2, "tag_torso")?;
-    let head_tag = match &head {
-        Some(_) => Some(upper.1.tag_index(&upper.0, &upper.2, "tag_head")?),
-        None => None,
-    };
-    let mut parts: Vec<&(String, Md3, Vec<u8>)> = vec![&lower, &upper];
+    let torso_tag = lower.tag_index("tag_torso")?;
+    let head_tag = head.as_ref().map(|_| upper.tag_index("tag_head")).transpose()?;
+    let mut parts: Vec<&Md3File> = vec![&lower, &upper];
     parts.extend(&head);
-    let n: usize = parts.iter().map(|p| p.1.vertices()).sum();
+    let n: usize = parts.iter().map(|p| p.md3.vertices()).sum();
     skeletal::check_rows(&p.lower, steps, n)?;
-    if let Some(h) = &head
-        && h.1.frames == 0
-    {
-        return Err(DataError::new(&h.0, "num_frames", "the head has no frame"));
+    // The head plays no animation: its first frame, read once.
+    let mut head_points = Vec::new();
+    if let Some(h) = &head {
+        if h.md3.frames == 0 {
+            return Err(DataError::new(&h.path, "num_frames", "the head has no frame"));
+        }
+        h.points(0, &mut head_points)?;
     }
     let mut faces = Vec::new();
     let mut base = 0u32;
     for part in &parts {
-        faces.extend(part.1.faces(base));
-        base += part.1.vertices() as u32;
+        faces.extend(part.md3.faces(base));
+        base += part.md3.vertices() as u32;
     }
     let mut vertices = Vec::with_capacity(steps * n);
-    let mut points = Vec::new();
+    let mut points = Vec::with_capacity(n);
+    let y_up = |v: [f64; 3]| z_up_to_y_up(v).map(|x| x as f32);
     for k in 0..steps {
         let (fl, fu) = (take.lower[k], take.upper[k]);
-        let torso = Place::ROOT.attach(&lower.1.tag(&lower.0, &lower.2, torso_tag, fl)?);
-        let mut placed = Vec::with_capacity(n);
-        lower.1.points(&lower.0, &lower.2, fl, &mut points)?;
-        placed.extend(points.iter().copied());
-        upper.1.points(&upper.0, &upper.2, fu, &mut points)?;
-        placed.extend(points.iter().map(|&v| torso.point(v)));
-        if let (Some(h), Some(t)) = (&head, head_tag) {
-            let at = torso.attach(&upper.1.tag(&upper.0, &upper.2, t, fu)?);
-            h.1.points(&h.0, &h.2, 0, &mut points)?;
-            placed.extend(points.iter().map(|&v| at.point(v)));
+        let torso = Place::ROOT.attach(&lower.tag(torso_tag, fl)?);
+        points.clear();
+        lower.points(fl, &mut points)?;
+        vertices.extend(points.iter().map(|&v| y_up(v)));
+        points.clear();
+        upper.points(fu, &mut points)?;
+        vertices.extend(points.iter().map(|&v| y_up(torso.point(v))));
+        if let Some(t) = head_tag {
+            let at = torso.attach(&upper.tag(t, fu)?);
+            vertices.extend(head_points.iter().map(|&v| y_up(at.point(v))));
         }
-        vertices.extend(placed.into_iter().map(|v| z_up_to_y_up(v).map(|x| x as f32)));
     }
     let name = p
         .lower

@@ -1,20 +1,21 @@
-//! 3 × 3 matrix helpers of the ACAP features (f64, row-major): products, the inverse, a Jacobi eigensolver for
-//! symmetric matrices, the rotation polar decomposition, and the rotation log/exp maps.
+//! 3-vector and 3 × 3 matrix helpers in f64 (row-major), shared by the ACAP features, the MD3 tag placement and the
+//! scene metrics: products, the inverse, a Jacobi eigensolver for symmetric matrices, the rotation polar
+//! decomposition, and the rotation log/exp maps.
 
-pub(crate) type Vec3 = [f64; 3];
-pub(crate) type Mat3 = [[f64; 3]; 3];
+pub type Vec3 = [f64; 3];
+pub type Mat3 = [[f64; 3]; 3];
 
-pub(crate) const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+pub const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
-pub(crate) fn sub(a: Vec3, b: Vec3) -> Vec3 {
+pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
-pub(crate) fn dot(a: Vec3, b: Vec3) -> f64 {
+pub fn dot(a: Vec3, b: Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-pub(crate) fn cross(a: Vec3, b: Vec3) -> Vec3 {
+pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
@@ -22,20 +23,20 @@ pub(crate) fn cross(a: Vec3, b: Vec3) -> Vec3 {
     ]
 }
 
-pub(crate) fn norm(a: Vec3) -> f64 {
+pub fn norm(a: Vec3) -> f64 {
     dot(a, a).sqrt()
 }
 
-pub(crate) fn scale(a: Vec3, s: f64) -> Vec3 {
+pub fn scale(a: Vec3, s: f64) -> Vec3 {
     [a[0] * s, a[1] * s, a[2] * s]
 }
 
-pub(crate) fn add_scaled(a: Vec3, b: Vec3, s: f64) -> Vec3 {
+pub fn add_scaled(a: Vec3, b: Vec3, s: f64) -> Vec3 {
     [a[0] + s * b[0], a[1] + s * b[1], a[2] + s * b[2]]
 }
 
 /// a · bᵀ scaled by `w`, added into `m`.
-pub(crate) fn add_outer(m: &mut Mat3, w: f64, a: Vec3, b: Vec3) {
+pub fn add_outer(m: &mut Mat3, w: f64, a: Vec3, b: Vec3) {
     for (row, &ai) in m.iter_mut().zip(&a) {
         for (x, &bj) in row.iter_mut().zip(&b) {
             *x += w * ai * bj;
@@ -43,23 +44,23 @@ pub(crate) fn add_outer(m: &mut Mat3, w: f64, a: Vec3, b: Vec3) {
     }
 }
 
-pub(crate) fn mat_vec(m: &Mat3, v: Vec3) -> Vec3 {
+pub fn mat_vec(m: &Mat3, v: Vec3) -> Vec3 {
     [dot(m[0], v), dot(m[1], v), dot(m[2], v)]
 }
 
-pub(crate) fn transpose(m: &Mat3) -> Mat3 {
+pub fn transpose(m: &Mat3) -> Mat3 {
     std::array::from_fn(|i| std::array::from_fn(|j| m[j][i]))
 }
 
-pub(crate) fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
+pub fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
     std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| a[i][k] * b[k][j]).sum()))
 }
 
-pub(crate) fn add_mat(a: &Mat3, b: &Mat3, s: f64) -> Mat3 {
+pub fn add_mat(a: &Mat3, b: &Mat3, s: f64) -> Mat3 {
     std::array::from_fn(|i| std::array::from_fn(|j| a[i][j] + s * b[i][j]))
 }
 
-pub(crate) fn trace(m: &Mat3) -> f64 {
+pub fn trace(m: &Mat3) -> f64 {
     m[0][0] + m[1][1] + m[2][2]
 }
 
@@ -72,7 +73,7 @@ fn from_columns(c: [Vec3; 3]) -> Mat3 {
 }
 
 /// The inverse by cofactors; `None` when the determinant is zero or not finite.
-pub(crate) fn inverse(m: &Mat3) -> Option<Mat3> {
+pub fn inverse(m: &Mat3) -> Option<Mat3> {
     let c0 = cross(m[1], m[2]);
     let c1 = cross(m[2], m[0]);
     let c2 = cross(m[0], m[1]);
@@ -88,7 +89,7 @@ pub(crate) fn inverse(m: &Mat3) -> Option<Mat3> {
 
 /// Eigen-decomposition of a symmetric matrix by cyclic Jacobi rotations: eigenvalues in descending order and
 /// the eigenvectors as the columns of a rotation (determinant +1).
-pub(crate) fn symmetric_eigen(m: &Mat3) -> (Vec3, Mat3) {
+pub fn symmetric_eigen(m: &Mat3) -> (Vec3, Mat3) {
     let mut a = *m;
     let mut v = IDENTITY;
     for _sweep in 0..64 {
@@ -141,7 +142,7 @@ fn orthonormal_to(a: Vec3, u: Vec3) -> Option<Vec3> {
 /// Rotation polar decomposition `t = r · s`: `r` a rotation (det +1), `s` symmetric; when det t < 0 the
 /// direction of the smallest singular value carries the sign in `s`. A rank-deficient `t` gets a deterministic
 /// completion of the missing directions (Gram–Schmidt of the right singular vectors); `t = 0` gives `r = I`.
-pub(crate) fn polar(t: &Mat3) -> (Mat3, Mat3) {
+pub fn polar(t: &Mat3) -> (Mat3, Mat3) {
     let (lambda, v) = symmetric_eigen(&mat_mul(&transpose(t), t));
     let r = if lambda[0] <= 0.0 || !lambda[0].is_finite() {
         IDENTITY
@@ -175,7 +176,7 @@ fn any_orthonormal(u: Vec3) -> Vec3 {
 }
 
 /// Unit axis and angle θ ∈ [0, π] of a rotation; the axis is zero when θ = 0.
-pub(crate) fn log_map(r: &Mat3) -> (Vec3, f64) {
+pub fn log_map(r: &Mat3) -> (Vec3, f64) {
     let cos = (trace(r) - 1.0) / 2.0;
     let vee = [
         0.5 * (r[2][1] - r[1][2]),
@@ -209,7 +210,7 @@ pub(crate) fn log_map(r: &Mat3) -> (Vec3, f64) {
 }
 
 /// Rotation of the rotation vector `rv` (Rodrigues).
-pub(crate) fn exp_map(rv: Vec3) -> Mat3 {
+pub fn exp_map(rv: Vec3) -> Mat3 {
     let theta = norm(rv);
     if theta == 0.0 {
         return IDENTITY;
