@@ -142,11 +142,7 @@ impl Augment {
             if mirror {
                 scene.faces.iter_mut().for_each(|f| f.swap(1, 2));
             }
-            for p in &mut scene.vertices {
-                for (x, c) in p.iter_mut().zip(norm.center) {
-                    *x = (*x - c) / norm.scale;
-                }
-            }
+            norm.apply_points(&mut scene.vertices);
         }
     }
 }

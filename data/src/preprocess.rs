@@ -126,7 +126,12 @@ impl Normalization {
 
     /// Normalise every frame of `clip` in place.
     pub fn apply(&self, clip: &mut Clip) {
-        for p in &mut clip.vertices {
+        self.apply_points(&mut clip.vertices);
+    }
+
+    /// (D3) on any points in the clip's coordinates (a scene's vertices, docs/method.md §6.5): `(x − c) / s`.
+    pub fn apply_points(&self, points: &mut [[f32; 3]]) {
+        for p in points {
             for (x, c) in p.iter_mut().zip(self.center) {
                 *x = (*x - c) / self.scale; // (D3)
             }

@@ -103,11 +103,8 @@ impl Scene {
 
     /// The scene in a window's normalised frame (D1)–(D3) (`(x − c) / s`), or `None` when that is not finite.
     pub fn normalized(&self, n: &crate::preprocess::Normalization) -> Option<Scene> {
-        let vertices: Vec<[f32; 3]> = self
-            .vertices
-            .iter()
-            .map(|p| std::array::from_fn(|k| (p[k] - n.center[k]) / n.scale))
-            .collect();
+        let mut vertices = self.vertices.clone();
+        n.apply_points(&mut vertices);
         vertices.iter().flatten().all(|x| x.is_finite()).then(|| Scene {
             vertices,
             faces: self.faces.clone(),

@@ -30,15 +30,16 @@ pub fn scene(args: SceneArgs) -> anyhow::Result<ExitCode> {
     use any4d_data::scene::Scene;
     use any4d_eval::scene_metrics::{ContactThresholds, scene_metrics};
     let clip = read_clip(&args.clip).with_context(|| format!("reading the clip {}", args.clip.display()))?;
-    let mut scene =
-        Scene::read_obj(&args.scene).with_context(|| format!("reading the scene {}", args.scene.display()))?;
+    let scene = Scene::read_obj(&args.scene).with_context(|| format!("reading the scene {}", args.scene.display()))?;
     // Both in the clip's normalised frame (D1)–(D3), where the thresholds are stated.
     let (clip, norm) = any4d_data::preprocess::normalize(&clip);
-    for p in &mut scene.vertices {
-        for (x, c) in p.iter_mut().zip(norm.center) {
-            *x = (*x - c) / norm.scale;
-        }
-    }
+    let Some(scene) = scene.normalized(&norm) else {
+        anyhow::bail!(
+            "{}: normalising the scene by {}'s frame 0 gives non-finite coordinates",
+            args.scene.display(),
+            args.clip.display()
+        );
+    };
     let thresholds = ContactThresholds {
         contact: args.contact,
         slide: args.slide,
