@@ -13,13 +13,13 @@
 //! `safetensors` crate, then every tensor the network needs present, of a float dtype and of the network's shape,
 //! and no other tensor (AAM's buffers and CLIP keys excepted); each refusal names the file and the tensor.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
 use burn::store::burn_pack::Tensor as PackTensor;
 use burn::store::{BurnToPyTorchAdapter, ModuleAdapter, ModuleSnapshot, PyTorchToBurnAdapter};
-use burn::tensor::{Bytes, DType, TensorData};
+use burn::tensor::{DType, TensorData};
 use regex::Regex;
 use safetensors::{Dtype, SafeTensors};
 
@@ -314,6 +314,36 @@ pub fn write_file(path: &Path, tensors: &[FileTensor], metadata: BTreeMap<String
     any4d_data::io::write_atomic(path, &bytes).map_err(|e| err(path, "", e.to_string()))
 }
 
+/// The `__metadata__` of a safetensors file from its header alone (its tensors are not read): what an import needs
+/// before it can build the network the file holds.
+pub fn read_header_metadata(path: &Path) -> Result<BTreeMap<String, String>, InteropError> {
+    use std::io::Read;
+    let not = |why: String| err(path, "", format!("not a safetensors file: {why}"));
+    let mut f = std::fs::File::open(path).map_err(|e| err(path, "", e.to_string()))?;
+    let size = f.metadata().map_err(|e| err(path, "", e.to_string()))?.len();
+    let mut len = [0u8; 8];
+    f.read_exact(&mut len)
+        .map_err(|_| not("shorter than its 8-byte header length".into()))?;
+    let n = u64::from_le_bytes(len);
+    // The safetensors crate's own bound on a header.
+    if n > size.saturating_sub(8) || n > 100_000_000 {
+        return Err(not(format!("a header of {n} bytes in a file of {size}")));
+    }
+    let mut header = vec![0u8; n as usize];
+    f.read_exact(&mut header).map_err(|e| err(path, "", e.to_string()))?;
+    let json: serde_json::Value =
+        serde_json::from_slice(&header).map_err(|e| not(format!("its header is not JSON ({e})")))?;
+    Ok(json
+        .get("__metadata__")
+        .and_then(|m| m.as_object())
+        .map(|m| {
+            m.iter()
+                .filter_map(|(k, v)| v.as_str().map(|v| (k.clone(), v.to_owned())))
+                .collect()
+        })
+        .unwrap_or_default())
+}
+
 /// What [`read_file`] found besides the parameters it applied.
 #[derive(Debug, Default)]
 pub struct ReadReport {
@@ -341,10 +371,10 @@ enum EntryData {
 }
 
 impl Entry {
-    fn bytes(&self) -> Result<Vec<u8>, String> {
-        match &self.data {
-            EntryData::Read(b) => Ok(b.clone()),
-            EntryData::Lazy(t) => t.to_bytes().map(|b| b.to_vec()).map_err(|e| e.to_string()),
+    fn into_bytes(self) -> Result<Vec<u8>, String> {
+        match self.data {
+            EntryData::Read(b) => Ok(b),
+            EntryData::Lazy(t) => t.into_bytes().map(|b| b.to_vec()).map_err(|e| e.to_string()),
         }
     }
 }
@@ -463,27 +493,25 @@ pub fn read_file<M: ModuleSnapshot>(
         false => safetensors_entries(path)?,
     };
     let expected = file_names(module, network, names);
-    let wanted: HashMap<&str, &[usize]> = expected
-        .iter()
-        .map(|(_, name, shape)| (name.as_str(), shape.as_slice()))
-        .collect();
+    let wanted: HashSet<&str> = expected.iter().map(|(_, name, _)| name.as_str()).collect();
     let mut report = ReadReport {
         metadata,
         ..ReadReport::default()
     };
-    let mut by_name: HashMap<&str, &Entry> = HashMap::new();
-    let mut keys: Vec<&Entry> = entries.iter().collect();
-    keys.sort_unstable_by(|a, b| a.name.cmp(&b.name));
-    for e in keys {
-        if wanted.contains_key(e.name.as_str()) {
-            by_name.insert(&e.name, e);
+    let mut entries = entries;
+    entries.sort_unstable_by(|a, b| a.name.cmp(&b.name));
+    let mut by_name: HashMap<String, Entry> = HashMap::new();
+    for e in entries {
+        if wanted.contains(e.name.as_str()) {
+            by_name.insert(e.name.clone(), e);
             continue;
         }
         if names == Names::AnimateAnyMesh && aam_extra(network, &e.name) {
-            if let Some((_, shape, values)) = constants.iter().find(|c| c.0 == e.name) {
+            let name = e.name.clone();
+            if let Some((_, shape, values)) = constants.iter().find(|c| c.0 == name) {
                 check_constant(path, e, shape, values)?;
             }
-            report.ignored.push(e.name.clone());
+            report.ignored.push(name);
             continue;
         }
         return Err(err(
@@ -494,7 +522,7 @@ pub fn read_file<M: ModuleSnapshot>(
     }
     let mut tensors = Vec::with_capacity(expected.len());
     for (burn_path, name, shape) in &expected {
-        let e = by_name.get(name.as_str()).ok_or_else(|| {
+        let e = by_name.remove(name.as_str()).ok_or_else(|| {
             err(
                 path,
                 name,
@@ -515,14 +543,14 @@ pub fn read_file<M: ModuleSnapshot>(
                 format!("dtype {}, a float parameter needs F32, F16, BF16 or F64", e.dtype),
             ));
         };
-        let bytes = e.bytes().map_err(|why| err(path, name, why))?;
+        let bytes = e.into_bytes().map_err(|why| err(path, name, why))?;
         let data = TensorData::from_bytes_vec(bytes, shape.clone(), dtype).convert::<f32>();
         tensors.push(PackTensor::new(
             burn_path.clone(),
             DType::F32,
             shape.clone(),
             None,
-            Bytes::from_bytes_vec(data.as_bytes().to_vec()),
+            data.into_bytes(),
         ));
     }
     let adapter: Option<Box<dyn ModuleAdapter>> = match names {
@@ -540,11 +568,12 @@ pub fn read_file<M: ModuleSnapshot>(
 }
 
 /// Refuses an AnimateAnyMesh buffer whose shape or values (within 10⁻⁶ relative) are not the module's own.
-fn check_constant(path: &Path, e: &Entry, shape: &[usize], values: &[f32]) -> Result<(), InteropError> {
+fn check_constant(path: &Path, e: Entry, shape: &[usize], values: &[f32]) -> Result<(), InteropError> {
+    let name = e.name.clone();
     let differs = |why: String| {
         err(
             path,
-            &e.name,
+            &name,
             format!("{why}: built with other frequencies than this network"),
         )
     };
@@ -554,11 +583,11 @@ fn check_constant(path: &Path, e: &Entry, shape: &[usize], values: &[f32]) -> Re
     let Some(dtype) = e.float else {
         return Err(differs(format!("dtype {}", e.dtype)));
     };
-    let bytes = e.bytes().map_err(|why| err(path, &e.name, why))?;
+    let bytes = e.into_bytes().map_err(|why| err(path, &name, why))?;
     let got = TensorData::from_bytes_vec(bytes, shape.to_vec(), dtype).convert::<f32>();
     let got: Vec<f32> = got
         .try_to_vec::<f32>()
-        .map_err(|why| err(path, &e.name, format!("{why:?}")))?;
+        .map_err(|why| err(path, &name, format!("{why:?}")))?;
     match got
         .iter()
         .zip(values)

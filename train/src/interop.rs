@@ -56,21 +56,20 @@ fn interop_err(e: interop::InteropError) -> TrainError {
 
 /// The header metadata of an export: `config` (the run's resolved `config.toml`) as JSON, so that a reader
 /// needs no TOML parser.
-fn metadata(network: Network, names: Names, config: String, step: u64) -> BTreeMap<String, String> {
-    // A run's own config.toml was written by this program from a parsed table: it parses, and JSON holds it.
-    let config = config
-        .parse::<toml::Table>()
-        .ok()
-        .and_then(|t| serde_json::to_string(&t).ok())
-        .unwrap_or(config);
-    BTreeMap::from([
+fn metadata(run: &Path, network: Network, names: Names, config: String, step: u64) -> Result<BTreeMap<String, String>> {
+    let table: toml::Table = config
+        .parse()
+        .map_err(|e| run_err(run.join(CONFIG_FILE), format!("not TOML: {e}")))?;
+    let config = serde_json::to_string(&table)
+        .map_err(|e| run_err(run.join(CONFIG_FILE), format!("cannot be written as JSON: {e}")))?;
+    Ok(BTreeMap::from([
         // What PyTorch's `safetensors.torch.save_file` writes: loaders that check it accept the file.
         ("format".to_owned(), "pt".to_owned()),
         (META_NETWORK.to_owned(), network.name().to_owned()),
         (META_NAMES.to_owned(), names.name().to_owned()),
         (META_CONFIG.to_owned(), config),
         (META_STEP.to_owned(), step.to_string()),
-    ])
+    ]))
 }
 
 /// Exports the run folder `run` (RF or VAE) into the new folder `out` (see the module doc).
@@ -112,7 +111,7 @@ fn export_into(run: &Path, tmp: &Path, names: Names, config_text: String, device
         let rf = load_rf_run(run, device)?;
         let averaged = rf.checkpoint.join(crate::checkpoint::EMA_FILE).is_file();
         let tensors = collect_tensors(&rf.model.mmdit, Network::Mmdit, names);
-        let meta = metadata(Network::Mmdit, names, config_text, rf.step);
+        let meta = metadata(run, Network::Mmdit, names, config_text, rf.step)?;
         interop::write_file(&tmp.join(MODEL_SAFETENSORS), &tensors, meta.clone()).map_err(interop_err)?;
         let text = collect_tensors(&rf.model.text, Network::Mmdit, Names::Any4d);
         let mut text_meta = meta;
@@ -146,7 +145,7 @@ fn export_into(run: &Path, tmp: &Path, names: Names, config_text: String, device
                 tensors.push(FileTensor { name, shape, bytes });
             }
         }
-        let meta = metadata(network, names, config_text, step);
+        let meta = metadata(run, network, names, config_text, step)?;
         interop::write_file(&tmp.join(MODEL_SAFETENSORS), &tensors, meta).map_err(interop_err)?;
         if run.join(LATENT_STATS_FILE).is_file() {
             copy(run, LATENT_STATS_FILE)?;
@@ -174,36 +173,6 @@ pub struct Imported {
     pub side_files: Vec<&'static str>,
 }
 
-/// The header metadata of a safetensors file, without reading its tensors (an empty map for a file without any).
-fn read_metadata(path: &Path) -> Result<BTreeMap<String, String>> {
-    use std::io::Read;
-    let mut f = fs::File::open(path).map_err(io_err("open", path))?;
-    let mut len = [0u8; 8];
-    f.read_exact(&mut len)
-        .map_err(|_| run_err(path, "not a safetensors file: shorter than its 8-byte header length"))?;
-    let n = u64::from_le_bytes(len);
-    let size = f.metadata().map_err(io_err("stat", path))?.len();
-    if n > size.saturating_sub(8) || n > 100 << 20 {
-        return Err(run_err(
-            path,
-            format!("not a safetensors file: a header of {n} bytes in a file of {size}"),
-        ));
-    }
-    let mut header = vec![0u8; n as usize];
-    f.read_exact(&mut header).map_err(io_err("read", path))?;
-    let json: serde_json::Value = serde_json::from_slice(&header)
-        .map_err(|e| run_err(path, format!("not a safetensors file: its header is not JSON ({e})")))?;
-    Ok(json
-        .get("__metadata__")
-        .and_then(|m| m.as_object())
-        .map(|m| {
-            m.iter()
-                .filter_map(|(k, v)| v.as_str().map(|v| (k.clone(), v.to_owned())))
-                .collect()
-        })
-        .unwrap_or_default())
-}
-
 /// Imports `from` (a `model.safetensors` as [`export_run`] writes it, one written by PyTorch, or a PyTorch pickle
 /// `.pt`/`.pth`/`.ckpt` read by burn's reader, which runs none of its code) into the new run folder `out`. The network, names and config come from the file's header unless given; `config` is needed for a
 /// file without any4d's header. An RF needs its caption encoder, tokenizer and VAE record beside the file (as an
@@ -221,7 +190,7 @@ pub fn import_file(
     // A PyTorch pickle carries no header of any4d's: its config and names are given.
     let meta = match interop::is_pytorch_pickle(from) {
         true => BTreeMap::new(),
-        false => read_metadata(from)?,
+        false => interop::read_header_metadata(from).map_err(interop_err)?,
     };
     let config_text = match config {
         Some(p) => fs::read_to_string(p).map_err(io_err("read", p))?,
@@ -243,7 +212,13 @@ pub fn import_file(
             .and_then(|n| Names::from_name(n))
             .ok_or_else(|| run_err(from, "the file does not say whose names it uses: give --names"))?,
     };
-    let step: u64 = meta.get(META_STEP).and_then(|s| s.parse().ok()).unwrap_or(0);
+    // A file without any4d's header (written by PyTorch) is imported as step 0.
+    let step: u64 = match meta.get(META_STEP) {
+        Some(s) => s
+            .parse()
+            .map_err(|_| run_err(from, format!("the header's `{META_STEP}` is {s:?}, not a step number")))?,
+        None => 0,
+    };
     let dir = from
         .parent()
         .filter(|d| !d.as_os_str().is_empty())

@@ -61,6 +61,24 @@ impl Cursor<'_> {
         })
     }
 
+    /// `count` points of three little-endian f32 (`None`: a count that overflowed).
+    fn points(&mut self, count: Option<usize>, field: &str) -> Result<Vec<[f32; 3]>> {
+        let words = self.words(count.and_then(|c| c.checked_mul(3)), field)?;
+        Ok(words
+            .chunks_exact(12)
+            .map(|b| [0, 4, 8].map(|k| f32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
+            .collect())
+    }
+
+    /// `count` triangles of three little-endian u32 vertex indices.
+    fn triangles(&mut self, count: usize, field: &str) -> Result<Vec<[u32; 3]>> {
+        let words = self.words(count.checked_mul(3), field)?;
+        Ok(words
+            .chunks_exact(12)
+            .map(|b| [0, 4, 8].map(|k| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
+            .collect())
+    }
+
     /// `count` little-endian 4-byte words; the length is checked before anything is allocated.
     fn words(&mut self, count: Option<usize>, field: &str) -> Result<&[u8]> {
         let n = count
@@ -100,16 +118,8 @@ pub fn decode(
             format!("clip {id} has T = {t}, P = {np}; the header says T = {frames}, P = {p}"),
         ));
     }
-    let vertices: Vec<[f32; 3]> = c
-        .words(t.checked_mul(n).and_then(|x| x.checked_mul(3)), "vertices")?
-        .chunks_exact(12)
-        .map(|b| [0, 4, 8].map(|k| f32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
-        .collect();
-    let faces: Vec<[u32; 3]> = c
-        .words(m.checked_mul(3), "faces")?
-        .chunks_exact(12)
-        .map(|b| [0, 4, 8].map(|k| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
-        .collect();
+    let vertices = c.points(t.checked_mul(n), "vertices")?;
+    let faces = c.triangles(m, "faces")?;
     let fps_at = c.at;
     let fps: Vec<u32> = c
         .words(Some(np), "fps")?
@@ -168,16 +178,8 @@ pub fn decode(
 fn scene_section(c: &mut Cursor) -> Result<Option<Scene>> {
     let sv = c.u32("scene vertices")? as usize;
     let sm = c.u32("scene faces")? as usize;
-    let vertices: Vec<[f32; 3]> = c
-        .words(sv.checked_mul(3), "scene vertices")?
-        .chunks_exact(12)
-        .map(|b| [0, 4, 8].map(|k| f32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
-        .collect();
-    let faces: Vec<[u32; 3]> = c
-        .words(sm.checked_mul(3), "scene faces")?
-        .chunks_exact(12)
-        .map(|b| [0, 4, 8].map(|k| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]])))
-        .collect();
+    let vertices = c.points(Some(sv), "scene vertices")?;
+    let faces = c.triangles(sm, "scene faces")?;
     if sv == 0 && sm == 0 {
         return Ok(None);
     }
