@@ -10,14 +10,15 @@
 # minetest-data and two Minetest mods (B3D player characters and the maid robot; 4 MB together), cube2-data (Cube 2:
 # Sauerbraten's IQM player, squirrel, hands and guns, MD5 flag; 173 MB), minetest-mod-homedecor (a turning desk fan),
 # gambas3-examples (seven Quake II-style MD2 models of its OpenGL example), blobandconquer-data (an MD2 spider) and
-# castle-game-engine-doc (glTF characters, cars and gears of its examples; 257 MB). docs/data.md lists every
+# castle-game-engine-doc (glTF characters, cars and gears of its examples; 257 MB) and supertuxkart-data (SuperTuxKart's
+# skinned .spm karts, characters and props with the XML giving their frame ranges; 628 MB). docs/data.md lists every
 # package tried and why each was or was not used.
 # Never add openarena*, megaglest*, nexuiz*/xonotic*, qt3d* or assimp-testmodels' MD2 files: they are the held-out
 # evaluation (the staging step refuses those packages by name and skips the MD2 files).
 set -euo pipefail
 OUT=${1:?usage: scripts/real_corpus.sh OUT}
 PACKAGES=(redeclipse-data 0ad-data ufoai-data assimp-testmodels minetest-data minetest-mod-3d-armor minetest-mod-maidroid
-  cube2-data minetest-mod-homedecor gambas3-examples blobandconquer-data castle-game-engine-doc)
+  cube2-data minetest-mod-homedecor gambas3-examples blobandconquer-data castle-game-engine-doc supertuxkart-data)
 # Import settings: 16-frame windows every 8 frames, P = 512 FPS tokens (the paper's); the low-poly game meshes
 # go down to 128 vertices (the paper's lower bound is 512, which would drop most 0 A.D. animals and UFO:AI
 # models). Takes shorter than the window are played round when they loop (--loop-short, docs/method.md §2.6).

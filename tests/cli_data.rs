@@ -192,7 +192,7 @@ fn bench_data_reports_throughput() {
     );
     // Every reader is timed on the same clips written in its format.
     for format in [
-        "bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd", "b3d", "x", "fbx", "dae",
+        "bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd", "b3d", "spm", "x", "fbx", "dae",
     ] {
         assert!(
             stdout

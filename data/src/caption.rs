@@ -48,6 +48,8 @@ pub const GENERIC: &[&str] = &[
     "v",
     "a",
     "hud",
+    "stklib",
+    "main",
 ];
 
 /// Take words and the verb phrase each stands for.
@@ -108,6 +110,10 @@ pub const MOTIONS: &[(&str, &str)] = &[
     ("powerslide", "sliding"),
     ("wallrun", "running along a wall"),
     ("spin", "spinning"),
+    ("winning", "celebrating"),
+    ("losing", "sulking"),
+    ("backpedal", "reversing"),
+    ("cheering", "cheering"),
     ("roar", "roaring"),
     ("boxing", "boxing"),
 ];

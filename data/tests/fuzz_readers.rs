@@ -1,6 +1,6 @@
 //! Mutation fuzzing of the skeletal and scene readers and of their sidecars (IQM and its animation-only files,
 //! MD2 and its `.anm` table, MD3 and its `animation.cfg`, a Quake III player assembled from three MD3 parts, MD5
-//! mesh and animation, PMD and PSA, B3D, DirectX `.x`, binary FBX, COLLADA, BVH retargeted onto an IQM rig,
+//! mesh and animation, PMD and PSA, B3D, SuperTuxKart `.spm` and its `kart.xml`, DirectX `.x`, binary FBX, COLLADA, BVH retargeted onto an IQM rig,
 //! `.anime`), on the stable toolchain: each case writes its
 //! seed files (made by the readers' own test writers) into a folder, then mutates one file of it — the model or
 //! one sidecar — with byte- and token-level mutations plus repeated slices (deep nesting, long counts) and reads
@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 use any4d_data::Clip;
 use any4d_data::formats::skeletal::ReadOptions;
-use any4d_data::formats::{self, PANIC_FIELD, anime, b3d, bvh, dae, fbx, iqm, md2, md3, pmd, x};
+use any4d_data::formats::{self, PANIC_FIELD, anime, b3d, bvh, dae, fbx, iqm, md2, md3, pmd, spm, x};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -74,6 +74,9 @@ fn md5_anim(frames: usize) -> String {
     s
 }
 
+const SPM_KART_XML: &str = "<kart name=\"M\" model-file=\"m.spm\">\n  <animations left=\"0\" straight=\"2\" \
+    end-straight=\"3\" start-jump=\"4\"/>\n</kart>\n";
+
 const Q3_CFG: &str = "sex m\nfootsteps normal\n0 3 0 20\n2 1 0 20\n3 3 0 20\n5 1 0 20\n6 2 0 20\n7 1 0 20\n\
     8 2 0 15\n10 2 0 15\n12 2 0 15\n14 2 0 15\n16 2 0 15\n18 2 0 15\n20 2 0 15\n22 2 2 25\n24 -2 2 25\n";
 
@@ -106,6 +109,13 @@ fn cases() -> Vec<Case> {
     let psa = pmd::write_test_psa(&keys(6));
     let moving: Vec<u32> = (0..pos.len() as u32).filter(|v| v % 2 == 1).collect();
     let b3d_keys: Vec<(i32, [f32; 3])> = (1..=6).map(|f| (f, [0.0, 0.1 * f as f32, 0.0])).collect();
+    let spm_skin: Vec<u8> = skin.iter().map(|&j| if j == 0 { 255 } else { 0 }).collect();
+    let spm_keys: Vec<(u16, Vec<[f32; 3]>)> = keys(6)
+        .into_iter()
+        .enumerate()
+        .map(|(f, k)| (f as u16, vec![k[1], k[0]]))
+        .collect();
+    let spm_file = spm::write_test_spm(&pos, &faces, &spm_skin, &[("tip", 1), ("root", -1)], 1, &spm_keys);
     let still = vec![0.0; 27];
     let mut turn = still.clone();
     turn[3] = 45.0;
@@ -223,6 +233,15 @@ fn cases() -> Vec<Case> {
             vec![],
             vec![b3d::write_test_b3d(&pos, &faces, [0.0; 3], &moving, &b3d_keys)],
             false,
+        ),
+        case("spm", "m.spm", "m.spm", vec![], vec![spm_file.clone()], false),
+        case(
+            "spm-kart-xml",
+            "m.spm",
+            "kart.xml",
+            vec![("m.spm", spm_file)],
+            vec![SPM_KART_XML.into()],
+            true,
         ),
         case(
             "x",

@@ -370,6 +370,60 @@ fn minetest_b3d_models_with_keys_are_staged_and_imported() {
     );
 }
 
+/// `supertuxkart-data`: a skinned `.spm` is staged with the XML that names it (which gives its takes), a static one
+/// and an unrelated XML are not, and the staged kart imports its takes with the package's licence.
+#[test]
+fn supertuxkart_meshes_are_staged_with_the_xml_that_names_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("extracted/supertuxkart-data");
+    write(
+        &pkg.join("usr/share/doc/supertuxkart-data/copyright"),
+        b"Format: dep5\n\nFiles: *\nLicense: GPL-3+\n",
+    );
+    let kart = pkg.join("usr/share/games/supertuxkart/data/karts/puffer");
+    let (pos, faces) = strip(4);
+    let skin: Vec<u8> = (0..pos.len()).map(|v| if v % 2 == 1 { 0 } else { 255 }).collect();
+    let keys: Vec<(u16, Vec<[f32; 3]>)> = [0u16, 40]
+        .iter()
+        .map(|&f| (f, vec![[0.0, f32::from(f), 0.0]]))
+        .collect();
+    let spm = any4d_data::formats::spm::write_test_spm(&pos, &faces, &skin, &[("body", -1)], 1, &keys);
+    write(&kart.join("puffer.spm"), &spm);
+    // Takes 0–21 and 21–40 (a mark runs to the next): 16-frame windows every 4 frames give two of each.
+    let xml = r#"<kart model-file="puffer.spm"><animations start-losing="0" start-winning="21"/></kart>"#;
+    write(&kart.join("kart.xml"), xml.as_bytes());
+    write(&kart.join("materials.xml"), b"<materials/>");
+    let mut rock = spm.clone();
+    rock[2] = 1 << 3 | 2;
+    write(&kart.join("rock.spm"), &rock[..28]);
+    let staged = dir.path().join("staged");
+    let report = stage(&dir.path().join("extracted"), &staged).unwrap();
+    assert_eq!(report.assets.get("supertuxkart-data"), Some(&1), "{report:?}");
+    let folder = staged.join("supertuxkart-data/puffer");
+    assert!(folder.join("puffer.spm").is_file() && folder.join("kart.xml").is_file());
+    assert!(!folder.join("materials.xml").exists());
+    let opts = ImportOptions {
+        filter: VertexFilter { min: 3, max: 4096 },
+        frames: 16,
+        stride: 4,
+        ..ImportOptions::default()
+    };
+    let out = dir.path().join("store");
+    let rep = store::import(&[staged], &out, &opts).unwrap();
+    let rows = read_index(&out).unwrap();
+    let ok: Vec<_> = rows.iter().filter(|r| r.status == Status::Ok).collect();
+    assert_eq!(ok.len(), 4, "{rep}");
+    for r in &ok {
+        assert_eq!((r.format.as_str(), r.licence.as_str()), ("spm", "GPL-3+"));
+    }
+    assert!(
+        ok.iter().any(|r| r.caption == "a puffer sulking"),
+        "{:?}",
+        ok.iter().map(|r| &r.caption).collect::<Vec<_>>()
+    );
+    assert!(ok.iter().any(|r| r.caption == "a puffer celebrating"));
+}
+
 /// Import `staged` in 16-frame windows every 4 frames and check that it gives exactly two clips, each of `format`
 /// with `(licence, package)` and a caption starting with `caption`.
 fn import_two_windows(staged: &Path, out: &Path, format: &str, source: (&str, &str), caption: &str) {

@@ -4,7 +4,8 @@
 //! Vertex formats (`.bin`, `.glb`, `.anime`, OBJ folders, MD2, MD3) store the clip's frames (MD2 quantised to
 //! bytes, MD3 to 1/64 units); the skeletal formats (IQM, MD5, 0 A.D. PMD/PSA, DirectX `.x`) store frame 0
 //! rigidly skinned to [`JOINTS`] joints whose translations move per frame, so their reads include the skinning
-//! bake (B3D: one moving joint holding every [`JOINTS`]-th vertex, the rest on the still root). Each clip gets its
+//! bake (B3D: one moving joint holding every [`JOINTS`]-th vertex, the rest on the still root; SuperTuxKart `.spm`:
+//! [`JOINTS`] root joints, each vertex on one). Each clip gets its
 //! own folder (MD5 and PMD find their animations beside the mesh).
 
 use std::fmt::Write as _;
@@ -14,7 +15,7 @@ use std::time::Instant;
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
 use crate::formats::skeletal::ReadOptions;
-use crate::formats::{self, b3d, dae, fbx, iqm, md2, md3, pmd, x};
+use crate::formats::{self, b3d, dae, fbx, iqm, md2, md3, pmd, spm, x};
 use crate::fps::farthest_point_sampling;
 use crate::preprocess;
 
@@ -23,7 +24,7 @@ pub const JOINTS: usize = 8;
 
 /// The formats benchmarked, in report order.
 const FORMATS: &[&str] = &[
-    "bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd", "b3d", "x", "fbx", "dae",
+    "bin", "glb", "anime", "obj-seq", "md2", "md3", "iqm", "md5", "pmd", "b3d", "spm", "x", "fbx", "dae",
 ];
 
 /// Translation of joint `j` at frame `f` (non-negative: IQM's test writer quantises without an offset).
@@ -125,6 +126,18 @@ fn write(format: &str, clip: &Clip, dir: &Path) -> Result<PathBuf> {
             let keys: Vec<(i32, [f32; 3])> = (0..clip.frames).map(|f| (f as i32 + 1, joint_shift(f, 1))).collect();
             let path = dir.join("clip.b3d");
             write_bytes(&path, b3d::write_test_b3d(frame0, &clip.faces, [0.0; 3], &bone, &keys))?;
+            path
+        }
+        "spm" => {
+            let joints: Vec<(&str, i16)> = (0..JOINTS).map(|_| ("j", -1)).collect();
+            let keys: Vec<(u16, Vec<[f32; 3]>)> = (0..clip.frames)
+                .map(|f| (f as u16, (0..JOINTS).map(|j| joint_shift(f, j)).collect()))
+                .collect();
+            let path = dir.join("clip.spm");
+            write_bytes(
+                &path,
+                spm::write_test_spm(frame0, &clip.faces, &skin, &joints, JOINTS as u16, &keys),
+            )?;
             path
         }
         "x" | "fbx" | "dae" => {

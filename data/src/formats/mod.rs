@@ -24,6 +24,7 @@ pub mod obj;
 pub mod pickle;
 pub mod pmd;
 pub mod skeletal;
+pub mod spm;
 pub mod x;
 
 use std::io::Read;
@@ -142,6 +143,8 @@ pub enum Format {
     Anime,
     /// Blitz3D `.b3d` (Minetest, Irrlicht).
     B3d,
+    /// SuperTuxKart `.spm`.
+    Spm,
     /// DirectX `.x` (text form).
     X,
     /// Binary FBX 7.
@@ -165,6 +168,7 @@ impl Format {
             Format::Pmd => "pmd",
             Format::Anime => "anime",
             Format::B3d => "b3d",
+            Format::Spm => "spm",
             Format::X => "x",
             Format::Fbx => "fbx",
             Format::Dae => "dae",
@@ -179,7 +183,8 @@ impl Format {
 
 /// Extensions (lower case) of the files an import picks up as clip sources.
 pub const SOURCE_EXTENSIONS: &[&str] = &[
-    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime", "b3d", "x", "fbx", "dae",
+    "bin", "pkl", "pickle", "gltf", "glb", "iqm", "md5mesh", "md2", "md3", "pmd", "anime", "b3d", "spm", "x", "fbx",
+    "dae",
 ];
 
 /// Whether `path` is a clip source for an import: a file with one of [`SOURCE_EXTENSIONS`], except an
@@ -226,6 +231,7 @@ impl Format {
             "pmd" => Ok(Format::Pmd),
             "anime" => Ok(Format::Anime),
             "b3d" => Ok(Format::B3d),
+            "spm" => Ok(Format::Spm),
             "x" => Ok(Format::X),
             "fbx" => Ok(Format::Fbx),
             "dae" => Ok(Format::Dae),
@@ -244,7 +250,7 @@ impl Format {
                 "format",
                 format!(
                     "unknown extension `.{other}` (expected .bin, .pkl, .gltf, .glb, .iqm, .md5mesh, .md2, .md3, \
-                     .pmd, .anime, .b3d, .x, .fbx, .dae or a folder of .obj)"
+                     .pmd, .anime, .b3d, .spm, .x, .fbx, .dae or a folder of .obj)"
                 ),
             )),
         }
@@ -298,6 +304,7 @@ fn read_take_unguarded(path: &Path, format: Format, opts: &ReadOptions) -> Resul
         Format::Pmd => pmd::read(path, opts)?,
         Format::Anime => anime::read(path, opts)?,
         Format::B3d => b3d::read(path, opts)?,
+        Format::Spm => spm::read(path, opts)?,
         Format::X => x::read(path, opts)?,
         Format::Fbx => fbx::read(path, opts)?,
         Format::Dae => dae::read(path, opts)?,
@@ -326,6 +333,7 @@ fn list_takes_unguarded(path: &Path, format: Format) -> Result<Option<Vec<TakeIn
         Format::Pmd => pmd::list_takes(path)?,
         Format::Anime => anime::list_takes(path)?,
         Format::B3d => b3d::list_takes(path)?,
+        Format::Spm => spm::list_takes(path)?,
         Format::X => x::list_takes(path)?,
         Format::Fbx => fbx::list_takes(path)?,
         Format::Dae => dae::list_takes(path)?,

@@ -1,4 +1,5 @@
-//! Packages whose animated files stand alone ([`ANIMATED_FILES`]): each file with a take is one staged asset.
+//! Packages whose animated files stand alone ([`ANIMATED_FILES`]): each file with a take is one staged asset (with
+//! the buffers a glTF names, and the XML files that name a SuperTuxKart mesh).
 
 use std::path::Path;
 
@@ -19,6 +20,7 @@ pub const ANIMATED_FILES: &[(&str, &str, &[&str])] = &[
         "usr/share/doc/castle-game-engine-doc/examples",
         &["gltf", "glb"],
     ),
+    ("supertuxkart-data", "usr/share/games/supertuxkart/data", &["spm"]),
 ];
 
 /// Every file of `exts` under a package's `root` that has at least one take, one folder per file stem (a stem met
@@ -75,6 +77,16 @@ impl AnimatedFiles {
                     let name = buffer.file_name().unwrap_or_default().to_string_lossy().into_owned();
                     if text.contains(&format!("\"{name}\"")) {
                         copy(&buffer, &to.join(&name))?;
+                    }
+                }
+            }
+            // The game's XML beside a SuperTuxKart mesh says which frame ranges it plays (`formats::spm`).
+            if file.extension().is_some_and(|e| e.eq_ignore_ascii_case("spm")) {
+                let name = file.file_name().unwrap_or_default().to_string_lossy().into_owned();
+                for xml in files_with(folder, "xml") {
+                    let bytes = std::fs::read(&xml).map_err(|e| DataError::io(&xml, e))?;
+                    if String::from_utf8_lossy(&bytes).contains(&name) {
+                        copy(&xml, &to.join(xml.file_name().unwrap_or_default()))?;
                     }
                 }
             }

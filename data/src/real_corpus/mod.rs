@@ -23,7 +23,9 @@
 //! - [`ANIMATED_FILES`]: packages whose animated files stand alone, each file with at least one take staged as
 //!   its own folder (a glTF with its buffer): `gambas3-examples` (seven Quake II-style MD2 monsters and a weapon of
 //!   its OpenGL example), `blobandconquer-data` (an MD2 spider), `castle-game-engine-doc` (the glTF characters,
-//!   cars and gears of the engine's examples);
+//!   cars and gears of the engine's examples), `supertuxkart-data` (the karts with their drivers, the track
+//!   library's characters and animals, cutscene actors and animated items, `.spm` with the XML files that give
+//!   their frame ranges);
 //! - `redeclipse-data` and `assimp-testmodels` (folder [`MOCAP_FOLDER`]): the `.bvh` motion capture of
 //!   `assimp-testmodels` beside copies of the Red Eclipse player meshes, retargeted at import
 //!   ([`crate::formats::bvh`]); `cube2-data` and `assimp-testmodels` (folder [`CUBE2_MOCAP_FOLDER`]): the same
