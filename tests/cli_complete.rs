@@ -30,6 +30,7 @@ fn user_clip(frames: usize) -> Clip {
         max_vertices: 700,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     let mut clip = generate_one(&cfg, 0).unwrap();
     for p in &mut clip.vertices {

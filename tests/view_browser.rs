@@ -63,6 +63,7 @@ fn the_view_page_plays_in_headless_chromium() {
         max_vertices: 700,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     let gt = generate_one(&cfg, 0).unwrap();
     let mut pred = gt.clone();

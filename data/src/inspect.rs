@@ -69,6 +69,9 @@ pub struct Summary {
     pub reject_reasons: BTreeMap<String, usize>,
     /// Every rejected file with its full reason.
     pub rejected_files: Vec<(String, String)>,
+    /// Stored clips that move in a scene (docs/method.md §6.5); `None` when the store's records carry no scene
+    /// section.
+    pub scenes: Option<usize>,
 }
 
 /// Facts about one clip file.
@@ -134,7 +137,15 @@ pub fn summarize(dir: &Path) -> Result<Summary> {
     let rows = read_index(dir)?;
     let store = Store::open(dir)?;
     check_index(&store, &rows)?;
-    Ok(summarize_rows(dir, &rows))
+    let mut summary = summarize_rows(dir, &rows);
+    if store.has_scenes() {
+        let mut with = 0;
+        for i in 0..store.len() {
+            with += usize::from(store.get(i)?.scene.is_some());
+        }
+        summary.scenes = Some(with);
+    }
+    Ok(summary)
 }
 
 /// Summarise index rows (the pure part of [`summarize`]).
@@ -172,6 +183,7 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
         synthetic_families: BTreeMap::new(),
         reject_reasons: BTreeMap::new(),
         rejected_files: Vec::new(),
+        scenes: None,
     };
     let mut objects = std::collections::HashSet::new();
     let mut package_objects = std::collections::HashSet::new();
@@ -302,6 +314,9 @@ impl Summary {
             self.train, self.val, self.objects
         );
         let _ = writeln!(o, "empty captions     {}", self.empty_captions);
+        if let Some(n) = self.scenes {
+            let _ = writeln!(o, "scenes             {n} of {} clips move in a scene", self.ok);
+        }
         let _ = writeln!(
             o,
             "clips.bin          matches the index (count, sizes); {} of {} clips have a checksum{}",

@@ -359,6 +359,7 @@ fn every_synthetic_family_round_trips() {
         max_vertices: 1024,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     let mut worst = (0.0f64, String::new());
     for (s, shape) in ShapeFamily::ALL.into_iter().enumerate() {

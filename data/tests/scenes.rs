@@ -185,3 +185,49 @@ fn numpy_reads_a_store_with_scenes() {
         "{stdout}"
     );
 }
+
+/// `data synth --scenes`: every procedural clip carries its scene, normalised with its window, and a caption that
+/// names the furniture; the clips themselves are those of the same run without scenes (another source each, so
+/// both kinds can share a store).
+#[test]
+fn procedural_clips_in_scenes_carry_them_and_equal_the_plain_clips() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = any4d_data::synth::SynthConfig {
+        clips: 6,
+        max_vertices: 1024,
+        scenes: true,
+        ..Default::default()
+    };
+    let out = dir.path().join("store");
+    store::write_synth_with(&cfg, &out, 8, None).unwrap();
+    let plain_cfg = any4d_data::synth::SynthConfig {
+        scenes: false,
+        ..cfg.clone()
+    };
+    let plain_out = dir.path().join("plain");
+    store::write_synth_with(&plain_cfg, &plain_out, 8, None).unwrap();
+    let (s, plain) = (Store::open(&out).unwrap(), Store::open(&plain_out).unwrap());
+    assert!(s.has_scenes() && !plain.has_scenes());
+    assert_eq!(s.len(), 6);
+    let phrases = ["pillar", "wall", "ceiling", "box", "table"];
+    for i in 0..s.len() {
+        let (c, p) = (s.get(i).unwrap(), plain.get(i).unwrap());
+        assert_eq!(c.clip.vertices, p.clip.vertices, "clip {i}");
+        assert!(c.clip.caption.starts_with(&p.clip.caption), "{}", c.clip.caption);
+        assert!(phrases.iter().any(|w| c.clip.caption.contains(w)), "{}", c.clip.caption);
+        let (scene, raw) = (
+            c.scene.unwrap(),
+            any4d_data::synth::generate_scened(&cfg, i).unwrap().1.unwrap(),
+        );
+        assert_eq!(scene, raw.normalized(&c.normalization).unwrap(), "clip {i}");
+    }
+    assert!(verify_store(&out).unwrap().problems.is_empty());
+    let summary = any4d_data::inspect::summarize(&out).unwrap();
+    assert_eq!(summary.scenes, Some(6));
+    assert!(
+        summary.to_table().contains("6 of 6 clips move in a scene"),
+        "{}",
+        summary.to_table()
+    );
+    assert_eq!(any4d_data::inspect::summarize(&plain_out).unwrap().scenes, None);
+}

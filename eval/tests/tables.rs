@@ -274,6 +274,7 @@ fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
         max_vertices: 768,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     write_synth_with(&cfg, &store16, 16, None).unwrap();
     let methods = [MethodKind::Lerp, MethodKind::StaticNearest];
@@ -440,6 +441,7 @@ fn the_split_option_draws_items_from_that_split_only() {
         max_vertices: 768,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     write_synth_with(&cfg, &store, 16, None).unwrap();
     let index = read_index(&store).unwrap();
@@ -541,6 +543,7 @@ fn the_caption_ablation_withholds_every_caption_and_says_so() {
         max_vertices: 768,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     write_synth_with(&cfg, &store, 16, None).unwrap();
     let table1 = Protocol::ShortHorizon(ShortHorizon {

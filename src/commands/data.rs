@@ -147,6 +147,10 @@ pub struct SynthArgs {
     /// fly, slither), on the skeletons that can.
     #[arg(long, value_parser = parse_action)]
     pub action: Option<Action>,
+    /// Put each clip in a procedural scene around it (a floor and a pillar, walls, a low ceiling, a box or a
+    /// table, never touching the clip), stored with its windows; the caption names the furniture.
+    #[arg(long)]
+    pub scenes: bool,
 }
 
 /// The one of `all` called `name`, else an error listing the names.
@@ -348,6 +352,7 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
             (Family::Shapes, None, None) => Family::Shapes,
             (Family::Shapes, _, _) => bail!("--template and --action choose rigged characters: add --family rigged"),
         },
+        scenes: a.scenes,
     };
     cfg.validate()?;
     let bar = progress_bar("synth");

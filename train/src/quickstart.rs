@@ -139,6 +139,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         max_vertices: opts.max_vertices,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     let report = write_synth(&synth, &data)?;
     stage(format!(

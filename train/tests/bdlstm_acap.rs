@@ -43,6 +43,7 @@ fn fixture() -> &'static Fixture {
             max_vertices: 512,
             body: Some(ShapeFamily::Humanoid),
             family: Default::default(),
+            scenes: false,
         };
         write_synth_with(&synth, &store, 32, None).expect("single-topology store");
         Fixture { dir, store }
@@ -184,6 +185,7 @@ fn acap_setups_that_cannot_work_are_refused_before_a_run_folder_exists() {
         max_vertices: 600,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     write_synth_with(&synth, &mixed, 32, None).unwrap();
     let o = opts(&mixed, "mixed");

@@ -77,6 +77,7 @@ fn windows_of_one_clip_are_one_training_example() {
         max_vertices: 512,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     let data = dir.path().join("windows");
     // 7-frame clips cut into 4-frame windows at stride 1: four windows per clip.

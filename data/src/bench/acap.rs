@@ -47,6 +47,7 @@ pub fn bench_clip(vertices: usize, frames: usize) -> Result<Clip> {
         max_vertices: vertices + 128,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     generate_with(&cfg, 0, ShapeFamily::Tube, MotionFamily::Twist)
 }

@@ -147,6 +147,7 @@ pub fn import_with_progress(
         frames: opts.frames,
         p: opts.p,
         time: opts.time_limit,
+        scenes: false,
     };
     let report = run_jobs(
         out,
@@ -205,12 +206,13 @@ pub fn write_synth_windows(
         frames: window,
         p,
         time: FILE_TIME_LIMIT,
+        scenes: cfg.scenes,
     };
     let process = move |job: &Job| match job {
-        Job::Synth { source, index } => match synth::generate_one(&cfg, *index) {
-            Ok(mut clip) => {
+        Job::Synth { source, index } => match synth::generate_scened(&cfg, *index) {
+            Ok((mut clip, scene)) => {
                 clip.source = source.clone();
-                match preprocess_windows(&clip, window, stride, p, None) {
+                match preprocess_windows(&clip, window, stride, p, scene.as_ref()) {
                     Ok(windows) => Outcome::Clips(windows, Vec::new(), SkinStats::default(), Vec::new()),
                     Err(e) => Outcome::Rejected(reason(&e, source)),
                 }
@@ -437,6 +439,8 @@ struct Limits {
     frames: usize,
     p: usize,
     time: Duration,
+    /// Records carry a scene section even when no file source has a scene beside it (procedural scenes).
+    scenes: bool,
 }
 
 /// Rewrite the store in `out` from the kept part of `existing` plus the outcome of `jobs`.
@@ -451,7 +455,8 @@ fn run_jobs(
     let replaced: HashSet<&str> = jobs.iter().map(Job::source).collect();
     // Dropped without `finish` (any error below), the writer removes its temporary file.
     // Records carry a scene section when a source has a scene beside it or the existing store's records do.
-    let scenes = existing.as_ref().is_some_and(|(store, _)| store.catalog.scenes)
+    let scenes = limits.scenes
+        || existing.as_ref().is_some_and(|(store, _)| store.catalog.scenes)
         || jobs.iter().any(|j| match j {
             Job::File { path, .. } => crate::scene::scene_beside(path).is_some(),
             _ => false,

@@ -7,6 +7,7 @@
 
 mod motions;
 pub mod rigged;
+pub mod scenes;
 mod shapes;
 
 use rayon::prelude::*;
@@ -182,6 +183,8 @@ pub struct SynthConfig {
     pub body: Option<ShapeFamily>,
     /// The generator.
     pub family: Family,
+    /// Each clip moves in a procedural scene around it ([`scenes`]; its caption names the furniture).
+    pub scenes: bool,
 }
 
 /// Seed of the shared rest mesh of [`SynthConfig::body`] (stream: the family's index).
@@ -197,6 +200,7 @@ impl Default for SynthConfig {
             max_vertices: 4096,
             body: None,
             family: Family::Shapes,
+            scenes: false,
         }
     }
 }
@@ -272,8 +276,17 @@ impl SynthConfig {
         Ok(())
     }
 
-    /// The source of clip `index` (its key in a store: a run with the same seed and generator replaces it).
+    /// The source of clip `index` (its key in a store: a run with the same seed and generator replaces it; clips
+    /// in scenes are other sources than the same clips without).
     pub fn source(&self, index: usize) -> String {
+        let plain = self.plain_source(index);
+        match self.scenes {
+            true => format!("scene-{plain}"),
+            false => plain,
+        }
+    }
+
+    fn plain_source(&self, index: usize) -> String {
         match self.family {
             Family::Shapes => format!("synth:{}:{index}", self.seed),
             Family::Rigged(RiggedKinds {
@@ -288,6 +301,22 @@ impl SynthConfig {
             ),
         }
     }
+}
+
+/// Seed of the scenes' streams ([`furnished`]), mixed with the run's seed: a clip is the same with a scene or without.
+pub const SCENE_SEED: u64 = 0x5CE7_E5EE;
+
+/// Clip `index` with its scene when `cfg.scenes` is set (its caption then names the furniture; the scene's draws
+/// come from stream `index` of `cfg.seed ^ SCENE_SEED`).
+pub fn generate_scened(cfg: &SynthConfig, index: usize) -> Result<(Clip, Option<crate::scene::Scene>)> {
+    let mut clip = generate_one(cfg, index)?;
+    if !cfg.scenes {
+        return Ok((clip, None));
+    }
+    let mut r = rng(cfg.seed ^ SCENE_SEED, index as u64);
+    let (scene, phrase) = scenes::furnish(&clip, &mut r);
+    clip.caption = format!("{} {phrase}", clip.caption);
+    Ok((clip, Some(scene)))
 }
 
 /// Clip `index` of the dataset: families, sizes and motion drawn from stream `index` of `cfg.seed`.

@@ -64,6 +64,7 @@ pub fn synth_store(dir: &Path, seed: u64) -> PathBuf {
         max_vertices: 512,
         body: None,
         family: Default::default(),
+        scenes: false,
     };
     write_synth_with(&synth, &store, 32, None).expect("synthetic store");
     store
