@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# Does the keyframe RF beat interpolation on the held-out real characters when it generates only the residual from
+# the keyframes' latent interpolation (the anchor, docs/method.md §4.10), on a VAE that reconstructs real characters?
+# The VAE: configs/vae/small.toml with the augmentation of ../2026-12-06-corpus-arms (its best arm, `vae-srra`,
+# retrained: its weights were lost with its session) on 2,000 procedural + 2,000 rigged clips + the real corpus of
+# scripts/real_corpus.sh, which now holds SuperTuxKart's karts, characters and props. The RF:
+# configs/rf/anchored_small.toml on that VAE and store. Scored on the held-out store against lerp, latent lerp, the
+# VAE's floor and the shipped family on the windows, keyframes and seeds of the shipped family's committed rows, and
+# on procedural validation clips.
+#
+#   bash experiments/2026-12-07-anchored-real-rf/run.sh SCRATCH     # ANY4D_BIN=... if not target/release/any4d
+#
+# Sizes (environment): RF_STEPS (default 4,500, half the preset's 9,000: the CPU budget of one session), ANCHOR_SCALE
+# (default 0.5, the preset's; the run logs the RMS of Z − A it should be near). SCRATCH (outside the repository)
+# receives the stores and run folders; tables land in this folder.
+set -euo pipefail
+here=$(cd "$(dirname "$0")" && pwd)
+root=$(cd "$here/../.." && pwd)
+tmp=${1:?usage: run.sh SCRATCH}
+bin=${ANY4D_BIN:-$root/target/release/any4d}
+steps=${RF_STEPS:-4500}
+scale=${ANCHOR_SCALE:-0.5}
+mkdir -p "$tmp"
+cd "$root"
+[[ -d $tmp/heldout/store ]] || ANY4D=$bin bash scripts/heldout_corpus.sh "$tmp/heldout"
+[[ -d $tmp/rc/store ]] || P=128 ANY4D=$bin bash scripts/real_corpus.sh "$tmp/rc"
+[[ -d $tmp/p2k128 ]] || "$bin" data synth --clips 2000 --seed 666 --max-vertices 1024 --p 128 --out "$tmp/p2k128"
+if [[ ! -d $tmp/srrs ]]; then
+  "$bin" data synth --clips 2000 --seed 666 --max-vertices 1024 --p 128 --out "$tmp/srrs.tmp"
+  "$bin" data synth --family rigged --clips 2000 --seed 666 --max-vertices 1024 --p 128 --out "$tmp/srrs.tmp"
+  "$bin" data import "$tmp/rc/staged" --out "$tmp/srrs.tmp" --frames 16 --stride 8 --p 128 --min-vertices 128 \
+    --max-vertices 4096 --loop-short >"$tmp/srrs_import.log" || [[ $? -eq 2 ]]
+  mv "$tmp/srrs.tmp" "$tmp/srrs"
+fi
+e=${here#"$root"/}
+vae=$tmp/runs/vae-srras-1
+[[ -d $vae ]] || "$bin" train vae --config configs/vae/small.toml --data "$tmp/srrs" --runs-dir "$tmp/runs" \
+  --run vae-srras --set vae.augment.yaw_degrees=180 --set vae.augment.mirror=0.5 --set 'vae.augment.scale=[0.7,1.3]' \
+  --set vae.augment.reverse=0.5 --set 'vae.augment.speed=[0.5,1.0]'
+mkdir -p "$here/vae"
+for f in config.toml log.txt metrics.csv valid.csv loss.png; do [[ -f $vae/$f ]] && cp "$vae/$f" "$here/vae/"; done
+# Table 5 of the shipped VAE (--vae) and this one (--vae-b) on the held-out store whole.
+[[ -f $here/table5-heldout/clips.parquet ]] ||
+  "$bin" eval run --protocol table5 --data "$tmp/heldout/store" --split all --clips 63 --vae weights/small/vae \
+    --vae-b "$vae" --posterior mean --out "$e/table5-heldout"
+run=$tmp/rfruns/rf-anchor-1
+[[ -d $run ]] ||
+  "$bin" train rf --config configs/rf/anchored_small.toml --vae "$vae" --data "$tmp/srrs" --runs-dir "$tmp/rfruns" \
+    --run rf-anchor --set "rf.duration.steps=$steps" --set "model.anchor.keyframe_lerp.scale=$scale"
+mkdir -p "$here/rf"
+for f in config.toml log.txt metrics.csv valid.csv samples.csv loss.png; do [[ -f $run/$f ]] && cp "$run/$f" "$here/rf/"; done
+V=experiments/2026-12-05-vae2000-family
+S=experiments/2026-12-04-rf-scale
+[[ -f $here/heldout/clips.parquet ]] ||
+  "$bin" eval run --protocol table1 --data "$tmp/heldout/store" --split all --manifest $V/heldout/manifest.json \
+    --out "$e/heldout" --rf "$run" --n-grid 16 --export 0 --methods keyframe_rf,lerp_latent,vae_oracle
+[[ -f $here/procedural-s42/clips.parquet ]] ||
+  "$bin" eval run --protocol table1 --data "$tmp/p2k128" --manifest $S/manifest.json --out "$e/procedural-s42" \
+    --rf "$run" --n-grid 16 --export 0 --methods keyframe_rf,lerp_latent,lerp
+R=experiments/2026-12-06-real-rf
+C=experiments/2026-12-06-real-rf/compare.py
+python3 $C "$here/heldout-vs-shipped.csv" \
+  shipped=$V/heldout/clips.parquet:keyframe_rf anchored=$e/heldout/clips.parquet:keyframe_rf \
+  real_rf=$R/heldout/clips.parquet:keyframe_rf lerp=$V/heldout/clips.parquet:lerp \
+  latent_lerp=$e/heldout/clips.parquet:lerp_latent vae_oracle=$e/heldout/clips.parquet:vae_oracle
+python3 $C "$here/procedural-vs-shipped.csv" \
+  shipped=$V/table1-s42/clips.parquet:keyframe_rf anchored=$e/procedural-s42/clips.parquet:keyframe_rf \
+  lerp=$e/procedural-s42/clips.parquet:lerp latent_lerp=$e/procedural-s42/clips.parquet:lerp_latent
