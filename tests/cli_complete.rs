@@ -49,6 +49,20 @@ fn s(p: &Path) -> String {
     p.display().to_string()
 }
 
+/// An `.obj` of one axis-aligned box (the outward-wound faces of `any4d_data::scene::Scene::cuboid`).
+fn cuboid_obj(lo: [f32; 3], hi: [f32; 3]) -> String {
+    let box_ = any4d_data::scene::Scene::cuboid(lo, hi);
+    let mut obj: String = box_
+        .vertices
+        .iter()
+        .map(|v| format!("v {} {} {}\n", v[0], v[1], v[2]))
+        .collect();
+    for f in &box_.faces {
+        obj += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+    }
+    obj
+}
+
 fn centroid(frame: &[[f32; 3]]) -> [f32; 3] {
     let n = frame.len() as f32;
     [0, 1, 2].map(|k| frame.iter().map(|p| p[k]).sum::<f32>() / n)
@@ -77,15 +91,26 @@ fn complete_a_clip_in_user_coordinates_with_exact_keyframes() {
     ];
     let view = dir.path().join("done.html");
     let v = s(&view);
+    // A slab far below the clip: every output is scored in it (no collision) and the page draws it; the scene
+    // does not overlap the clip, which is said.
+    let scene = dir.path().join("far.obj");
+    std::fs::write(&scene, cuboid_obj([-1e3, -2e3, -1e3], [1e3, -1.5e3, 1e3])).unwrap();
+    let sc = s(&scene);
     let mut with_view = base.to_vec();
-    with_view.extend(["--view", &v]);
+    with_view.extend(["--view", &v, "--scene", &sc]);
     let (ok, log) = run(&with_view);
     assert!(ok, "{log}");
+    assert!(
+        log.contains("sample 0 (seed 42) in the scene: collision frames 0.000"),
+        "{log}"
+    );
+    assert!(log.contains("does not overlap"), "{log}");
     let page = std::fs::read_to_string(&view).unwrap();
     assert!(
         page.contains("\"keyframes\":[0,15]") && page.contains("sample 0 (seed 42)"),
         "the viewer page"
     );
+    assert!(page.contains("\"scene\":{"), "the page draws the scene");
     let got = read_clip(&out).unwrap();
     let source = read_clip(&input).unwrap();
     assert_eq!((got.frames, got.n_vertices), (16, source.n_vertices));

@@ -262,8 +262,19 @@ fn eval_scene_scores_a_clip_sinking_into_a_floor() {
     close("foot_skating", 0.0);
     let table = any4d(&["eval", "scene", c, sc]);
     assert!(String::from_utf8_lossy(&table.stdout).contains("max penetration (E9)"));
+    // The viewer draws the scene and lists the clip's scene metrics under its panel.
+    let page = dir.path().join("page.html");
+    let out = any4d(&["view", c, "--scene", sc, "--out", page.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert!(
+        html.contains("\"scene\":{\"faces\"") && html.contains("[\"collision frames\",\"0.250\"]"),
+        "{html:.400}"
+    );
     std::fs::write(&scene, "v 0 0 0\n").unwrap();
     let bad = any4d(&["eval", "scene", c, sc]);
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("at least one triangle"));
+    let bad = any4d(&["view", c, "--scene", sc, "--out", page.to_str().unwrap()]);
+    assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("reading the scene"));
 }

@@ -1,7 +1,8 @@
 //! `any4d view` in a real browser: the page written for a ground truth and a prediction opens in headless Chromium
 //! (Debian's `chromium`), reports `data-status="ready"` (every panel drew with WebGL, no script error), passes its
 //! `#selftest` (the slider moves the frame, and two frames of the moving clip draw different pixels), and its
-//! screenshot shows the meshes (non-white pixels inside the panels, coloured ones where the prediction is off).
+//! screenshot shows the meshes (non-white pixels inside the panels, coloured ones where the prediction is off) on
+//! the grey floor of its scene.
 //!
 //! Without Chromium the test says so and passes, unless `ANY4D_REQUIRE_BROWSER=1` (set by `.ci/run`, which installs
 //! it), where a missing browser fails.
@@ -73,6 +74,19 @@ fn the_view_page_plays_in_headless_chromium() {
     let (gt_path, pred_path) = (dir.path().join("gt.glb"), dir.path().join("pred.glb"));
     write_clip(&gt_path, &gt).unwrap();
     write_clip(&pred_path, &pred).unwrap();
+    // A floor under the clips (which stand on y = 0), drawn in grey in every panel.
+    let floor = any4d_data::scene::Scene::cuboid([-3.0, -0.2, -3.0], [3.0, -0.001, 3.0]);
+    let mut obj: String = floor
+        .vertices
+        .iter()
+        .map(|v| format!("v {} {} {}\n", v[0], v[1], v[2]))
+        .collect();
+    floor
+        .faces
+        .iter()
+        .for_each(|f| obj += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1));
+    let scene = dir.path().join("floor.obj");
+    std::fs::write(&scene, obj).unwrap();
     let page = dir.path().join("view.html");
     let out = any4d(&[
         "view",
@@ -81,6 +95,8 @@ fn the_view_page_plays_in_headless_chromium() {
         &gt_path.display().to_string(),
         "--keyframes",
         "0,7,15",
+        "--scene",
+        &scene.display().to_string(),
         "--out",
         &page.display().to_string(),
     ]);
@@ -111,6 +127,7 @@ fn the_view_page_plays_in_headless_chromium() {
         "the slider must move the frame and the pixels: {body}"
     );
     assert!(dom_text.contains("RMSE ×100"), "metrics shown");
+    assert!(dom_text.contains("collision frames"), "scene metrics shown");
     assert_eq!(dom_text.matches("class=\"mark\"").count(), 3, "three keyframe marks");
 
     let shot = dir.path().join("shot.png");

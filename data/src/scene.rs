@@ -111,6 +111,23 @@ impl Scene {
         })
     }
 
+    /// Whether the scene's bounding box and that of every frame of `clip` overlap (a scene that does not is most
+    /// likely in other coordinates or units than the clip: callers warn).
+    pub fn overlaps(&self, clip: &crate::clip::Clip) -> bool {
+        let bounds = |points: &[[f32; 3]]| {
+            points
+                .iter()
+                .fold(([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]), |(lo, hi), p| {
+                    (
+                        std::array::from_fn(|k| lo[k].min(p[k])),
+                        std::array::from_fn(|k| hi[k].max(p[k])),
+                    )
+                })
+        };
+        let ((a0, a1), (b0, b1)) = (bounds(&self.vertices), bounds(&clip.vertices));
+        (0..3).all(|k| a0[k] <= b1[k] && b0[k] <= a1[k])
+    }
+
     /// This scene and `other` as one (their parts side by side).
     pub fn with(mut self, other: &Scene) -> Self {
         let base = self.vertices.len() as u32;
@@ -138,6 +155,11 @@ mod tests {
                 .reason
                 .contains("indexes past")
         );
+        let clip = crate::clip::Clip::new("c", vec![[0.5, 0.5, 0.0]; 6], 2, 3, vec![[0, 1, 2]], "", "t").unwrap();
+        let floor = Scene::new(tri.clone(), vec![[0, 1, 2]], p).unwrap();
+        assert!(floor.overlaps(&clip));
+        let far = Scene::cuboid([10.0, 10.0, 10.0], [11.0, 11.0, 11.0]);
+        assert!(!far.overlaps(&clip));
         let many = vec![[0, 1, 2]; MAX_SCENE_TRIANGLES + 1];
         assert!(Scene::new(tri, many, p).unwrap_err().reason.contains("more than"));
         let dir = tempfile::tempdir().unwrap();

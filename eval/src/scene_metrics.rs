@@ -75,6 +75,22 @@ pub fn signed_distance(scene: &Scene, p: [f64; 3]) -> f64 {
     if winding_number(scene, p) > 0.5 { -d } else { d }
 }
 
+/// (E8)–(E10) of `clip` in `scene` (both in the clip's coordinates), measured where the thresholds are stated: in
+/// the clip's normalised frame (D1)–(D3), the scene moved with it. An error names the clip when normalising the scene
+/// by the clip's frame 0 gives non-finite coordinates.
+pub fn clip_scene_metrics(
+    clip: &any4d_data::Clip,
+    scene: &Scene,
+    thresholds: ContactThresholds,
+) -> Result<SceneMetrics> {
+    let (clip, norm) = any4d_data::preprocess::normalize(clip);
+    let scene = scene.normalized(&norm).ok_or_else(|| EvalError::Parameter {
+        name: "scene",
+        reason: format!("normalising it by {}'s frame 0 gives non-finite coordinates", clip.id),
+    })?;
+    scene_metrics(Motion::from_clip(&clip)?, &scene, thresholds)
+}
+
 /// (E8)–(E10) of `motion` in `scene` (y up, as every clip of the project).
 pub fn scene_metrics(motion: Motion, scene: &Scene, thresholds: ContactThresholds) -> Result<SceneMetrics> {
     let (t, n) = (motion.frames(), motion.n_vertices());

@@ -46,11 +46,16 @@
 
   const VS = "attribute vec3 p; attribute vec3 nrm; attribute float err; uniform mat4 mvp; uniform float scale;" +
     "varying vec3 vn; varying float ve; void main(){ gl_Position = mvp * vec4(p, 1.0); vn = nrm; ve = err / scale; }";
+  // `base`: the uncoloured mesh's colour (the scene's darker grey, docs/method.md §6.5).
   const FS = "precision mediump float; varying vec3 vn; varying float ve; uniform float colored; uniform vec3 light;" +
-    "void main(){ float l = length(vn) > 0.0 ? 0.35 + 0.65 * abs(dot(normalize(vn), light)) : 0.7;" +
+    "uniform vec3 base; void main(){ float l = length(vn) > 0.0 ? 0.35 + 0.65 * abs(dot(normalize(vn), light)) : 0.7;" +
     " float t = clamp(ve, 0.0, 1.0); vec3 heat = mix(mix(vec3(0.2,0.4,0.9), vec3(0.95,0.85,0.2), min(t*2.0,1.0))," +
-    " vec3(0.85,0.1,0.1), max(t*2.0-1.0,0.0)); vec3 c = mix(vec3(0.72,0.74,0.78), heat, colored);" +
+    " vec3(0.85,0.1,0.1), max(t*2.0-1.0,0.0)); vec3 c = mix(base, heat, colored);" +
     " gl_FragColor = vec4(c * l, 1.0); }";
+  const CLIP_GREY = [0.72, 0.74, 0.78], SCENE_GREY = [0.5, 0.5, 0.5];
+  const scene = data.scene ? {
+    positions: decode(data.scene.positions, Float32Array), faces: decode(data.scene.faces, Uint32Array),
+  } : null;
 
   const main = document.getElementById("panels");
   const width = Math.max(240, Math.min(420, Math.floor((window.innerWidth - 48) / Math.min(data.panels.length, 4)) - 12));
@@ -90,8 +95,15 @@
     const index = gl.createBuffer();
     gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, index);
     gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, uint ? faces : new Uint16Array(faces), gl.STATIC_DRAW);
+    let sceneIndex = null;
+    if (scene) {
+      if (!uint && scene.positions.length / 3 > 65535) throw new Error("this browser cannot index the scene's vertices");
+      sceneIndex = gl.createBuffer();
+      gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, sceneIndex);
+      gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, uint ? scene.faces : new Uint16Array(scene.faces), gl.STATIC_DRAW);
+    }
     panels.push({
-      pd, gl, prog, canvas, faces, index, uintIndex: !!uint,
+      pd, gl, prog, canvas, faces, index, uintIndex: !!uint, sceneIndex,
       positions: decode(pd.positions, Float32Array),
       errors: pd.errors ? decode(pd.errors, Float32Array) : null,
       buffers: { p: gl.createBuffer(), n: gl.createBuffer(), e: gl.createBuffer() },
@@ -133,13 +145,24 @@
         gl.bindBuffer(gl.ARRAY_BUFFER, buf); gl.bufferData(gl.ARRAY_BUFFER, values, gl.DYNAMIC_DRAW);
         gl.enableVertexAttribArray(loc); gl.vertexAttribPointer(loc, size, gl.FLOAT, false, 0, 0);
       };
+      gl.uniformMatrix4fv(gl.getUniformLocation(prog, "mvp"), false, new Float32Array(mvp));
+      gl.uniform1f(gl.getUniformLocation(prog, "scale"), Math.max(data.error_scale, 1e-12));
+      gl.uniform3f(gl.getUniformLocation(prog, "light"), 0.3, 0.8, 0.52);
+      if (scene) {
+        const m = scene.positions.length / 3;
+        attr("p", p.buffers.p, scene.positions, 3);
+        attr("nrm", p.buffers.n, normals(scene.positions, scene.faces, m, 0), 3);
+        attr("err", p.buffers.e, new Float32Array(m), 1);
+        gl.uniform1f(gl.getUniformLocation(prog, "colored"), 0);
+        gl.uniform3fv(gl.getUniformLocation(prog, "base"), SCENE_GREY);
+        gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, p.sceneIndex);
+        gl.drawElements(gl.TRIANGLES, scene.faces.length, p.uintIndex ? gl.UNSIGNED_INT : gl.UNSIGNED_SHORT, 0);
+      }
       attr("p", p.buffers.p, p.positions.subarray(3 * n * frame, 3 * n * (frame + 1)), 3);
       attr("nrm", p.buffers.n, normals(p.positions, p.faces, n, frame), 3);
       attr("err", p.buffers.e, p.errors ? p.errors.subarray(n * frame, n * (frame + 1)) : new Float32Array(n), 1);
-      gl.uniformMatrix4fv(gl.getUniformLocation(prog, "mvp"), false, new Float32Array(mvp));
-      gl.uniform1f(gl.getUniformLocation(prog, "scale"), Math.max(data.error_scale, 1e-12));
       gl.uniform1f(gl.getUniformLocation(prog, "colored"), p.errors ? 1 : 0);
-      gl.uniform3f(gl.getUniformLocation(prog, "light"), 0.3, 0.8, 0.52);
+      gl.uniform3fv(gl.getUniformLocation(prog, "base"), CLIP_GREY);
       gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, p.index);
       gl.drawElements(gl.TRIANGLES, p.faces.length, p.uintIndex ? gl.UNSIGNED_INT : gl.UNSIGNED_SHORT, 0);
     }

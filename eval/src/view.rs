@@ -49,6 +49,18 @@ pub struct Page {
     pub panels: Vec<Panel>,
     /// Playback rate.
     pub fps: f64,
+    /// A static scene drawn in grey in every panel (docs/method.md §6.5), in the panels' coordinates.
+    pub scene: Option<any4d_data::scene::Scene>,
+}
+
+/// The metric lines of a panel in a scene: (E8)–(E10) (docs/method.md §6.5).
+pub fn scene_lines(m: &crate::scene_metrics::SceneMetrics) -> Vec<(String, String)> {
+    vec![
+        ("collision frames".into(), format!("{:.3}", m.collision_frames)),
+        ("collision vertices".into(), format!("{:.4}", m.collision_vertices)),
+        ("max penetration".into(), format!("{:.4}", m.max_penetration)),
+        ("foot skating".into(), format!("{:.3}", m.foot_skating)),
+    ]
 }
 
 /// The metric lines of a panel scored against the ground truth: distances × 100 (docs/method.md §6.2) and the
@@ -168,6 +180,17 @@ pub fn page_html(page: &Page) -> Result<String> {
             })
         })
         .collect();
+    if let Some(scene) = &page.scene
+        && scene.vertices.iter().flatten().any(|x| !x.is_finite())
+    {
+        return bad("scene", "a coordinate is not finite".into());
+    }
+    let scene = page.scene.as_ref().map(|s| {
+        serde_json::json!({
+            "positions": b64_f32(s.vertices.iter().flatten().copied()),
+            "faces": b64_u32(s.faces.iter().flatten().copied()),
+        })
+    });
     let data = serde_json::json!({
         "title": page.title,
         "caption": page.caption,
@@ -177,6 +200,7 @@ pub fn page_html(page: &Page) -> Result<String> {
         "ground_truth": page.ground_truth,
         "error_scale": error_scale,
         "panels": panels,
+        "scene": scene,
     });
     let json = serde_json::to_string(&data).map_err(|e| DataError::new("view page", "json", e.to_string()))?;
     Ok(format!(
@@ -230,6 +254,7 @@ mod tests {
             ground_truth: true,
             panels,
             fps: DEFAULT_FPS,
+            scene: None,
         }
     }
 
@@ -270,6 +295,16 @@ mod tests {
             .decode(data["panels"][1]["positions"].as_str().unwrap())
             .unwrap();
         assert_eq!(pos.len(), 3 * 4 * 3 * 4);
+        assert!(data["scene"].is_null());
+        // A scene travels as its own positions and faces.
+        let mut with = page(vec![panel("gt", clip(3, 0.0))]);
+        with.scene = Some(any4d_data::scene::Scene::cuboid([-1.0, -0.1, -1.0], [2.0, 0.0, 2.0]));
+        let html = page_html(&with).unwrap();
+        let start = html.find("application/json\">").unwrap() + "application/json\">".len();
+        let end = start + html[start..].find("</script>").unwrap();
+        let data: serde_json::Value = serde_json::from_str(&html[start..end]).unwrap();
+        let faces = STANDARD.decode(data["scene"]["faces"].as_str().unwrap()).unwrap();
+        assert_eq!(faces.len(), 12 * 3 * 4);
     }
 
     #[test]

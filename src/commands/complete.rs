@@ -74,6 +74,11 @@ pub struct CompleteArgs {
     /// Also write a viewer page (HTML, self-contained) playing every sample with the keyframes marked.
     #[arg(long)]
     pub view: Option<PathBuf>,
+    /// A static scene (`.obj` of closed parts, in the keyframes' coordinates): each output is scored in it
+    /// ((E8)–(E10), docs/method.md §6.5: does the completion pass through walls or sink into the floor?) and the
+    /// `--view` page draws it. The completion itself does not see the scene.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
     /// Compute backend.
     #[arg(long, value_parser = enum_parser(&Backend::ALL), default_value = "flex")]
     pub backend: Backend,
@@ -143,6 +148,7 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
             );
         }
     }
+    let scene = super::view::read_scene(args.scene.as_deref())?;
     let device = backend::device(args.backend, Precision::F32)?;
     let sampling = SamplingSetup {
         n_grid: args.steps,
@@ -180,23 +186,30 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
         formats::write_clip(&path, clip).with_context(|| format!("writing sample {k}"))?;
         println!("wrote {}", path.display());
     }
+    let mut panels: Vec<Panel> = clips
+        .iter()
+        .enumerate()
+        .map(|(k, clip)| Panel {
+            label: if args.average {
+                format!("mean of {} samples (seeds from {})", args.samples, args.seed)
+            } else {
+                format!(
+                    "sample {k} (seed {})",
+                    args.seed.wrapping_add(k as u64 * SAMPLE_SEED_STRIDE)
+                )
+            },
+            clip: clip.clone(),
+            metrics: Vec::new(),
+        })
+        .collect();
+    if let Some(scene) = &scene {
+        super::view::score_in_scene(scene, &mut panels)?;
+        for p in &panels {
+            let lines: Vec<String> = p.metrics.iter().map(|(k, v)| format!("{k} {v}")).collect();
+            println!("{} in the scene: {}", p.label, lines.join(", "));
+        }
+    }
     if let Some(view) = &args.view {
-        let panels = clips
-            .iter()
-            .enumerate()
-            .map(|(k, clip)| Panel {
-                label: if args.average {
-                    format!("mean of {} samples (seeds from {})", args.samples, args.seed)
-                } else {
-                    format!(
-                        "sample {k} (seed {})",
-                        args.seed.wrapping_add(k as u64 * SAMPLE_SEED_STRIDE)
-                    )
-                },
-                clip: clip.clone(),
-                metrics: Vec::new(),
-            })
-            .collect();
         let page = Page {
             title: format!("{} — completed by {}", keys.id, model.checkpoint),
             caption,
@@ -204,6 +217,7 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
             ground_truth: false,
             panels,
             fps: DEFAULT_FPS,
+            scene,
         };
         write_page(&page, view)?;
         println!("wrote {}", view.display());

@@ -7,7 +7,6 @@ use anyhow::Context;
 use clap::Args;
 
 use any4d_data::formats::read_clip;
-use any4d_eval::metrics::Motion;
 
 #[derive(Args, Debug)]
 pub struct SceneArgs {
@@ -28,23 +27,22 @@ pub struct SceneArgs {
 
 pub fn scene(args: SceneArgs) -> anyhow::Result<ExitCode> {
     use any4d_data::scene::Scene;
-    use any4d_eval::scene_metrics::{ContactThresholds, scene_metrics};
+    use any4d_eval::scene_metrics::{ContactThresholds, clip_scene_metrics};
     let clip = read_clip(&args.clip).with_context(|| format!("reading the clip {}", args.clip.display()))?;
     let scene = Scene::read_obj(&args.scene).with_context(|| format!("reading the scene {}", args.scene.display()))?;
-    // Both in the clip's normalised frame (D1)–(D3), where the thresholds are stated.
-    let (clip, norm) = any4d_data::preprocess::normalize(&clip);
-    let Some(scene) = scene.normalized(&norm) else {
-        anyhow::bail!(
-            "{}: normalising the scene by {}'s frame 0 gives non-finite coordinates",
+    if !scene.overlaps(&clip) {
+        eprintln!(
+            "warning: the scene {} and the clip {} do not overlap (other coordinates or units?)",
             args.scene.display(),
             args.clip.display()
         );
-    };
+    }
     let thresholds = ContactThresholds {
         contact: args.contact,
         slide: args.slide,
     };
-    let m = scene_metrics(Motion::from_clip(&clip)?, &scene, thresholds)
+    // Both in the clip's normalised frame (D1)–(D3), where the thresholds are stated.
+    let m = clip_scene_metrics(&clip, &scene, thresholds)
         .with_context(|| format!("scoring {} in {}", args.clip.display(), args.scene.display()))?;
     match args.json {
         true => println!("{}", serde_json::to_string_pretty(&m)?),

@@ -30,9 +30,39 @@ pub struct ViewArgs {
     /// Playback frames per second.
     #[arg(long, default_value_t = DEFAULT_FPS)]
     pub fps: f64,
+    /// A static scene (`.obj` of closed parts, in the clips' coordinates), drawn in grey in every panel; each panel
+    /// then lists its scene metrics (E8)–(E10) (docs/method.md §6.5).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
     /// Output HTML file.
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// The scene of a `--scene` argument, read (before any work that a broken file would waste).
+pub fn read_scene(path: Option<&std::path::Path>) -> anyhow::Result<Option<any4d_data::scene::Scene>> {
+    path.map(|p| any4d_data::scene::Scene::read_obj(p).with_context(|| format!("reading the scene {}", p.display())))
+        .transpose()
+}
+
+/// Each panel's clip scored in `scene` ((E8)–(E10), lines appended to its metrics); a warning when the scene does
+/// not overlap the first panel's clip.
+pub fn score_in_scene(scene: &any4d_data::scene::Scene, panels: &mut [Panel]) -> anyhow::Result<()> {
+    use any4d_eval::scene_metrics::{ContactThresholds, clip_scene_metrics};
+    if let Some(first) = panels.first()
+        && !scene.overlaps(&first.clip)
+    {
+        eprintln!(
+            "warning: the scene does not overlap `{}` (other coordinates or units?)",
+            first.label
+        );
+    }
+    for p in panels.iter_mut() {
+        let m = clip_scene_metrics(&p.clip, scene, ContactThresholds::default())
+            .with_context(|| format!("scoring `{}` in the scene", p.label))?;
+        p.metrics.extend(any4d_eval::view::scene_lines(&m));
+    }
+    Ok(())
 }
 
 fn label(path: &std::path::Path) -> String {
@@ -45,6 +75,7 @@ pub fn exec(args: ViewArgs) -> anyhow::Result<ExitCode> {
     if args.files.is_empty() && args.gt.is_none() {
         bail!("nothing to show: give clip files (and optionally --gt FILE)");
     }
+    let scene = read_scene(args.scene.as_deref())?;
     let mut panels = Vec::new();
     let gt = match &args.gt {
         Some(path) => {
@@ -83,6 +114,9 @@ pub fn exec(args: ViewArgs) -> anyhow::Result<ExitCode> {
         });
     }
     let caption = args.caption.clone().unwrap_or_else(|| panels[0].clip.caption.clone());
+    if let Some(scene) = &scene {
+        score_in_scene(scene, &mut panels)?;
+    }
     let page = Page {
         title: args.title.clone(),
         caption,
@@ -90,6 +124,7 @@ pub fn exec(args: ViewArgs) -> anyhow::Result<ExitCode> {
         ground_truth: gt.is_some(),
         panels,
         fps: args.fps,
+        scene,
     };
     write_page(&page, &args.out)?;
     println!("wrote {} ({} panels)", args.out.display(), page.panels.len());

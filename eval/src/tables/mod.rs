@@ -447,6 +447,7 @@ fn write_item_views(gt: &Clip, preds: &[&Prediction], out: &Path) -> Result<Vec<
             ground_truth: true,
             panels,
             fps: view::DEFAULT_FPS,
+            scene: None,
         };
         let path = out
             .join("view")
