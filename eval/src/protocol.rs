@@ -378,6 +378,20 @@ impl StoreSource {
         }
     }
 
+    /// Whether the store's records carry scenes (docs/method.md §6.5).
+    pub fn has_scenes(&self) -> bool {
+        self.store.has_scenes()
+    }
+
+    /// The stored scene of a single-window item, in that window's normalised frame (the frame of [`Self::item`]'s
+    /// ground truth); `None` for a pair of windows or a clip without a scene.
+    pub fn item_scene(&self, item: &ManifestClip) -> Result<Option<any4d_data::scene::Scene>> {
+        match item.next {
+            Some(_) => Ok(None),
+            None => Ok(self.store.get(item.clip.index)?.scene),
+        }
+    }
+
     /// The ground truth of a manifest item and its prompts (one per 16-frame clip), normalised by its frame 0.
     pub fn item(&self, item: &ManifestClip, frames: usize) -> Result<(Clip, Vec<String>)> {
         let first = self.store.get(item.clip.index)?;

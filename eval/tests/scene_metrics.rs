@@ -1,6 +1,6 @@
 //! The scene metrics (E8)–(E10) (docs/method.md §6.5): signed distances worked out by hand on a floor slab with a box
-//! on it, the four metrics of a small clip, bad parameters, and agreement with an independent numpy version
-//! (`scripts/scene_metrics_reference.py`).
+//! on it, the four metrics of a small clip, bad parameters, agreement with an independent numpy version
+//! (`scripts/scene_metrics_reference.py`), procedural scene clips that never collide, and table 1's scene columns.
 
 use std::path::Path;
 
@@ -163,4 +163,55 @@ fn procedural_scene_clips_never_collide() {
             assert_eq!(m.collision_frames, 0.0, "{} normalised", clip.id);
         }
     }
+}
+
+/// Table 1 of a store with scenes (`data synth --scenes`) adds the scene metrics (E8)–(E10) as columns, each
+/// method's mean over the items that have a scene, in the summary and its CSV.
+#[test]
+fn table1_of_a_store_with_scenes_reports_the_scene_metrics() {
+    use any4d_data::store::write_synth_with;
+    use any4d_data::synth::SynthConfig;
+    use any4d_eval::methods::{MethodKind, vertex_methods};
+    use any4d_eval::tables::short_horizon::{LAYOUT_SCENES, ShortHorizon};
+    use any4d_eval::tables::{Items, Protocol, TableOptions, run_protocol};
+
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("scenes");
+    let cfg = SynthConfig {
+        clips: 12,
+        seed: 5,
+        min_vertices: 256,
+        max_vertices: 600,
+        scenes: true,
+        ..SynthConfig::default()
+    };
+    write_synth_with(&cfg, &store, 16, None).unwrap();
+    let out = dir.path().join("t1");
+    let mut opts = TableOptions::new(store, out.clone());
+    opts.methods = vertex_methods(&[MethodKind::Lerp]).unwrap();
+    opts.split = any4d_eval::protocol::EvalSplit::All;
+    opts.progress = false;
+    let table1 = Protocol::ShortHorizon(ShortHorizon {
+        items: Items {
+            clips: 2,
+            ..Items::default()
+        },
+        ..ShortHorizon::default()
+    });
+    let report = run_protocol(&table1, &opts).unwrap();
+    assert_eq!(report.title, LAYOUT_SCENES.title);
+    let col = |header: &str| LAYOUT_SCENES.columns.iter().position(|c| c.header == header).unwrap();
+    for r in &report.rows {
+        for h in [
+            "collision frames %",
+            "collision vertices %",
+            "max penetration ×100",
+            "foot skating %",
+        ] {
+            let v = r.values[col(h)].mean;
+            assert!(v.is_finite() && (0.0..=100.0).contains(&v), "{h}: {v}");
+        }
+    }
+    let csv = std::fs::read_to_string(out.join("summary.csv")).unwrap();
+    assert!(csv.contains("scene_collision_frames_mean"), "{csv}");
 }

@@ -4,7 +4,7 @@
 use any4d_data::DataError;
 use any4d_data::keyframes::Placement;
 
-use super::summary::{Layout, MetricColumn, col, pooled};
+use super::summary::{Layout, MetricColumn, col, pooled, pooled_scaled};
 use super::{Items, TableOptions, TableReport, run_completion};
 use crate::protocol::ManifestOptions;
 use crate::rollout::OverlapSource;
@@ -26,6 +26,53 @@ const COLUMNS: &[MetricColumn] = &[
     col("energy_ratio", "motion / GT", 1.0),
 ];
 
+/// P-Table 1 of a store with scenes: the same columns, then the scene metrics (E8)–(E10) of docs/method.md §6.5
+/// averaged over the clips that have a scene (× 100: percentages, and the penetration in hundredths of the
+/// normalised half-extent).
+pub const LAYOUT_SCENES: Layout = Layout {
+    title: "Table 1: short-horizon completion in scenes (16 frames, K_x extra keyframes)",
+    columns: COLUMNS_SCENES,
+    k_column: true,
+};
+
+const COLUMNS_SCENES: &[MetricColumn] = &[
+    col("rmse", "RMSE ×100", 100.0),
+    col("chamfer", "Chamfer ×100", 100.0),
+    col("dtw", "DTW ×100", 100.0),
+    col("mae_elem", "MAE ×100", 100.0),
+    col("jerk_ratio", "jerk / GT", 1.0),
+    pooled("jerk_pooled", "jerk", "jerk_gt", "jerk Σ/ΣGT"),
+    col("energy_ratio", "motion / GT", 1.0),
+    pooled_scaled(
+        "scene_collision_frames",
+        "collision_frames",
+        "in_scene",
+        "collision frames %",
+        100.0,
+    ),
+    pooled_scaled(
+        "scene_collision_vertices",
+        "collision_vertices",
+        "in_scene",
+        "collision vertices %",
+        100.0,
+    ),
+    pooled_scaled(
+        "scene_max_penetration",
+        "max_penetration",
+        "in_scene",
+        "max penetration ×100",
+        100.0,
+    ),
+    pooled_scaled(
+        "scene_foot_skating",
+        "foot_skating",
+        "in_scene",
+        "foot skating %",
+        100.0,
+    ),
+];
+
 /// The options of P-Table 1.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ShortHorizon {
@@ -42,6 +89,8 @@ impl ShortHorizon {
             placement: self.placement,
             ..ManifestOptions::table1(opts.data.display().to_string())
         };
-        run_completion(opts, &LAYOUT, &self.items, draw, OverlapSource::GroundTruth, true)
+        let scenes = any4d_data::store::Store::open(&opts.data)?.has_scenes();
+        let layout = if scenes { &LAYOUT_SCENES } else { &LAYOUT };
+        run_completion(opts, layout, &self.items, draw, OverlapSource::GroundTruth, true)
     }
 }

@@ -65,10 +65,21 @@ pub const fn col(key: &'static str, header: &'static str, scale: f64) -> MetricC
 /// A pooled ratio column named `key`: Σ `num` / Σ `den` over the clips of a seed ([`Aggregate::Pooled`]) on which
 /// both are defined (a NaN in either leaves the clip out of both sums).
 pub const fn pooled(key: &'static str, num: &'static str, den: &'static str, header: &'static str) -> MetricColumn {
+    pooled_scaled(key, num, den, header, 1.0)
+}
+
+/// [`pooled`] printed × `scale`.
+pub const fn pooled_scaled(
+    key: &'static str,
+    num: &'static str,
+    den: &'static str,
+    header: &'static str,
+    scale: f64,
+) -> MetricColumn {
     MetricColumn {
         key,
         header,
-        scale: 1.0,
+        scale,
         aggregate: Aggregate::Pooled { num, den },
     }
 }
