@@ -94,3 +94,39 @@ impl ShortHorizon {
         run_completion(opts, layout, &self.items, draw, OverlapSource::GroundTruth, true)
     }
 }
+
+/// The scene metrics of a prediction for the records of a store with scenes (docs/method.md §6.5, (E8)–(E10), in
+/// the window's normalised frame): `in_scene` 1 and the four metrics for an item with a scene; every key NaN for an
+/// item without one, so that every record of the table carries the same names and the pooled columns
+/// ([`LAYOUT_SCENES`]) average over the items that have a scene.
+pub(crate) fn scene_columns(
+    scene: Option<&any4d_data::scene::Scene>,
+    prediction: &[[f32; 3]],
+    gt: &any4d_data::Clip,
+) -> Result<std::collections::BTreeMap<String, f64>, DataError> {
+    use crate::scene_metrics::{ContactThresholds, scene_metrics};
+    let values = match scene {
+        Some(scene) => {
+            let motion = crate::metrics::Motion::new(prediction, gt.frames, gt.n_vertices)
+                .map_err(|e| DataError::new(&gt.id, "scene metrics", e.to_string()))?;
+            let m = scene_metrics(motion, scene, ContactThresholds::default())
+                .map_err(|e| DataError::new(&gt.id, "scene metrics", e.to_string()))?;
+            [
+                1.0,
+                m.collision_frames,
+                m.collision_vertices,
+                m.max_penetration,
+                m.foot_skating,
+            ]
+        }
+        None => [f64::NAN; 5],
+    };
+    let keys = [
+        "in_scene",
+        "collision_frames",
+        "collision_vertices",
+        "max_penetration",
+        "foot_skating",
+    ];
+    Ok(keys.iter().map(|k| k.to_string()).zip(values).collect())
+}
