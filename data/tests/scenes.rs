@@ -231,3 +231,72 @@ fn procedural_clips_in_scenes_carry_them_and_equal_the_plain_clips() {
     );
     assert_eq!(any4d_data::inspect::summarize(&plain_out).unwrap().scenes, None);
 }
+
+/// A glTF file whose one node moves (a triangle sliding along x) beside a still box (its node placed 1 below the
+/// origin): the box is the file's scene, placed by its node, and an import stores it with every window.
+#[test]
+fn a_gltf_files_still_meshes_are_its_scene() {
+    use base64::Engine;
+    let floats = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+    let floor = Scene::cuboid([-2.0, -0.5, -2.0], [2.0, 0.0, 2.0]);
+    let mut buf = floats(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+    buf.extend(floats(&floor.vertices.concat()));
+    floor.faces.iter().flatten().for_each(|i| buf.extend(i.to_le_bytes()));
+    buf.extend(floats(&[0.0, 1.0]));
+    buf.extend(floats(&[0.0, 0.0, 0.0, 3.0, 0.0, 0.0]));
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&buf)
+    );
+    let view = |offset: usize, len: usize| serde_json::json!({"buffer": 0, "byteOffset": offset, "byteLength": len});
+    let json = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": buf.len(), "uri": uri}],
+        "bufferViews": [view(0, 36), view(36, 96), view(132, 144), view(276, 8), view(284, 24)],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]},
+            {"bufferView": 1, "componentType": 5126, "count": 8, "type": "VEC3", "min": [-2, -0.5, -2], "max": [2, 0, 2]},
+            {"bufferView": 2, "componentType": 5125, "count": 36, "type": "SCALAR"},
+            {"bufferView": 3, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0], "max": [1]},
+            {"bufferView": 4, "componentType": 5126, "count": 2, "type": "VEC3"}
+        ],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0}}]},
+            {"primitives": [{"attributes": {"POSITION": 1}, "indices": 2}]}
+        ],
+        "nodes": [{"mesh": 0}, {"mesh": 1, "translation": [0, -1, 0]}],
+        "scenes": [{"nodes": [0, 1]}],
+        "scene": 0,
+        "animations": [{
+            "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}],
+            "samplers": [{"input": 3, "output": 4}]
+        }]
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src");
+    std::fs::create_dir(&src).unwrap();
+    let file = src.join("slide.gltf");
+    std::fs::write(&file, serde_json::to_vec(&json).unwrap()).unwrap();
+    let scene = formats::gltf::static_scene(&file).unwrap().expect("the still box");
+    let placed: Vec<[f32; 3]> = floor.vertices.iter().map(|v| [v[0], v[1] - 1.0, v[2]]).collect();
+    assert_eq!((scene.vertices, scene.faces.clone()), (placed, floor.faces.clone()));
+    let out = dir.path().join("store");
+    let report = store::import(std::slice::from_ref(&src), &out, &opts()).unwrap();
+    assert!(report.added > 0, "{report}");
+    let s = Store::open(&out).unwrap();
+    assert!(s.has_scenes());
+    assert!((0..s.len()).all(|i| s.get(i).unwrap().scene.is_some_and(|sc| sc.faces == floor.faces)));
+    // A still mesh indexing past its vertices is an error naming it (the import then rejects the file).
+    let mut broken = json.clone();
+    broken["accessors"][2]["count"] = serde_json::json!(36);
+    broken["meshes"][1]["primitives"][0]["attributes"]["POSITION"] = serde_json::json!(0);
+    std::fs::write(&file, serde_json::to_vec(&broken).unwrap()).unwrap();
+    let e = formats::gltf::static_scene(&file).unwrap_err();
+    assert!(e.field.contains("meshes[1]") && e.reason.contains("of 3"), "{e}");
+    // Without the still node there is no scene.
+    let mut alone = json.clone();
+    alone["nodes"] = serde_json::json!([{"mesh": 0}]);
+    alone["scenes"] = serde_json::json!([{"nodes": [0]}]);
+    std::fs::write(&file, serde_json::to_vec(&alone).unwrap()).unwrap();
+    assert!(formats::gltf::static_scene(&file).unwrap().is_none());
+}

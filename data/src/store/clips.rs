@@ -51,11 +51,11 @@ pub(super) fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
     if let Err(e) = provenance {
         return Outcome::Rejected(reason(e, source));
     }
-    // The scene beside the source, if any (docs/method.md §6.5): every window carries it, normalised with it.
-    let scene = match crate::scene::scene_beside(path).map(|p| crate::scene::Scene::read_obj(&p)) {
-        Some(Err(e)) => return Outcome::Rejected(reason(&e, source)),
-        Some(Ok(s)) => Some(s),
-        None => None,
+    // The source's scene, if any (docs/method.md §6.5: a `.scene.obj` beside it, a glTF's still meshes): every
+    // window carries it, normalised with it.
+    let scene = match crate::scene::scene_of(path) {
+        Err(e) => return Outcome::Rejected(reason(&e, source)),
+        Ok(s) => s,
     };
     let scene = scene.as_ref();
     if !format.has_takes() {

@@ -454,11 +454,12 @@ fn run_jobs(
 ) -> Result<ImportReport> {
     let replaced: HashSet<&str> = jobs.iter().map(Job::source).collect();
     // Dropped without `finish` (any error below), the writer removes its temporary file.
-    // Records carry a scene section when a source has a scene beside it or the existing store's records do.
+    // Records carry a scene section when a source has a scene (beside it, or a glTF's still meshes) or the existing
+    // store's records do.
     let scenes = limits.scenes
         || existing.as_ref().is_some_and(|(store, _)| store.catalog.scenes)
         || jobs.iter().any(|j| match j {
-            Job::File { path, .. } => crate::scene::scene_beside(path).is_some(),
+            Job::File { path, .. } => crate::scene::scene_of(path).is_ok_and(|s| s.is_some()),
             _ => false,
         });
     let mut writer = StoreWriter::create_with(&out.join(CLIPS_FILE), limits.frames, limits.p, scenes)?;

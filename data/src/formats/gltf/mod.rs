@@ -22,6 +22,7 @@
 mod accessor;
 mod bake;
 mod read;
+mod scene;
 mod source;
 mod write;
 
@@ -83,6 +84,15 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
     super::guard(path, || {
         let bytes = super::read_clip_file(path)?;
         read::read(&bytes, path, opts, &ExternalBuffers::Folder(folder_of(path)))
+    })
+}
+
+/// The static scene of a `.gltf` / `.glb` (its still meshes beside the animated one, docs/method.md §6.5), or
+/// `None` when it has none.
+pub fn static_scene(path: &Path) -> Result<Option<crate::scene::Scene>> {
+    super::guard(path, || {
+        let bytes = super::read_clip_file(path)?;
+        scene::static_scene(&bytes, path, &ExternalBuffers::Folder(folder_of(path)))
     })
 }
 

@@ -225,22 +225,22 @@ pub(super) fn read(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: 
     Clip::new(id, vertices, frames, n, faces, caption, source)
 }
 
-fn rows3(flat: &[f64]) -> Vec<[f64; 3]> {
+pub(super) fn rows3(flat: &[f64]) -> Vec<[f64; 3]> {
     flat.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
 }
 
-struct Reader<'a> {
-    ctx: Ctx<'a>,
-    root: &'a Root,
-    buffers: &'a [Vec<u8>],
+pub(super) struct Reader<'a> {
+    pub(super) ctx: Ctx<'a>,
+    pub(super) root: &'a Root,
+    pub(super) buffers: &'a [Vec<u8>],
 }
 
 impl Reader<'_> {
-    fn floats(&self, index: usize, field: &str, ty: Type, allowed: &[accessor::Form]) -> Result<Vec<f64>> {
+    pub(super) fn floats(&self, index: usize, field: &str, ty: Type, allowed: &[accessor::Form]) -> Result<Vec<f64>> {
         accessor::read(self.ctx, self.root, self.buffers, index, field, ty, allowed)
     }
 
-    fn u32s(&self, index: usize, field: &str, ty: Type, allowed: &[accessor::Form]) -> Result<Vec<u32>> {
+    pub(super) fn u32s(&self, index: usize, field: &str, ty: Type, allowed: &[accessor::Form]) -> Result<Vec<u32>> {
         accessor::read_u32(self.ctx, self.root, self.buffers, index, field, ty, allowed)
     }
 
@@ -339,7 +339,7 @@ impl Reader<'_> {
     }
 
     /// Every node's parent and rest transform; the parents must form a forest (one parent each, no cycle).
-    fn hierarchy(&self) -> Result<Vec<RestNode>> {
+    pub(super) fn hierarchy(&self) -> Result<Vec<RestNode>> {
         let nodes = &self.root.nodes;
         let count = nodes.len();
         let mut parent: Vec<Option<usize>> = vec![None; count];
