@@ -10,15 +10,17 @@
 #
 #   bash experiments/2026-12-07-anchored-real-rf/run.sh SCRATCH     # ANY4D_BIN=... if not target/release/any4d
 #
-# Sizes (environment): RF_STEPS (default 4,500, half the preset's 9,000: the CPU budget of one session), ANCHOR_SCALE
-# (default 0.5, the preset's; the run logs the RMS of Z − A it should be near). SCRATCH (outside the repository)
-# receives the stores and run folders; tables land in this folder.
+# Sizes (environment): RF_STEPS (default 3,000, a third of the preset's 9,000: what one session's CPU allowed after
+# the VAE), ANCHOR_SCALE (default 0.5, the preset's; the run logs the RMS of Z − A it should be near), PYTHON (with
+# numpy and pyarrow, for the comparison tables). SCRATCH (outside the repository) receives the stores and run
+# folders; tables land in this folder.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 root=$(cd "$here/../.." && pwd)
 tmp=${1:?usage: run.sh SCRATCH}
 bin=${ANY4D_BIN:-$root/target/release/any4d}
-steps=${RF_STEPS:-4500}
+steps=${RF_STEPS:-3000}
+py=${PYTHON:-python3}
 scale=${ANCHOR_SCALE:-0.5}
 mkdir -p "$tmp"
 cd "$root"
@@ -46,7 +48,7 @@ for f in config.toml log.txt metrics.csv valid.csv loss.png; do [[ -f $vae/$f ]]
 run=$tmp/rfruns/rf-anchor-1
 [[ -d $run ]] ||
   "$bin" train rf --config configs/rf/anchored_small.toml --vae "$vae" --data "$tmp/srrs" --runs-dir "$tmp/rfruns" \
-    --run rf-anchor --set "rf.duration.steps=$steps" --set "model.anchor.keyframe_lerp.scale=$scale"
+    --run rf-anchor --set "train.duration.steps=$steps" --set "model.anchor.keyframe_lerp.scale=$scale"
 mkdir -p "$here/rf"
 for f in config.toml log.txt metrics.csv valid.csv samples.csv loss.png; do [[ -f $run/$f ]] && cp "$run/$f" "$here/rf/"; done
 V=experiments/2026-12-05-vae2000-family
@@ -59,10 +61,10 @@ S=experiments/2026-12-04-rf-scale
     --rf "$run" --n-grid 16 --export 0 --methods keyframe_rf,lerp_latent,lerp
 R=experiments/2026-12-06-real-rf
 C=experiments/2026-12-06-real-rf/compare.py
-python3 $C "$here/heldout-vs-shipped.csv" \
+"$py" $C "$here/heldout-vs-shipped.csv" \
   shipped=$V/heldout/clips.parquet:keyframe_rf anchored=$e/heldout/clips.parquet:keyframe_rf \
   real_rf=$R/heldout/clips.parquet:keyframe_rf lerp=$V/heldout/clips.parquet:lerp \
   latent_lerp=$e/heldout/clips.parquet:lerp_latent vae_oracle=$e/heldout/clips.parquet:vae_oracle
-python3 $C "$here/procedural-vs-shipped.csv" \
+"$py" $C "$here/procedural-vs-shipped.csv" \
   shipped=$V/table1-s42/clips.parquet:keyframe_rf anchored=$e/procedural-s42/clips.parquet:keyframe_rf \
   lerp=$e/procedural-s42/clips.parquet:lerp latent_lerp=$e/procedural-s42/clips.parquet:lerp_latent
