@@ -29,19 +29,6 @@ pub fn scene_beside(source: &Path) -> Option<std::path::PathBuf> {
     crate::formats::skeletal::sidecar_inside(dir, &path).then_some(path)
 }
 
-/// The scene of the import source `source`: the `.scene.obj` beside it ([`scene_beside`]), else, for a glTF file,
-/// its still meshes ([`crate::formats::gltf::static_scene`]); `None` when it has neither.
-pub fn scene_of(source: &Path) -> Result<Option<Scene>> {
-    if let Some(obj) = scene_beside(source) {
-        return Scene::read_obj(&obj).map(Some);
-    }
-    let ext = source.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
-    match ext.as_deref() {
-        Some("gltf" | "glb") if source.is_file() => crate::formats::gltf::static_scene(source),
-        _ => Ok(None),
-    }
-}
-
 /// A static triangle mesh in a clip's coordinates.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scene {

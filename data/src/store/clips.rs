@@ -53,7 +53,7 @@ pub(super) fn process_file(job: &Job, opts: &ImportOptions) -> Outcome {
     }
     // The source's scene, if any (docs/method.md §6.5: a `.scene.obj` beside it, a glTF's still meshes): every
     // window carries it, normalised with it.
-    let scene = match crate::scene::scene_of(path) {
+    let scene = match scene_of(path) {
         Err(e) => return Outcome::Rejected(reason(&e, source)),
         Ok(s) => s,
     };
@@ -260,4 +260,17 @@ pub(super) fn preprocess_windows(
         ));
     }
     Ok(out)
+}
+
+/// The scene of the import source `source`: the `.scene.obj` beside it ([`crate::scene::scene_beside`]), else, for a glTF file,
+/// its still meshes ([`crate::formats::gltf::static_scene`]); `None` when it has neither.
+pub(super) fn scene_of(source: &Path) -> Result<Option<crate::scene::Scene>> {
+    if let Some(obj) = crate::scene::scene_beside(source) {
+        return crate::scene::Scene::read_obj(&obj).map(Some);
+    }
+    let ext = source.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("gltf" | "glb") if source.is_file() => crate::formats::gltf::static_scene(source),
+        _ => Ok(None),
+    }
 }

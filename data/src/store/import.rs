@@ -459,7 +459,7 @@ fn run_jobs(
     let scenes = limits.scenes
         || existing.as_ref().is_some_and(|(store, _)| store.catalog.scenes)
         || jobs.iter().any(|j| match j {
-            Job::File { path, .. } => crate::scene::scene_of(path).is_ok_and(|s| s.is_some()),
+            Job::File { path, .. } => super::clips::scene_of(path).is_ok_and(|s| s.is_some()),
             _ => false,
         });
     let mut writer = StoreWriter::create_with(&out.join(CLIPS_FILE), limits.frames, limits.p, scenes)?;
