@@ -264,14 +264,7 @@ pub fn summarize_file(path: &Path) -> Result<FileSummary> {
     let poses = formats::one_frame_takes(path)?;
     let taken = formats::read_take(path, &ReadOptions::default())?;
     let clip = taken.clip;
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    for p in &clip.vertices {
-        for k in 0..3 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
+    let (lo, hi) = crate::preprocess::bounds(&clip.vertices);
     Ok(FileSummary {
         path: path.display().to_string(),
         format: format!("{format:?}"),

@@ -87,6 +87,19 @@ pub fn weld(clip: &Clip, eps: f32) -> Clip {
     }
 }
 
+/// The axis-aligned box of `points`: (lowest, highest corner); (+∞, −∞) for no points.
+pub fn bounds(points: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
+    let mut lo = [f32::INFINITY; 3];
+    let mut hi = [f32::NEG_INFINITY; 3];
+    for p in points {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
+}
+
 /// The frame-0 normalisation of docs/method.md §2.3: `x̄ = (x − center) / scale`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Normalization {
@@ -105,14 +118,7 @@ impl Normalization {
                 scale: 1e-8,
             };
         }
-        let mut lo = [f32::INFINITY; 3];
-        let mut hi = [f32::NEG_INFINITY; 3];
-        for p in frame0 {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
+        let (lo, hi) = bounds(frame0);
         let center = [0, 1, 2].map(|k| (hi[k] + lo[k]) / 2.0); // (D1)
         let half = frame0
             .iter()

@@ -114,16 +114,7 @@ impl Scene {
     /// Whether the scene's bounding box and that of every frame of `clip` overlap (a scene that does not is most
     /// likely in other coordinates or units than the clip: callers warn).
     pub fn overlaps(&self, clip: &crate::clip::Clip) -> bool {
-        let bounds = |points: &[[f32; 3]]| {
-            points
-                .iter()
-                .fold(([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]), |(lo, hi), p| {
-                    (
-                        std::array::from_fn(|k| lo[k].min(p[k])),
-                        std::array::from_fn(|k| hi[k].max(p[k])),
-                    )
-                })
-        };
+        use crate::preprocess::bounds;
         let ((a0, a1), (b0, b1)) = (bounds(&self.vertices), bounds(&clip.vertices));
         (0..3).all(|k| a0[k] <= b1[k] && b0[k] <= a1[k])
     }

@@ -89,14 +89,7 @@ impl WindowFrame {
 
     /// (H1) from the vertices of the overlap frame.
     pub fn from_overlap(frame: &[[f32; 3]]) -> Self {
-        let mut lo = [f32::INFINITY; 3];
-        let mut hi = [f32::NEG_INFINITY; 3];
-        for p in frame {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
+        let (lo, hi) = any4d_data::preprocess::bounds(frame);
         let center = [0, 1, 2].map(|k| {
             if lo[k].is_finite() && hi[k].is_finite() {
                 (hi[k] + lo[k]) / 2.0

@@ -24,14 +24,7 @@ pub(super) struct Geometry {
 
 impl Geometry {
     pub(super) fn of(body: &Body) -> Self {
-        let mut lo = [f32::INFINITY; 3];
-        let mut hi = [f32::NEG_INFINITY; 3];
-        for p in &body.pos {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
+        let (lo, hi) = crate::preprocess::bounds(&body.pos);
         let a = body.axis;
         let (s0, l_eff) = match body.pivot {
             Pivot::Base(b) => (b, (hi[a] - b).max(1e-3)),

@@ -49,15 +49,7 @@ impl Piece {
 
 /// The axis-aligned box every frame of `clip` lies in: (lowest, highest corner).
 pub fn swept_box(clip: &Clip) -> (V3, V3) {
-    let mut lo = [f32::INFINITY; 3];
-    let mut hi = [f32::NEG_INFINITY; 3];
-    for v in &clip.vertices {
-        for k in 0..3 {
-            lo[k] = lo[k].min(v[k]);
-            hi[k] = hi[k].max(v[k]);
-        }
-    }
-    (lo, hi)
+    crate::preprocess::bounds(&clip.vertices)
 }
 
 /// A scene around `clip` and the phrase its caption gains; every random draw comes from `r`.

@@ -16,7 +16,9 @@ pub const LAYOUT: Layout = Layout {
     k_column: true,
 };
 
-const COLUMNS: &[MetricColumn] = &[
+const COLUMNS: &[MetricColumn] = &BASE;
+
+const BASE: [MetricColumn; 7] = [
     col("rmse", "RMSE ×100", 100.0),
     col("chamfer", "Chamfer ×100", 100.0),
     col("dtw", "DTW ×100", 100.0),
@@ -35,14 +37,9 @@ pub const LAYOUT_SCENES: Layout = Layout {
     k_column: true,
 };
 
-const COLUMNS_SCENES: &[MetricColumn] = &[
-    col("rmse", "RMSE ×100", 100.0),
-    col("chamfer", "Chamfer ×100", 100.0),
-    col("dtw", "DTW ×100", 100.0),
-    col("mae_elem", "MAE ×100", 100.0),
-    col("jerk_ratio", "jerk / GT", 1.0),
-    pooled("jerk_pooled", "jerk", "jerk_gt", "jerk Σ/ΣGT"),
-    col("energy_ratio", "motion / GT", 1.0),
+const COLUMNS_SCENES: &[MetricColumn] = &with_scene_columns();
+
+const SCENE: [MetricColumn; 4] = [
     pooled_scaled(
         "scene_collision_frames",
         "collision_frames",
@@ -72,6 +69,21 @@ const COLUMNS_SCENES: &[MetricColumn] = &[
         100.0,
     ),
 ];
+
+/// [`BASE`] then [`SCENE`].
+const fn with_scene_columns() -> [MetricColumn; 11] {
+    let mut out = [SCENE[0]; 11];
+    let mut i = 0;
+    while i < BASE.len() {
+        out[i] = BASE[i];
+        i += 1;
+    }
+    while i < out.len() {
+        out[i] = SCENE[i - BASE.len()];
+        i += 1;
+    }
+    out
+}
 
 /// The options of P-Table 1.
 #[derive(Debug, Clone, Default, PartialEq)]
