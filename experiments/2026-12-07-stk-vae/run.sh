@@ -1,19 +1,16 @@
 #!/usr/bin/env bash
-# Does the keyframe RF beat interpolation on the held-out real characters when it generates only the residual from
-# the keyframes' latent interpolation (the anchor, docs/method.md §4.10), on a VAE that reconstructs real characters?
-# The VAE: configs/vae/small.toml with the augmentation of ../2026-12-06-corpus-arms (its best arm, `vae-srra`,
-# retrained: its weights were lost with its session) on 2,000 procedural + 2,000 rigged clips + the real corpus of
-# scripts/real_corpus.sh, which now holds SuperTuxKart's karts, characters and props. The RF:
-# configs/rf/anchored_small.toml on that VAE and store. Scored on the held-out store against lerp, latent lerp, the
-# VAE's floor and the shipped family on the windows, keyframes and seeds of the shipped family's committed rows, and
-# on procedural validation clips.
+# What SuperTuxKart's characters in the real corpus do to the small frame-wise VAE: configs/vae/small.toml with the
+# augmentation of ../2026-12-06-corpus-arms (its best recipe, `vae-srra`) on 2,000 procedural + 2,000 rigged clips
+# + the real corpus of scripts/real_corpus.sh, which now holds SuperTuxKart's skinned meshes; table 5 against the
+# shipped VAE on the held-out store, the real corpus's validation split and procedural validation clips, and the
+# held-out windows paired with the corpus-arms VAEs (summarise.py). With RF=1 it goes on to the anchored keyframe RF
+# (configs/rf/anchored_small.toml) on that VAE and its held-out and procedural table 1 — not run for the README.
 #
-#   bash experiments/2026-12-07-anchored-real-rf/run.sh SCRATCH     # ANY4D_BIN=... if not target/release/any4d
+#   bash experiments/2026-12-07-stk-vae/run.sh SCRATCH     # ANY4D_BIN=... if not target/release/any4d
 #
-# Sizes (environment): RF_STEPS (default 3,000, a third of the preset's 9,000: what one session's CPU allowed after
-# the VAE), ANCHOR_SCALE (default 0.5, the preset's; the run logs the RMS of Z − A it should be near), PYTHON (with
-# numpy and pyarrow, for the comparison tables). SCRATCH (outside the repository) receives the stores and run
-# folders; tables land in this folder.
+# Environment: RF (1 to train and score the anchored RF), RF_STEPS (default 3,000, a third of the preset's 9,000),
+# ANCHOR_SCALE (default 0.5, the preset's; the run logs the RMS of Z − A it should be near), PYTHON (with numpy and
+# pyarrow). SCRATCH (outside the repository) receives the stores and run folders; tables land in this folder.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 root=$(cd "$here/../.." && pwd)
@@ -40,11 +37,19 @@ vae=$tmp/runs/vae-srras-1
   --run vae-srras --set vae.augment.yaw_degrees=180 --set vae.augment.mirror=0.5 --set 'vae.augment.scale=[0.7,1.3]' \
   --set vae.augment.reverse=0.5 --set 'vae.augment.speed=[0.5,1.0]'
 mkdir -p "$here/vae"
-for f in config.toml log.txt metrics.csv valid.csv loss.png; do [[ -f $vae/$f ]] && cp "$vae/$f" "$here/vae/"; done
-# Table 5 of the shipped VAE (--vae) and this one (--vae-b) on the held-out store whole.
-[[ -f $here/table5-heldout/clips.parquet ]] ||
-  "$bin" eval run --protocol table5 --data "$tmp/heldout/store" --split all --clips 63 --vae weights/small/vae \
-    --vae-b "$vae" --posterior mean --out "$e/table5-heldout"
+for f in config.toml log.txt metrics.csv valid.csv loss.png latent_stats.json; do cp "$vae/$f" "$here/vae/"; done
+# Table 5 of the shipped VAE (--vae) and this one (--vae-b) on the held-out store whole, 100 windows of the real
+# corpus's validation split and 100 procedural validation clips.
+t5() {
+  [[ -f $here/table5-$1/clips.parquet ]] ||
+    "$bin" eval run --protocol table5 --data "$2" --vae weights/small/vae --vae-b "$vae" --posterior mean \
+      --out "$e/table5-$1" "${@:3}"
+}
+t5 heldout "$tmp/heldout/store" --split all --clips 63
+t5 real-val "$tmp/rc/store" --clips 100
+t5 procedural-val "$tmp/p2k128" --clips 100
+"$py" "$here/summarise.py"
+[[ ${RF:-0} == 1 ]] || exit 0
 run=$tmp/rfruns/rf-anchor-1
 [[ -d $run ]] ||
   "$bin" train rf --config configs/rf/anchored_small.toml --vae "$vae" --data "$tmp/srrs" --runs-dir "$tmp/rfruns" \
