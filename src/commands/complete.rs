@@ -186,8 +186,11 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
         formats::write_clip(&path, clip).with_context(|| format!("writing sample {k}"))?;
         println!("wrote {}", path.display());
     }
+    if args.view.is_none() && scene.is_none() {
+        return Ok(ExitCode::SUCCESS);
+    }
     let mut panels: Vec<Panel> = clips
-        .iter()
+        .into_iter()
         .enumerate()
         .map(|(k, clip)| Panel {
             label: if args.average {
@@ -198,7 +201,7 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
                     args.seed.wrapping_add(k as u64 * SAMPLE_SEED_STRIDE)
                 )
             },
-            clip: clip.clone(),
+            clip,
             metrics: Vec::new(),
         })
         .collect();

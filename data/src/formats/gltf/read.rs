@@ -50,12 +50,8 @@ pub(super) fn take_groups(animations: &[json::Animation]) -> Vec<(String, Vec<us
 /// `fps`; the key times are read and checked as the bake reads them.
 pub(super) fn takes(bytes: &[u8], path: &Path, fps: f32, external: &ExternalBuffers) -> Result<Vec<TakeInfo>> {
     let ctx = Ctx { path };
-    let Document { root, buffers, .. } = source::load(ctx, bytes, external)?;
-    let r = Reader {
-        ctx,
-        root: &root,
-        buffers: &buffers,
-    };
+    let doc = source::load(ctx, bytes, external)?;
+    let (r, root) = (Reader::of(ctx, &doc), &doc.root);
     let mut out = Vec::new();
     for (name, group) in take_groups(&root.animations) {
         let mut duration = 0.0f64;
@@ -91,12 +87,8 @@ pub(super) fn read(bytes: &[u8], path: &Path, opts: &GltfReadOptions, external: 
     if !(opts.fps.is_finite() && opts.fps > 0.0) {
         return Err(ctx.err("fps", format!("{} is not a positive frame rate", opts.fps)));
     }
-    let Document { root, buffers, caption } = source::load(ctx, bytes, external)?;
-    let r = Reader {
-        ctx,
-        root: &root,
-        buffers: &buffers,
-    };
+    let doc = source::load(ctx, bytes, external)?;
+    let (r, root, caption) = (Reader::of(ctx, &doc), &doc.root, doc.caption.clone());
     if root.animations.is_empty() {
         return Err(ctx.err("animations", "no animation"));
     }
@@ -230,12 +222,21 @@ pub(super) fn rows3(flat: &[f64]) -> Vec<[f64; 3]> {
 }
 
 pub(super) struct Reader<'a> {
-    pub(super) ctx: Ctx<'a>,
-    pub(super) root: &'a Root,
-    pub(super) buffers: &'a [Vec<u8>],
+    ctx: Ctx<'a>,
+    root: &'a Root,
+    buffers: &'a [Vec<u8>],
 }
 
-impl Reader<'_> {
+impl<'a> Reader<'a> {
+    /// A reader over a loaded document.
+    pub(super) fn of(ctx: Ctx<'a>, doc: &'a Document) -> Self {
+        Reader {
+            ctx,
+            root: &doc.root,
+            buffers: &doc.buffers,
+        }
+    }
+
     pub(super) fn floats(&self, index: usize, field: &str, ty: Type, allowed: &[accessor::Form]) -> Result<Vec<f64>> {
         accessor::read(self.ctx, self.root, self.buffers, index, field, ty, allowed)
     }

@@ -16,7 +16,7 @@ use gltf::json::validation::Checked;
 use super::accessor::{FLOAT, INDICES};
 use super::bake::{IDENTITY, Mat, apply, mul};
 use super::read::{Reader, rows3};
-use super::source::{self, Document};
+use super::source;
 use super::{Ctx, ExternalBuffers};
 use crate::error::Result;
 use crate::scene::{MAX_SCENE_TRIANGLES, Scene};
@@ -24,12 +24,8 @@ use crate::scene::{MAX_SCENE_TRIANGLES, Scene};
 /// The still meshes of the file in `bytes` as one scene; `None` when there are none.
 pub(super) fn static_scene(bytes: &[u8], path: &Path, external: &ExternalBuffers) -> Result<Option<Scene>> {
     let ctx = Ctx { path };
-    let Document { root, buffers, .. } = source::load(ctx, bytes, external)?;
-    let r = Reader {
-        ctx,
-        root: &root,
-        buffers: &buffers,
-    };
+    let doc = source::load(ctx, bytes, external)?;
+    let (r, root) = (Reader::of(ctx, &doc), &doc.root);
     let nodes = r.hierarchy()?;
     let mut moved = vec![false; nodes.len()];
     for anim in &root.animations {
