@@ -1,6 +1,6 @@
 //! Non-learned completion baselines (docs/method.md §5.2, (L1)): linear interpolation between consecutive keyframes in
-//! vertex space, the static nearest keyframe, and the same interpolation over latent arrays (`lerp_space =
-//! "latent"`; the caller decodes the result).
+//! vertex space, the static nearest keyframe, the same interpolation over latent arrays (`lerp_space =
+//! "latent"`; the caller decodes the result), and the keyframe correction (L2) of a decoded completion.
 
 use crate::metrics::{EvalError, Motion, Result, keyframe_set};
 
@@ -70,6 +70,42 @@ pub fn lerp_latents(latents: &[f32], frames: usize, frame_len: usize, keyframes:
         });
     }
     fill_frames(Fill::Linear, latents, frames, frame_len, keyframes)
+}
+
+/// (L2) keyframe correction: adds to every frame of `prediction` the (L1) interpolation of the keyframe residuals
+/// `given − prediction`, so the keyframe frames become `given`'s and the frames between them move by what the
+/// decoder got wrong on their neighbours (docs/method.md §5.6). Only the keyframe frames of `given` are read;
+/// frames 0 and T − 1 must be keyframes.
+///
+/// # Shapes
+/// `prediction`: `[T * N]` rows; `given`: `[T, N, 3]`.
+pub fn correct_by_keyframes(prediction: &mut [[f32; 3]], given: Motion, keyframes: &[usize]) -> Result<()> {
+    given.check("keyframes")?;
+    let rows = given.frames() * given.n_vertices();
+    if prediction.len() != rows {
+        return Err(EvalError::Parameter {
+            name: "prediction",
+            reason: format!(
+                "{} rows, expected {} frames × {}",
+                prediction.len(),
+                given.frames(),
+                given.n_vertices()
+            ),
+        });
+    }
+    let residual: Vec<f32> = given
+        .vertices()
+        .iter()
+        .zip(prediction.iter())
+        .flat_map(|(g, p)| [g[0] - p[0], g[1] - p[1], g[2] - p[2]])
+        .collect();
+    let spread = lerp_latents(&residual, given.frames(), 3 * given.n_vertices(), keyframes)?;
+    for (p, r) in prediction.iter_mut().zip(spread.chunks_exact(3)) {
+        for c in 0..3 {
+            p[c] += r[c];
+        }
+    }
+    Ok(())
 }
 
 /// Fill the non-keyframes of a flat frame-major array from its keyframes.

@@ -214,7 +214,9 @@ pub struct RunArgs {
     pub out: PathBuf,
     /// Methods, comma-separated: keyframe_rf, replacement_rf, lerp, lerp_latent, static_nearest, bdlstm, bdlstm_acap, aam,
     /// impute_until_0.98, impute_until_0.98_noisy1, keyframe_rf_mean8 (mean of 8 samples by ours), vae_oracle (every
-    /// ground-truth frame through the VAE: the floor of the latent rows, not a completion method).
+    /// ground-truth frame through the VAE: the floor of the latent rows, not a completion method), and a latent
+    /// method with `_corrected` after it (keyframe_rf_corrected, keyframe_rf_mean8_corrected, lerp_latent_corrected,
+    /// …: its output moved by the keyframes' interpolated decoding residuals, docs/method.md §5.6; not the paper's).
     #[arg(
         long,
         value_delimiter = ',',

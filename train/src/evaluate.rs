@@ -12,7 +12,7 @@ use any4d_eval::learned::{
     VaeReconstructor,
 };
 use any4d_eval::methods::vertex_methods;
-use any4d_eval::methods::{AAM_GUIDANCE, Method, MethodKind, RfMethod, SampleMean};
+use any4d_eval::methods::{AAM_GUIDANCE, KeyframeCorrected, Method, MethodKind, RfMethod, SampleMean};
 use any4d_eval::tables::reconstruction::Reconstructor;
 use any4d_model::any_vae::VaeKind;
 use any4d_model::rectified_flow::{ReplaceNoise, SampleOptions, Solver};
@@ -232,6 +232,11 @@ pub fn build_methods(
                     Box::new(method) as Box<dyn Method>,
                     checkpoint_label(&vae.run, vae.step),
                 )
+            }
+            MethodKind::Corrected { base } => {
+                let mut inner = build_methods(&[base.kind()], runs, sampling, device)?;
+                let method = KeyframeCorrected::new(kind, inner.methods.remove(0))?;
+                (Box::new(method) as Box<dyn Method>, inner.checkpoints.remove(0).1)
             }
             MethodKind::VaeOracle => {
                 let vae = vae_run_for(runs, device)?;

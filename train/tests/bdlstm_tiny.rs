@@ -95,6 +95,25 @@ fn tiny_bdlstm_lowers_its_loss_and_its_run_loads() {
     assert_eq!(a, method.complete(&visible, &keys, "", 7).unwrap());
     let err = method.complete(&visible, &[0, 2], "", 7).unwrap_err().to_string();
     assert!(err.contains("must be keyframes"), "{err}");
+    // Its keyframe-corrected row (docs/method.md §5.6) is built on the same run and reproduces the given keyframes.
+    let kind = MethodKind::parse("bdlstm_corrected").unwrap();
+    let corrected = build_methods(&[kind], &runs, SamplingSetup::default(), &dev).unwrap();
+    assert_eq!(
+        corrected.checkpoints,
+        vec![(kind.label(), built.checkpoints[0].1.clone())]
+    );
+    let c = corrected.methods[0].complete(&visible, &keys, "", 7).unwrap();
+    let n = clip.n_vertices;
+    for k in keys {
+        let off = c[k * n..(k + 1) * n]
+            .iter()
+            .flatten()
+            .zip(visible.frame(k).iter().flatten())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        assert!(off < 1e-5, "corrected keyframe {k} off by {off}");
+    }
+    assert_ne!(c, a, "the raw row's keyframes are decoded, not given");
     let err = build_methods(
         &[MethodKind::Bdlstm],
         &LearnedRuns::default(),

@@ -6,167 +6,25 @@
 //! interpolation in vertex and latent space ((L1), §5.2), the static nearest keyframe, the BD-LSTM baseline (§5.3,
 //! latent adaptation) and the AnimateAnyMesh reference (§5.5: an RF on the sequence-wise VAE, no keyframes).
 
-use std::fmt;
-
 use any4d_data::rng::{GOLDEN_GAMMA, Rng, rng, splitmix64};
 use any4d_data::{Clip, DataError};
-use serde::{Deserialize, Serialize};
 
 use crate::baselines::VertexBaseline;
 use crate::metrics::{ClipMetrics, Motion, evaluate_clip, replace_keyframes};
 
 type Result<T, E = DataError> = std::result::Result<T, E>;
 
+mod corrected;
+mod kind;
+
+pub use corrected::KeyframeCorrected;
+pub use kind::{AAM_GUIDANCE, CorrectedBase, KeyframeNoise, MethodKind};
+
 /// Standard deviation of the SceneMI keyframe noise at level l = 1, normalised units (docs/method.md §5.4: std l ·
 /// 0.02).
 pub const KEYFRAME_NOISE_STD: f32 = 0.02;
 /// RNG stream of the keyframe noise, distinct from the sampler's streams.
 const KEYFRAME_NOISE_STREAM: u64 = 0x6e6f_6973;
-
-/// Which keyframes a method is given (docs/method.md §5.4: evaluate with clean keyframes and noisy ones at l = 1).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", tag = "kind")]
-pub enum KeyframeNoise {
-    /// The ground-truth keyframe meshes.
-    Clean,
-    /// Keyframe vertices + i.i.d. N(0, (level · 0.02)²); the first and last frames stay clean.
-    Noisy { level: f32 },
-}
-
-/// The methods of the evaluation protocol, by name (what a config or the CLI selects).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case", tag = "kind")]
-pub enum MethodKind {
-    /// Keyframe-conditioned RF, 221 input channels, (R3)–(R6) (ours).
-    KeyframeRf,
-    /// Non-keyframe RF with sampling-time replacement (R7)–(R8) (the paper's "Baseline").
-    ReplacementRf,
-    /// SceneMI-style imputation until τ* (R9) with clean or noisy keyframes.
-    ImputeUntil { tau_star: f32, keyframes: KeyframeNoise },
-    /// (L1) in normalised vertex space.
-    Lerp,
-    /// (L1) between keyframe latents, then decoded (`lerp_space = "latent"`).
-    LerpLatent,
-    /// Not a completion method: every ground-truth frame encoded (posterior mean) and decoded by the VAE. It sees
-    /// the frames the others must generate, so its row is the floor of every latent method on that VAE under the
-    /// same scoring: how much of their error and jerk the VAE alone accounts for.
-    VaeOracle,
-    /// Hold the nearest keyframe (ties to the earlier one).
-    StaticNearest,
-    /// The BD-LSTM baseline, latent adaptation (docs/method.md §5.3): both chains per keyframe segment and the
-    /// merge rule.
-    Bdlstm,
-    /// The BD-LSTM baseline as published (docs/method.md §5.3, ACAP variant): chains on per-vertex ACAP features of
-    /// one fixed topology, positions by sparse least squares.
-    BdlstmAcap,
-    /// The per-vertex mean of `samples` completions by ours (`keyframe_rf`), sample 0 being the single
-    /// completion of the same seed: an estimate of the model's conditional mean, which separates the error of
-    /// the learned distribution's centre from the spread of its samples (not a method of the paper).
-    KeyframeRfMean { samples: u16 },
-    /// The AnimateAnyMesh reference (docs/method.md §5.5): an RF on the sequence-wise VAE's latents, conditioned on
-    /// the reference mesh (frame 0) and the caption only, sampled with CFG [`AAM_GUIDANCE`]; keyframes enter only
-    /// through the ground-truth replacement every row shares.
-    Aam,
-}
-
-/// Classifier-free guidance weight of the AnimateAnyMesh reference's sampler (its code's default, docs/method.md
-/// §5.5); ours and the Baseline sample with the paper's 1.0.
-pub const AAM_GUIDANCE: f64 = 3.0;
-
-impl MethodKind {
-    /// Label used in tables, file names and manifests: `keyframe_rf`, `replacement_rf`, `impute_until_0.98_noisy1`, …
-    pub fn label(&self) -> String {
-        match self {
-            MethodKind::KeyframeRf => "keyframe_rf".into(),
-            MethodKind::ReplacementRf => "replacement_rf".into(),
-            MethodKind::ImputeUntil {
-                tau_star,
-                keyframes: KeyframeNoise::Clean,
-            } => format!("impute_until_{tau_star}"),
-            MethodKind::ImputeUntil {
-                tau_star,
-                keyframes: KeyframeNoise::Noisy { level },
-            } => {
-                format!("impute_until_{tau_star}_noisy{level}")
-            }
-            MethodKind::Lerp => "lerp".into(),
-            MethodKind::LerpLatent => "lerp_latent".into(),
-            MethodKind::VaeOracle => "vae_oracle".into(),
-            MethodKind::StaticNearest => "static_nearest".into(),
-            MethodKind::Bdlstm => "bdlstm".into(),
-            MethodKind::BdlstmAcap => "bdlstm_acap".into(),
-            MethodKind::KeyframeRfMean { samples } => format!("keyframe_rf_mean{samples}"),
-            MethodKind::Aam => "aam".into(),
-        }
-    }
-
-    /// Parse a label written by [`MethodKind::label`] (plus `impute_until` = τ* 0.98, clean).
-    pub fn parse(s: &str) -> Result<Self> {
-        let bad = |reason: String| DataError::new("method", s, reason);
-        Ok(match s {
-            "keyframe_rf" | "ours" => MethodKind::KeyframeRf,
-            "replacement_rf" | "baseline" => MethodKind::ReplacementRf,
-            "lerp" => MethodKind::Lerp,
-            "lerp_latent" => MethodKind::LerpLatent,
-            "vae_oracle" => MethodKind::VaeOracle,
-            "static_nearest" => MethodKind::StaticNearest,
-            "bdlstm" => MethodKind::Bdlstm,
-            "bdlstm_acap" => MethodKind::BdlstmAcap,
-            "aam" => MethodKind::Aam,
-            "impute_until" => MethodKind::ImputeUntil {
-                tau_star: 0.98,
-                keyframes: KeyframeNoise::Clean,
-            },
-            other if other.starts_with("keyframe_rf_mean") => {
-                let n = &other["keyframe_rf_mean".len()..];
-                let samples: u16 = n
-                    .parse()
-                    .map_err(|e| bad(format!("samples {n:?} of keyframe_rf_mean<N>: {e}")))?;
-                if !(2..=MAX_MEAN_SAMPLES).contains(&samples) {
-                    return Err(bad(format!(
-                        "keyframe_rf_mean<N> averages 2..={MAX_MEAN_SAMPLES} samples, got {samples}"
-                    )));
-                }
-                MethodKind::KeyframeRfMean { samples }
-            }
-            other => {
-                let rest = other.strip_prefix("impute_until_").ok_or_else(|| {
-                    bad(
-                        "unknown method; expected keyframe_rf, keyframe_rf_mean<N>, replacement_rf, lerp, lerp_latent, \
-                         vae_oracle, static_nearest, bdlstm, bdlstm_acap, aam or impute_until[_<tau*>[_noisy<level>]]"
-                            .into(),
-                    )
-                })?;
-                let (tau, noise) = match rest.split_once("_noisy") {
-                    Some((t, l)) => (t, Some(l)),
-                    None => (rest, None),
-                };
-                let tau_star: f32 = tau.parse().map_err(|e| bad(format!("τ* {tau:?}: {e}")))?;
-                if !(0.0..=1.0).contains(&tau_star) {
-                    return Err(bad(format!("τ* = {tau_star} is outside [0, 1]")));
-                }
-                let keyframes = match noise {
-                    None => KeyframeNoise::Clean,
-                    Some(l) => KeyframeNoise::Noisy {
-                        level: l.parse().map_err(|e| bad(format!("noise level {l:?}: {e}")))?,
-                    },
-                };
-                MethodKind::ImputeUntil { tau_star, keyframes }
-            }
-        })
-    }
-
-    /// Whether the method needs a trained network (RF and/or VAE) rather than keyframes alone.
-    pub fn needs_model(&self) -> bool {
-        !matches!(self, MethodKind::Lerp | MethodKind::StaticNearest)
-    }
-}
-
-impl fmt::Display for MethodKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.label())
-    }
-}
 
 /// A way to fill the non-keyframes of a window.
 pub trait Method {
