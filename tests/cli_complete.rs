@@ -466,3 +466,58 @@ fn average_writes_the_mean_of_the_samples_with_exact_keyframes() {
     ]);
     assert!(!ok && log.contains("--samples 2 or more"), "{log}");
 }
+
+#[test]
+fn correct_moves_the_in_between_frames_by_a_residual_linear_between_keyframes() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("walk.bin");
+    let clip = user_clip(16);
+    write_clip(&input, &clip).unwrap();
+    let (rf, inp) = (shipped_rf(), s(&input));
+    let go = |out: &Path, extra: &[&str]| {
+        let o = s(out);
+        let mut args = vec![
+            "complete",
+            "--clip",
+            &inp,
+            "--keyframes",
+            "0,6,15",
+            "--rf",
+            &rf,
+            "--steps",
+            "4",
+            "--out",
+            &o,
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    let (raw_path, fixed_path) = (dir.path().join("raw.bin"), dir.path().join("fixed.bin"));
+    let (ok, log) = go(&raw_path, &[]);
+    assert!(ok, "{log}");
+    let (ok, log) = go(&fixed_path, &["--correct"]);
+    assert!(ok, "{log}");
+    let (raw, fixed) = (read_clip(&raw_path).unwrap(), read_clip(&fixed_path).unwrap());
+    for f in [0, 6, 15] {
+        assert_eq!(fixed.frame(f), clip.frame(f), "keyframe {f} is not exact");
+    }
+    // docs/method.md §5.6: the correction of frame f is the keyframes' residual interpolated linearly in f, so its
+    // second difference vanishes inside each keyframe segment (normalisation is affine, so this holds in user
+    // coordinates too).
+    let n = clip.n_vertices;
+    let d = |f: usize, i: usize, c: usize| fixed.vertices[f * n + i][c] - raw.vertices[f * n + i][c];
+    let (mut moved, mut bend) = (0.0f32, 0.0f32);
+    for i in 0..n {
+        for c in 0..3 {
+            moved = moved.max(d(10, i, c).abs());
+            for f in 8..14 {
+                bend = bend.max((d(f + 1, i, c) - 2.0 * d(f, i, c) + d(f - 1, i, c)).abs());
+            }
+        }
+    }
+    assert!(moved > 1e-4, "--correct should move the in-between frames");
+    assert!(
+        bend < 1e-3 * moved.max(1e-3),
+        "not linear between keyframes: {bend} vs {moved}"
+    );
+}

@@ -55,6 +55,11 @@ pub struct CompleteArgs {
     /// any one sample, and nearer the ground truth on average (experiments/2026-12-02-small-w256).
     #[arg(long)]
     pub average: bool,
+    /// Move every frame by the keyframes' decoding residuals, interpolated in time (docs/method.md §5.6, not the
+    /// paper's): the given keyframes show how far the VAE's decoding of this mesh is off, and the in-between frames
+    /// are corrected by as much (experiments/2026-12-07-keyframe-correction).
+    #[arg(long)]
+    pub correct: bool,
     /// Classifier-free guidance weight (1.0 in the paper: one conditional branch).
     #[arg(long, default_value_t = 1.0)]
     pub cfg: f64,
@@ -156,7 +161,7 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
         noise_scale: args.noise_scale,
         ..SamplingSetup::default()
     };
-    let model = keyframe_method(&args.rf, sampling, &device)
+    let model = keyframe_method(&args.rf, sampling, args.correct, &device)
         .with_context(|| format!("loading the keyframe RF run {}", args.rf.display()))?;
     let frames = args.frames.or(keys.clip_frames).unwrap_or(model.window);
     let caption = args
@@ -259,7 +264,7 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
         ..SamplingSetup::default()
     };
     let t0 = std::time::Instant::now();
-    let model = keyframe_method(&args.rf, sampling, &device)
+    let model = keyframe_method(&args.rf, sampling, false, &device)
         .with_context(|| format!("loading the keyframe RF run {}", args.rf.display()))?;
     println!(
         "model {} loaded in {:.2} s; {}-point midpoint grid, {} threads",

@@ -12,7 +12,7 @@ use any4d_eval::learned::{
     VaeReconstructor,
 };
 use any4d_eval::methods::vertex_methods;
-use any4d_eval::methods::{AAM_GUIDANCE, KeyframeCorrected, Method, MethodKind, RfMethod, SampleMean};
+use any4d_eval::methods::{AAM_GUIDANCE, CorrectedBase, KeyframeCorrected, Method, MethodKind, RfMethod, SampleMean};
 use any4d_eval::tables::reconstruction::Reconstructor;
 use any4d_model::any_vae::VaeKind;
 use any4d_model::rectified_flow::{ReplaceNoise, SampleOptions, Solver};
@@ -112,9 +112,20 @@ pub struct RunMethod {
     pub tokens: usize,
 }
 
-/// The keyframe RF of `run_dir` as a method (`any4d complete` / `extend`).
-pub fn keyframe_method(run_dir: &Path, sampling: SamplingSetup, device: &Device) -> Result<RunMethod> {
-    rf_method(MethodKind::KeyframeRf, run_dir, sampling, device)
+/// The keyframe RF of `run_dir` as a method (`any4d complete` / `extend`), with the keyframe correction (L2) when
+/// `correct` (docs/method.md §5.6).
+pub fn keyframe_method(run_dir: &Path, sampling: SamplingSetup, correct: bool, device: &Device) -> Result<RunMethod> {
+    let m = rf_method(MethodKind::KeyframeRf, run_dir, sampling, device)?;
+    if !correct {
+        return Ok(m);
+    }
+    let kind = MethodKind::Corrected {
+        base: CorrectedBase::KeyframeRf,
+    };
+    Ok(RunMethod {
+        method: Box::new(KeyframeCorrected::new(kind, m.method)?),
+        ..m
+    })
 }
 
 /// The RF sampler of one RF run (its own VAE and statistics, its scratch text encoder) for `kind`.
