@@ -84,6 +84,9 @@ fn shipped_small_models_load_and_reproduce_their_committed_metrics() {
     let out = any4d(&args);
     assert!(out.status.success(), "{:?}", text(&out));
 
+    // Run from the repository root (as the tests are), the summary names the runs as a clone has them.
+    let md = std::fs::read_to_string(table.join("summary.md")).unwrap();
+    assert!(md.contains("checkpoint weights/small/rf (step "), "{md}");
     let got = read_summary(&table.join("summary.csv"));
     let want = read_summary(&w.join("check/summary.csv"));
     assert_eq!(

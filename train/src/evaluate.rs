@@ -96,8 +96,12 @@ fn codec_of(vae: &LoadedVae, posterior: KeyPosterior, device: &Device) -> Result
     ))
 }
 
+/// `run (step N)`, the run relative to the working directory when it lies inside it: a summary committed from the
+/// repository root then names `weights/small/rf`, not a path only this machine has.
 fn checkpoint_label(run: &Path, step: u64) -> String {
-    format!("{} (step {step})", run.display())
+    let here = std::env::current_dir().ok().and_then(|d| d.canonicalize().ok());
+    let shown = here.as_deref().and_then(|d| run.strip_prefix(d).ok()).unwrap_or(run);
+    format!("{} (step {step})", shown.display())
 }
 
 /// A learned method built from one RF run, with what a caller needs to feed it.
