@@ -4,6 +4,7 @@
 pub mod acap_bdlstm;
 pub mod baselines;
 pub mod bench;
+mod error;
 pub mod learned;
 pub mod methods;
 pub mod metrics;

@@ -9,65 +9,9 @@ use any4d_data::preprocess::Normalization;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub use crate::error::{EvalError, Result};
 use crate::nearest::mean_nearest;
-
-/// Why a metric could not be computed. Every variant names what differs or what is missing.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum EvalError {
-    /// Prediction and ground truth disagree on a size.
-    #[error("{what} differ: prediction has {pred}, ground truth has {gt}")]
-    Mismatch { what: &'static str, pred: usize, gt: usize },
-    /// A flat vertex array does not hold `frames × n_vertices` rows.
-    #[error("vertex array holds {rows} rows, expected frames × vertices = {frames} × {n_vertices}")]
-    Layout {
-        rows: usize,
-        frames: usize,
-        n_vertices: usize,
-    },
-    /// A sequence has no frames or no vertices.
-    #[error("{name} is empty: {frames} frames × {n_vertices} vertices")]
-    Empty {
-        name: &'static str,
-        frames: usize,
-        n_vertices: usize,
-    },
-    /// NaN or infinity in an input.
-    #[error("{name}: non-finite coordinate {value:?} at frame {frame}, vertex {vertex}")]
-    NonFinite {
-        name: &'static str,
-        frame: usize,
-        vertex: usize,
-        value: [f32; 3],
-    },
-    /// A keyframe or scored frame index past the last frame.
-    #[error("{what} index {index} is out of range for {frames} frames")]
-    FrameOutOfRange {
-        what: &'static str,
-        index: usize,
-        frames: usize,
-    },
-    /// A metric needs more frames than the sequence has.
-    #[error("{metric} needs at least {needed} frames, the sequence has {frames}")]
-    TooFewFrames {
-        metric: &'static str,
-        needed: usize,
-        frames: usize,
-    },
-    /// The frame set a metric averages over is empty.
-    #[error("no frames to score: {0}")]
-    NoFrames(String),
-    /// A point set of the Chamfer distance is empty.
-    #[error("{name} has no points")]
-    EmptySet { name: &'static str },
-    /// [`average`] of no clips.
-    #[error("no clips to average")]
-    NoClips,
-    /// A parameter outside its domain (e.g. a non-positive frame rate).
-    #[error("invalid {name}: {reason}")]
-    Parameter { name: &'static str, reason: String },
-}
-
-pub type Result<T, E = EvalError> = std::result::Result<T, E>;
+pub(crate) use crate::nearest::{norm, sub};
 
 /// Owned vertex rows, frame-major `[T * N]` xyz.
 pub type Rows = Vec<[f32; 3]>;
@@ -175,20 +119,6 @@ fn check_frames(what: &'static str, indices: &[usize], frames: usize) -> Result<
         Some(&index) => Err(EvalError::FrameOutOfRange { what, index, frames }),
         None => Ok(()),
     }
-}
-
-/// `a − b` in f64.
-pub(crate) fn sub(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
-    [
-        f64::from(a[0]) - f64::from(b[0]),
-        f64::from(a[1]) - f64::from(b[1]),
-        f64::from(a[2]) - f64::from(b[2]),
-    ]
-}
-
-/// The Euclidean norm.
-pub(crate) fn norm(d: [f64; 3]) -> f64 {
-    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
 }
 
 /// Sum over the listed frames of `f(p, g)` per vertex pair, and the number of pairs.

@@ -13,7 +13,21 @@ use std::num::NonZeroUsize;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 
-use crate::metrics::{EvalError, Result, norm, sub};
+use crate::error::{EvalError, Result};
+
+/// `a − b` in f64.
+pub(crate) fn sub(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
+    [
+        f64::from(a[0]) - f64::from(b[0]),
+        f64::from(a[1]) - f64::from(b[1]),
+        f64::from(a[2]) - f64::from(b[2]),
+    ]
+}
+
+/// The Euclidean norm.
+pub(crate) fn norm(d: [f64; 3]) -> f64 {
+    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt()
+}
 
 /// Squared distance in f32, the one formula every search here compares with.
 fn dist2(a: &[f32; 3], b: &[f32; 3]) -> f32 {

@@ -382,7 +382,7 @@ fn score(kind: MethodKind, gt: &Clip, keyframes: &[usize], prediction: Vec<[f32;
     Ok(Scored { prediction, metrics })
 }
 
-/// The metrics of one clip as (name, value) pairs, for [`crate::tables::ClipRecord`].
+/// The metrics of one clip as (name, value) pairs, the values of a table's clip record.
 pub fn metrics_map(m: &ClipMetrics) -> std::collections::BTreeMap<String, f64> {
     let fields = [
         ("rmse", m.rmse),
