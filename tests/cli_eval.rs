@@ -278,3 +278,66 @@ fn eval_scene_scores_a_clip_sinking_into_a_floor() {
     let bad = any4d(&["view", c, "--scene", sc, "--out", page.to_str().unwrap()]);
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("reading the scene"));
 }
+
+/// P-Table 2 by default feeds every row its own generated overlap frame, and its summary says which reference stage
+/// 2 had; the ground-truth variant is asked for and labelled.
+#[test]
+fn table2_defaults_to_each_rows_generated_overlap_and_names_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("store");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let synth = any4d(&[
+        "data",
+        "synth",
+        "--clips",
+        "6",
+        "--seed",
+        "3",
+        "--frames",
+        "31",
+        "--window",
+        "16",
+        "--stride",
+        "15",
+        "--max-vertices",
+        "768",
+        "--p",
+        "16",
+        "--out",
+        &s(&store),
+    ]);
+    assert!(synth.status.success(), "{}", text(&synth.stderr));
+    for (extra, want) in [
+        (None, "each row's own generated overlap frame"),
+        (Some("gt"), "the ground-truth overlap frame where it is a keyframe"),
+    ] {
+        let out = dir.path().join(format!("t2-{}", extra.unwrap_or("default")));
+        let mut args = vec![
+            "eval".to_string(),
+            "run".into(),
+            "--protocol".into(),
+            "table2".into(),
+            "--data".into(),
+            s(&store),
+            "--split".into(),
+            "all".into(),
+            "--clips".into(),
+            "2".into(),
+            "--methods".into(),
+            "lerp".into(),
+            "--export".into(),
+            "0".into(),
+            "--no-progress".into(),
+            "--out".into(),
+            s(&out),
+        ];
+        if let Some(e) = extra {
+            args.extend(["--overlap-source".to_string(), e.to_string()]);
+        }
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = any4d(&refs);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+        assert!(md.contains(want), "{extra:?}: {md}");
+    }
+}

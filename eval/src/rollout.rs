@@ -15,8 +15,21 @@ pub enum OverlapSource {
     /// a shared frame that is not a keyframe falls back to the generated one.
     #[default]
     GroundTruth,
-    /// The previous window's output at the shared frame (autoregressive, default for the AAM reference).
+    /// The previous window's output at the shared frame (autoregressive; P-Table 2's default, every row alike).
     Generated,
+}
+
+impl OverlapSource {
+    /// One line for a table's header.
+    pub fn describe(self) -> &'static str {
+        match self {
+            OverlapSource::Generated => "stage-2 reference: each row's own generated overlap frame (every row alike)",
+            OverlapSource::GroundTruth => {
+                "stage-2 reference: the ground-truth overlap frame where it is a keyframe (`--overlap-source gt`: \
+                 favours rows that are given keyframes over the AnimateAnyMesh row, which has none)"
+            }
+        }
+    }
 }
 
 /// Window layout of a rollout: `window` frames per generation, a new window every `stride` frames.

@@ -45,6 +45,7 @@ fn header() -> TableHeader {
             .into_iter()
             .collect(),
         device: String::new(),
+        notes: Vec::new(),
     }
 }
 
@@ -327,6 +328,8 @@ fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
         .collect();
     views.sort();
     assert_eq!(views.len(), 4, "{views:?}");
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(!md.contains("stage-2"), "table 1 has no second stage: {md}");
     let page = std::fs::read_to_string(out.join("view").join(&views[0])).unwrap();
     assert_eq!(page.matches("\"label\":").count(), 3, "ground truth + 2 methods");
     assert!(page.contains("RMSE ×100"));
@@ -366,6 +369,13 @@ fn run_protocol_writes_table1_and_table2_outputs_on_a_synthetic_store() {
     let report = run_protocol(&table2, &t2).unwrap();
     assert_eq!(report.rows.len(), 1);
     assert!(report.markdown.contains("seam jerk / GT"), "{}", report.markdown);
+    assert!(
+        report
+            .markdown
+            .contains("stage-2 reference: the ground-truth overlap frame"),
+        "the summary names the stage-2 reference: {}",
+        report.markdown
+    );
     assert!(
         report.rows[0].values.iter().all(|v| v.mean.is_finite()),
         "{:?}",

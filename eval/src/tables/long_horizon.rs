@@ -39,7 +39,7 @@ pub const SEAM_HALF_WIDTH: usize = 2;
 pub struct LongHorizon {
     /// Which items (pairs of windows sharing a frame).
     pub items: Items,
-    /// Reference of stage 2 (docs/method.md §7, §8 A8; ground truth by default).
+    /// Reference of stage 2 (docs/method.md §7, §8 A8): `eval run` defaults to each row's generated frame.
     pub overlap_source: OverlapSource,
 }
 
@@ -47,7 +47,7 @@ impl LongHorizon {
     /// Runs the table.
     pub fn run(&self, opts: &TableOptions) -> Result<TableReport> {
         let draw = ManifestOptions::table2(opts.data.display().to_string());
-        run_completion(opts, &LAYOUT, &self.items, draw, self.overlap_source, false)
+        run_completion(opts, &LAYOUT, &self.items, draw, Some(self.overlap_source), false)
     }
 }
 

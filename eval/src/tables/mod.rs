@@ -308,14 +308,15 @@ pub(crate) fn write_text(path: &Path, text: &str, files: &mut Vec<PathBuf>) -> R
 }
 
 /// Tables 1 and 2: load the manifest of `items` or draw one with `draw` (its clip count and seeds from `items`), run
-/// every method over it (long items through the two-stage rollout with `overlap_source`), and write the manifest,
-/// per-clip parquet, summaries, the RMSE-vs-K_x plot when `plot`, and the predictions and strips of the first items.
+/// every method over it (long items through the two-stage rollout with `overlap`, which the summary then names), and
+/// write the manifest, per-clip parquet, summaries, the RMSE-vs-K_x plot when `plot`, and the predictions and strips
+/// of the first items.
 pub(crate) fn run_completion(
     opts: &TableOptions,
     layout: &Layout,
     items: &Items,
     draw: ManifestOptions,
-    overlap_source: OverlapSource,
+    overlap: Option<OverlapSource>,
     plot: bool,
 ) -> Result<TableReport> {
     if opts.methods.is_empty() {
@@ -342,7 +343,7 @@ pub(crate) fn run_completion(
         &source,
         &manifest,
         &opts.methods,
-        overlap_source,
+        overlap.unwrap_or_default(),
         opts.export_items,
         opts.progress,
         opts.captions,
@@ -351,7 +352,8 @@ pub(crate) fn run_completion(
     write_clip_parquet(&records, &parquet)?;
     files.push(parquet);
     let rows = summarize(&records, layout)?;
-    let header = header_for(opts, &manifest_path);
+    let mut header = header_for(opts, &manifest_path);
+    header.notes.extend(overlap.map(|o| o.describe().to_string()));
     let md = markdown(layout, &rows, &header);
     write_text(&opts.out.join("summary.md"), &md, &mut files)?;
     write_text(&opts.out.join("summary.csv"), &csv(layout, &rows, &header), &mut files)?;

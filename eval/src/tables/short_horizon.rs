@@ -7,7 +7,6 @@ use any4d_data::keyframes::Placement;
 use super::summary::{Layout, MetricColumn, col, pooled, pooled_scaled};
 use super::{Items, TableOptions, TableReport, run_completion};
 use crate::protocol::ManifestOptions;
-use crate::rollout::OverlapSource;
 
 /// Title and columns of P-Table 1.
 pub const LAYOUT: Layout = Layout {
@@ -103,7 +102,7 @@ impl ShortHorizon {
         };
         let scenes = any4d_data::store::Store::open(&opts.data)?.has_scenes();
         let layout = if scenes { &LAYOUT_SCENES } else { &LAYOUT };
-        run_completion(opts, layout, &self.items, draw, OverlapSource::GroundTruth, true)
+        run_completion(opts, layout, &self.items, draw, None, true)
     }
 }
 

@@ -116,6 +116,9 @@ pub struct TableHeader {
     pub checkpoints: BTreeMap<String, String>,
     /// Backend and device (P-Table 4).
     pub device: String,
+    /// Protocol choices a reader must know to compare the table with the paper's (one line each).
+    #[serde(default)]
+    pub notes: Vec<String>,
 }
 
 /// Mean and 95 % confidence half-width over seeds (`None` with one seed).
@@ -368,6 +371,9 @@ fn header_lines(title: &str, header: &TableHeader, seeds: usize) -> String {
     }
     if !header.device.is_empty() {
         let _ = writeln!(s, "- backend / device: {}", header.device);
+    }
+    for note in &header.notes {
+        let _ = writeln!(s, "- {note}");
     }
     let ci = if seeds > 1 {
         format!("mean over clips per seed, then mean ± 95 % CI over {seeds} seeds (Student t, n − 1 dof, sample sd)")
