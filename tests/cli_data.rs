@@ -446,3 +446,49 @@ fn rigged_characters_add_to_a_store_and_their_choices_are_checked() {
         assert!(!out.status.success() && stderr.contains(needle), "{extra:?}: {stderr}");
     }
 }
+
+/// `data render` draws a store clip in the scene stored with it: the same clip with and without `--scenes` renders
+/// differently (the furniture), and `--scene` is refused beside a store.
+#[test]
+fn render_draws_a_store_clips_scene() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sheet = |name: &str, scenes: bool| {
+        let store = tmp.path().join(name);
+        let mut args = vec![
+            "data",
+            "synth",
+            "--out",
+            p(&store),
+            "--clips",
+            "2",
+            "--seed",
+            "5",
+            "--p",
+            "16",
+        ];
+        if scenes {
+            args.push("--scenes");
+        }
+        let out = any4d(&args);
+        assert!(out.status.success(), "{:?}", text(&out));
+        let png = tmp.path().join(format!("{name}.png"));
+        let out = any4d(&["data", "render", p(&store), "--out", p(&png)]);
+        assert!(out.status.success(), "{:?}", text(&out));
+        (store, image::open(&png).unwrap().to_rgb8())
+    };
+    let (_, bare) = sheet("bare", false);
+    let (scened, in_scene) = sheet("scened", true);
+    assert_eq!(
+        bare.dimensions(),
+        in_scene.dimensions(),
+        "the clip and its framing are the same"
+    );
+    let differ = bare.pixels().zip(in_scene.pixels()).filter(|(a, b)| a != b).count();
+    assert!(differ > 100, "the scene should show: {differ} pixels differ");
+    let obj = tmp.path().join("floor.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 0 1\nf 1 2 3\n").unwrap();
+    let png = tmp.path().join("x.png");
+    let out = any4d(&["data", "render", p(&scened), "--scene", p(&obj), "--out", p(&png)]);
+    let (_, err) = text(&out);
+    assert!(!out.status.success() && err.contains("scene stored with it"), "{err}");
+}

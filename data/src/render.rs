@@ -1,5 +1,6 @@
 //! Contact sheets of clips: a z-buffered triangle rasteriser with flat Lambert shading and
-//! a fixed orthographic camera framed on all frames, so that motion shows as movement between tiles.
+//! a fixed orthographic camera framed on all frames, so that motion shows as movement between tiles; a clip's static
+//! scene, when it has one, drawn in grey around it with the same depth test.
 
 use std::path::Path;
 
@@ -7,6 +8,7 @@ use image::{ImageFormat, Rgb, RgbImage};
 
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
+use crate::scene::Scene;
 
 type V3 = [f32; 3];
 
@@ -155,21 +157,25 @@ pub fn rasterize_frame(vertices: &[V3], faces: &[[u32; 3]], view: &View, size: u
         ..RenderOptions::default()
     };
     let mut img = RgbImage::from_pixel(size, size, Rgb(opts.background));
-    draw_frame(
-        &mut img,
-        (0, 0),
-        size,
+    let part = Part {
         vertices,
         faces,
-        view,
-        Shading::Lambert(opts.color),
-    )?;
+        shading: Shading::Lambert(opts.color),
+    };
+    draw_frame(&mut img, (0, 0), size, &[part], view)?;
     Ok(img)
 }
 
 /// A grid of all frames of `clip` (row-major, `opts.columns` per row), framed on the bounding box of all frames.
 /// Errors if the clip is invalid ([`Clip::validate`]).
 pub fn contact_sheet(clip: &Clip, opts: &RenderOptions) -> Result<RgbImage> {
+    contact_sheet_in(clip, None, opts)
+}
+
+/// [`contact_sheet`] with `scene` (in the clip's coordinates) drawn in grey in every tile, then the clip over it: a
+/// wall or ceiling between the camera and the clip never hides it (the viewer's pages show true occlusion). The
+/// framing stays the clip's, and the scene's floor replaces the ground shadow.
+pub fn contact_sheet_in(clip: &Clip, scene: Option<&Scene>, opts: &RenderOptions) -> Result<RgbImage> {
     clip.validate()?;
     let w = opts.width_per_frame.max(8);
     let cols = opts.columns.clamp(1, clip.frames);
@@ -184,29 +190,29 @@ pub fn contact_sheet(clip: &Clip, opts: &RenderOptions) -> Result<RgbImage> {
         .fold(f32::INFINITY, f32::min);
     for f in 0..clip.frames {
         let origin = ((f % cols) as u32 * w, (f / cols) as u32 * w);
-        if opts.ground == Ground::Shadow {
+        if opts.ground == Ground::Shadow && scene.is_none() {
             let flat: Vec<V3> = clip.frame(f).iter().map(|p| [p[0], ground, p[2]]).collect();
-            draw_frame(
-                &mut img,
-                origin,
-                w,
-                &flat,
-                &clip.faces,
-                &view,
-                Shading::Flat([215, 215, 215]),
-            )
-            .map_err(|e| e.at(&clip.source))?;
+            let shadow = Part {
+                vertices: &flat,
+                faces: &clip.faces,
+                shading: Shading::Flat([215, 215, 215]),
+            };
+            draw_frame(&mut img, origin, w, &[shadow], &view).map_err(|e| e.at(&clip.source))?;
         }
-        draw_frame(
-            &mut img,
-            origin,
-            w,
-            clip.frame(f),
-            &clip.faces,
-            &view,
-            Shading::Lambert(opts.color),
-        )
-        .map_err(|e| e.at(&clip.source))?;
+        if let Some(scene) = scene {
+            let part = Part {
+                vertices: &scene.vertices,
+                faces: &scene.faces,
+                shading: Shading::Lambert(SCENE_COLOUR),
+            };
+            draw_frame(&mut img, origin, w, &[part], &view)?;
+        }
+        let part = Part {
+            vertices: clip.frame(f),
+            faces: &clip.faces,
+            shading: Shading::Lambert(opts.color),
+        };
+        draw_frame(&mut img, origin, w, &[part], &view).map_err(|e| e.at(&clip.source))?;
         // Tile border.
         for i in 0..w {
             for (x, y) in [(i, 0), (0, i), (i, w - 1), (w - 1, i)] {
@@ -220,34 +226,44 @@ pub fn contact_sheet(clip: &Clip, opts: &RenderOptions) -> Result<RgbImage> {
     Ok(img)
 }
 
-/// Render [`contact_sheet`] and write it as PNG to `path`; errors name the path.
-pub fn render_contact_sheet(clip: &Clip, path: impl AsRef<Path>, opts: &RenderOptions) -> Result<()> {
+/// Render [`contact_sheet_in`] and write it as PNG to `path`; errors name the path.
+pub fn render_contact_sheet(
+    clip: &Clip,
+    scene: Option<&Scene>,
+    path: impl AsRef<Path>,
+    opts: &RenderOptions,
+) -> Result<()> {
     let path = path.as_ref();
-    let img = contact_sheet(clip, opts)?;
+    let img = contact_sheet_in(clip, scene, opts)?;
     img.save_with_format(path, ImageFormat::Png)
         .map_err(|e| DataError::new(path, "png", e.to_string()))
 }
 
-/// Z-buffered flat-Lambert rasterisation of one frame into the `size`-pixel square tile at `origin`.
-fn draw_frame(
-    img: &mut RgbImage,
-    origin: (u32, u32),
-    size: u32,
-    vertices: &[V3],
-    faces: &[[u32; 3]],
-    view: &View,
+/// Grey of a scene's surfaces at full light.
+const SCENE_COLOUR: [u8; 3] = [175, 178, 185];
+
+/// One triangle mesh of a tile and how it is shaded.
+struct Part<'a> {
+    vertices: &'a [V3],
+    faces: &'a [[u32; 3]],
     shading: Shading,
-) -> Result<()> {
-    if let Some((i, f)) = faces
-        .iter()
-        .enumerate()
-        .find(|(_, f)| f.iter().any(|&v| v as usize >= vertices.len()))
-    {
-        return Err(DataError::new(
-            "render",
-            "faces",
-            format!("face {i} = {f:?} indexes past the {} vertices", vertices.len()),
-        ));
+}
+
+/// Z-buffered flat-Lambert rasterisation of `parts` (one depth buffer for all) into the `size`-pixel square tile at
+/// `origin`, over what the tile already shows.
+fn draw_frame(img: &mut RgbImage, origin: (u32, u32), size: u32, parts: &[Part<'_>], view: &View) -> Result<()> {
+    for Part { vertices, faces, .. } in parts {
+        if let Some((i, f)) = faces
+            .iter()
+            .enumerate()
+            .find(|(_, f)| f.iter().any(|&v| v as usize >= vertices.len()))
+        {
+            return Err(DataError::new(
+                "render",
+                "faces",
+                format!("face {i} = {f:?} indexes past the {} vertices", vertices.len()),
+            ));
+        }
     }
     let light = unit([
         view.toward[0] + 0.6 * view.up[0] - 0.4 * view.right[0],
@@ -260,48 +276,55 @@ fn draw_frame(
         let sy = (dot(p, view.up) - view.center[1]) / view.half;
         [px + sx * px, px - sy * px, dot(p, view.toward)]
     };
-    let screen: Vec<V3> = vertices.iter().map(|&p| project(p)).collect();
     let mut depth = vec![f32::NEG_INFINITY; (size * size) as usize];
-    for f in faces {
-        let (a, b, c) = (screen[f[0] as usize], screen[f[1] as usize], screen[f[2] as usize]);
-        if !a.iter().chain(&b).chain(&c).all(|v| v.is_finite()) {
-            continue;
-        }
-        let area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
-        if area.abs() < 1e-9 {
-            continue;
-        }
-        let (wa, wb, wc) = (
-            vertices[f[0] as usize],
-            vertices[f[1] as usize],
-            vertices[f[2] as usize],
-        );
-        let n = unit(cross(sub(wb, wa), sub(wc, wa)));
-        let rgb = match shading {
-            // Two-sided Lambert plus ambient.
-            Shading::Lambert(color) => {
-                let shade = 0.28 + 0.72 * dot(n, light).abs();
-                Rgb(color.map(|ch| (ch as f32 * shade).round().clamp(0.0, 255.0) as u8))
+    for &Part {
+        vertices,
+        faces,
+        shading,
+    } in parts
+    {
+        let screen: Vec<V3> = vertices.iter().map(|&p| project(p)).collect();
+        for f in faces {
+            let (a, b, c) = (screen[f[0] as usize], screen[f[1] as usize], screen[f[2] as usize]);
+            if !a.iter().chain(&b).chain(&c).all(|v| v.is_finite()) {
+                continue;
             }
-            Shading::Flat(color) => Rgb(color),
-        };
-        let x0 = a[0].min(b[0]).min(c[0]).floor().max(0.0) as u32;
-        let x1 = (a[0].max(b[0]).max(c[0]).ceil().min(size as f32 - 1.0)).max(-1.0) as i64;
-        let y0 = a[1].min(b[1]).min(c[1]).floor().max(0.0) as u32;
-        let y1 = (a[1].max(b[1]).max(c[1]).ceil().min(size as f32 - 1.0)).max(-1.0) as i64;
-        for y in y0 as i64..=y1 {
-            for x in x0 as i64..=x1 {
-                let (qx, qy) = (x as f32 + 0.5, y as f32 + 0.5);
-                let edge = |p: V3, q: V3| ((q[0] - p[0]) * (qy - p[1]) - (q[1] - p[1]) * (qx - p[0])) / area;
-                let (l0, l1, l2) = (edge(b, c), edge(c, a), edge(a, b));
-                if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
-                    continue;
+            let area = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+            if area.abs() < 1e-9 {
+                continue;
+            }
+            let (wa, wb, wc) = (
+                vertices[f[0] as usize],
+                vertices[f[1] as usize],
+                vertices[f[2] as usize],
+            );
+            let n = unit(cross(sub(wb, wa), sub(wc, wa)));
+            let rgb = match shading {
+                // Two-sided Lambert plus ambient.
+                Shading::Lambert(color) => {
+                    let shade = 0.28 + 0.72 * dot(n, light).abs();
+                    Rgb(color.map(|ch| (ch as f32 * shade).round().clamp(0.0, 255.0) as u8))
                 }
-                let z = l0 * a[2] + l1 * b[2] + l2 * c[2];
-                let k = (y as u32 * size + x as u32) as usize;
-                if z > depth[k] {
-                    depth[k] = z;
-                    img.put_pixel(origin.0 + x as u32, origin.1 + y as u32, rgb);
+                Shading::Flat(color) => Rgb(color),
+            };
+            let x0 = a[0].min(b[0]).min(c[0]).floor().max(0.0) as u32;
+            let x1 = (a[0].max(b[0]).max(c[0]).ceil().min(size as f32 - 1.0)).max(-1.0) as i64;
+            let y0 = a[1].min(b[1]).min(c[1]).floor().max(0.0) as u32;
+            let y1 = (a[1].max(b[1]).max(c[1]).ceil().min(size as f32 - 1.0)).max(-1.0) as i64;
+            for y in y0 as i64..=y1 {
+                for x in x0 as i64..=x1 {
+                    let (qx, qy) = (x as f32 + 0.5, y as f32 + 0.5);
+                    let edge = |p: V3, q: V3| ((q[0] - p[0]) * (qy - p[1]) - (q[1] - p[1]) * (qx - p[0])) / area;
+                    let (l0, l1, l2) = (edge(b, c), edge(c, a), edge(a, b));
+                    if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
+                        continue;
+                    }
+                    let z = l0 * a[2] + l1 * b[2] + l2 * c[2];
+                    let k = (y as u32 * size + x as u32) as usize;
+                    if z > depth[k] {
+                        depth[k] = z;
+                        img.put_pixel(origin.0 + x as u32, origin.1 + y as u32, rgb);
+                    }
                 }
             }
         }
@@ -438,14 +461,68 @@ mod tests {
     }
 
     #[test]
+    fn a_scene_is_drawn_around_the_clip_and_never_over_it() {
+        // A wall behind the moving square (z = −1) and one in front of it (z = 2), larger than the framed region:
+        // every tile's background turns grey, while the square keeps its colour over both.
+        let clip = quad_clip();
+        let wall = Scene::new(
+            vec![
+                [-5.0, -5.0, -1.0],
+                [5.0, -5.0, -1.0],
+                [5.0, 5.0, -1.0],
+                [-5.0, 5.0, -1.0],
+                [-5.0, -5.0, 2.0],
+                [5.0, -5.0, 2.0],
+                [5.0, 5.0, 2.0],
+            ],
+            vec![[0, 1, 2], [0, 2, 3], [4, 5, 6]],
+            Path::new("wall.obj"),
+        )
+        .unwrap();
+        let opts = RenderOptions {
+            width_per_frame: 64,
+            camera: Camera::Front,
+            labels: FrameLabels::None,
+            ..RenderOptions::default()
+        };
+        let bare = contact_sheet(&clip, &opts).unwrap();
+        let walled = contact_sheet_in(&clip, Some(&wall), &opts).unwrap();
+        let bg = Rgb(opts.background);
+        let corner = (5, 60);
+        assert_eq!(bare.get_pixel(corner.0, corner.1), &bg);
+        let grey = walled.get_pixel(corner.0, corner.1);
+        assert!(
+            grey != &bg && grey.0[0].abs_diff(grey.0[2]) < 30,
+            "scene grey, got {grey:?}"
+        );
+        // The square's pixels (orange, red well above blue) are the same with the wall behind it.
+        let orange = |img: &RgbImage| {
+            img.enumerate_pixels()
+                .filter(|(_, _, p)| u16::from(p.0[0]) > u16::from(p.0[2]) + 60)
+                .map(|(x, y, _)| (x, y))
+                .collect::<Vec<_>>()
+        };
+        assert!(!orange(&bare).is_empty());
+        assert_eq!(orange(&bare), orange(&walled), "the square is drawn over its scene");
+        let broken = Scene {
+            vertices: vec![[0.0; 3]; 3],
+            faces: vec![[0, 1, 7]],
+        };
+        assert_eq!(
+            contact_sheet_in(&clip, Some(&broken), &opts).unwrap_err().field,
+            "faces"
+        );
+    }
+
+    #[test]
     fn png_is_written_and_bad_path_is_named() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("sheet.png");
-        render_contact_sheet(&quad_clip(), &path, &RenderOptions::default()).unwrap();
+        render_contact_sheet(&quad_clip(), None, &path, &RenderOptions::default()).unwrap();
         let back = image::open(&path).unwrap();
         assert_eq!((back.width(), back.height()), (320, 160));
         let bad = dir.path().join("missing").join("x.png");
-        let e = render_contact_sheet(&quad_clip(), &bad, &RenderOptions::default()).unwrap_err();
+        let e = render_contact_sheet(&quad_clip(), None, &bad, &RenderOptions::default()).unwrap_err();
         assert!(e.path.contains("missing"), "{e}");
     }
 }

@@ -211,6 +211,10 @@ pub struct RenderArgs {
     /// Take (animation) of a clip file, by name or index (default: the first).
     #[arg(long)]
     pub take: Option<String>,
+    /// A static scene (`.obj`, in the clip's coordinates) drawn in grey around a clip file; a store clip is drawn in
+    /// the scene stored with it.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
 }
 
 /// Exit code of `import` when some sources were rejected (the store is still written).
@@ -371,7 +375,10 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
 }
 
 fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
-    let clip = if a.path.is_dir() && a.path.join(store::CLIPS_FILE).exists() {
+    let (clip, scene) = if a.path.is_dir() && a.path.join(store::CLIPS_FILE).exists() {
+        if a.scene.is_some() {
+            bail!("--scene draws around a clip file; a store clip is drawn in the scene stored with it");
+        }
         let store = Store::open(&a.path)?;
         let i = match &a.clip {
             Some(id) => store
@@ -380,7 +387,8 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
             None if store.is_empty() => bail!("{}: the store holds no clip", a.path.display()),
             None => 0,
         };
-        store.get(i)?.clip
+        let stored = store.get(i)?;
+        (stored.clip, stored.scene)
     } else {
         if a.clip.is_some() {
             bail!(
@@ -388,9 +396,12 @@ fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
                 a.path.display()
             );
         }
-        read_file(&a.path, a.take.as_deref())?
+        (
+            read_file(&a.path, a.take.as_deref())?,
+            super::view::read_scene(a.scene.as_deref())?,
+        )
     };
-    render_contact_sheet(&clip, &a.out, &RenderOptions::default())?;
+    render_contact_sheet(&clip, scene.as_ref(), &a.out, &RenderOptions::default())?;
     println!(
         "{} ({}) → {}: {:?}",
         clip.id,
