@@ -191,6 +191,7 @@ fn table1_of_a_store_with_scenes_reports_the_scene_metrics() {
     opts.methods = vertex_methods(&[MethodKind::Lerp]).unwrap();
     opts.split = any4d_eval::protocol::EvalSplit::All;
     opts.progress = false;
+    opts.export_items = 1;
     let table1 = Protocol::ShortHorizon(ShortHorizon {
         items: Items {
             clips: 2,
@@ -214,4 +215,7 @@ fn table1_of_a_store_with_scenes_reports_the_scene_metrics() {
     }
     let csv = std::fs::read_to_string(out.join("summary.csv")).unwrap();
     assert!(csv.contains("scene_collision_frames_mean"), "{csv}");
+    // The exported item's viewer pages draw its scene.
+    let page = std::fs::read_to_string(out.join("view").join("item000_k0_seed42.html")).unwrap();
+    assert!(page.contains("\"scene\":{\"faces\""), "no scene on the item's page");
 }

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use any4d_data::io::write_atomic;
 use any4d_data::keyframes::Placement;
+use any4d_data::scene::Scene;
 use any4d_data::{Clip, DataError};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -365,7 +366,11 @@ pub(crate) fn run_completion(
     for item in 0..opts.export_items.min(manifest.clips.len()) {
         let (gt, _) = source.item(&manifest.clips[item], manifest.frames)?;
         let preds: Vec<&Prediction> = kept.iter().filter(|p| p.item == item).collect();
-        files.extend(write_item_outputs(&gt, &preds, &opts.out)?);
+        let scene = match source.has_scenes() {
+            true => source.item_scene(&manifest.clips[item])?,
+            false => None,
+        };
+        files.extend(write_item_outputs(&gt, scene.as_ref(), &preds, &opts.out)?);
     }
     Ok(TableReport {
         title: layout.title,
@@ -376,8 +381,9 @@ pub(crate) fn run_completion(
 }
 
 /// PNG strips (`strips/`) and exported sequences (`predictions/`: `.bin`, OBJ folder, `.glb`) of one item, one per
-/// (method, keyframe set, seed). File stems: `item<i>_<method>_k<K_x>_seed<s>`.
-fn write_item_outputs(gt: &Clip, preds: &[&Prediction], out: &Path) -> Result<Vec<PathBuf>> {
+/// (method, keyframe set, seed), and its viewer pages, drawn in the item's `scene` when it has one. File stems:
+/// `item<i>_<method>_k<K_x>_seed<s>`.
+fn write_item_outputs(gt: &Clip, scene: Option<&Scene>, preds: &[&Prediction], out: &Path) -> Result<Vec<PathBuf>> {
     let strips = out.join("strips");
     std::fs::create_dir_all(&strips).map_err(|e| DataError::io(&strips, e))?;
     let mut files = Vec::new();
@@ -406,13 +412,13 @@ fn write_item_outputs(gt: &Clip, preds: &[&Prediction], out: &Path) -> Result<Ve
             &ExportFormat::ALL,
         )?);
     }
-    files.extend(write_item_views(gt, preds, out)?);
+    files.extend(write_item_views(gt, scene, preds, out)?);
     Ok(files)
 }
 
 /// One viewer page (`view/item<i>_k<K_x>_seed<s>.html`) per keyframe set and seed of an item: the ground truth and
-/// every method's prediction side by side, coloured by their distance to it, with their scores.
-fn write_item_views(gt: &Clip, preds: &[&Prediction], out: &Path) -> Result<Vec<PathBuf>> {
+/// every method's prediction side by side, coloured by their distance to it, with their scores, in the item's scene.
+fn write_item_views(gt: &Clip, scene: Option<&Scene>, preds: &[&Prediction], out: &Path) -> Result<Vec<PathBuf>> {
     let mut groups: Vec<(&[usize], u64, Vec<&Prediction>)> = Vec::new();
     for p in preds {
         match groups
@@ -454,7 +460,7 @@ fn write_item_views(gt: &Clip, preds: &[&Prediction], out: &Path) -> Result<Vec<
             ground_truth: true,
             panels,
             fps: view::DEFAULT_FPS,
-            scene: None,
+            scene: scene.cloned(),
         };
         let path = out
             .join("view")
