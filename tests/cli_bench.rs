@@ -310,3 +310,35 @@ fn acap_benchmark_prints_our_rows_and_refuses_bad_sizes() {
         assert!(stderr.contains(needle), "{flag} {value}: {stderr}");
     }
 }
+
+#[test]
+fn scene_benchmark_prints_our_rows_and_refuses_empty_sizes() {
+    let out = any4d(&[
+        "bench",
+        "scene",
+        "--clips",
+        "1",
+        "--keyframes",
+        "2",
+        "--anchors",
+        "16",
+        "--repeat",
+        "1",
+        "--python",
+        "/nonexistent/python3",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    for row in ["| ours, 1 thread |", "reference skipped"] {
+        assert!(stdout.contains(row), "{row} missing from {stdout}");
+    }
+    let ours = stdout.lines().find(|l| l.starts_with("| ours, 1 thread")).unwrap();
+    let ms: f64 = ours.split('|').nth(2).unwrap().trim().parse().unwrap();
+    assert!(ms > 0.0, "{ours}");
+    for flag in ["--clips", "--keyframes", "--anchors", "--repeat"] {
+        let out = any4d(&["bench", "scene", flag, "0"]);
+        let (stdout, stderr) = text(&out);
+        assert!(!out.status.success(), "{flag} 0: {stdout}");
+        assert!(stderr.contains(flag), "{flag} 0: {stderr}");
+    }
+}

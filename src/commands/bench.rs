@@ -32,6 +32,131 @@ pub enum BenchCmd {
     /// Procedural clips per second on one thread: the rigged characters against the shape families, same seed,
     /// same frames and vertex range, alternating.
     Synth(SynthBenchArgs),
+    /// Scene features per clip (the occupancy grid (S1) and the keyframes' basis-point offsets (S2)) against the
+    /// numpy reference, on procedural scene clips.
+    Scene(SceneBenchArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct SceneBenchArgs {
+    /// Procedural scene clips (rigged characters in furnished rooms).
+    #[arg(long, default_value_t = 4)]
+    pub clips: usize,
+    /// Keyframes per clip whose anchors get offsets (S2).
+    #[arg(long, default_value_t = 5)]
+    pub keyframes: usize,
+    /// Anchor vertices per keyframe (the VAE's P).
+    #[arg(long, default_value_t = 512)]
+    pub anchors: usize,
+    /// Timed passes over the clips; the fastest is reported, as the reference does.
+    #[arg(long, default_value_t = 3)]
+    pub repeat: usize,
+    /// The numpy reference script.
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/scene_features_reference.py"))]
+    pub script: PathBuf,
+    /// Python interpreter for the reference.
+    #[arg(long, default_value = "python3")]
+    pub python: PathBuf,
+}
+
+/// What the scene reference prints.
+#[derive(serde::Deserialize)]
+struct SceneReference {
+    clips: usize,
+    seconds_per_clip: f64,
+}
+
+/// `any4d bench scene`: (S1) + (S2) of every clip on one thread and on the pool, then the reference on one core.
+fn bench_scene(args: SceneBenchArgs) -> anyhow::Result<ExitCode> {
+    use any4d_data::scene::features::{GridSpec, bps_offsets, occupancy_grid};
+    use any4d_data::synth::{Family, SynthConfig, generate_scened};
+    if args.repeat == 0 || args.clips == 0 || args.keyframes == 0 || args.anchors == 0 {
+        bail!("--clips, --keyframes, --anchors and --repeat must be at least 1");
+    }
+    let cfg = SynthConfig {
+        clips: args.clips,
+        family: Family::Rigged(Default::default()),
+        scenes: true,
+        ..SynthConfig::default()
+    };
+    cfg.validate()?;
+    let spec = GridSpec::default();
+    // Per clip: its scene, frame 0's centre and the anchors of `keyframes` frames spread over the clip.
+    let mut inputs = Vec::with_capacity(args.clips);
+    for i in 0..args.clips {
+        let (clip, scene) = generate_scened(&cfg, i)?;
+        let scene = scene.context("a procedural scene clip without its scene")?;
+        let (lo, hi) = any4d_data::preprocess::bounds(clip.frame(0));
+        let center: [f32; 3] = std::array::from_fn(|a| (lo[a] + hi[a]) / 2.0);
+        let points: Vec<[f32; 3]> = (0..args.keyframes)
+            .flat_map(|k| {
+                let f = k * (clip.frames - 1) / (args.keyframes.max(2) - 1).max(1);
+                let frame = clip.frame(f.min(clip.frames - 1));
+                (0..args.anchors).map(move |p| frame[p * frame.len() / args.anchors])
+            })
+            .collect();
+        inputs.push((scene, center, points));
+    }
+    let run = || -> anyhow::Result<f64> {
+        let mut best = f64::INFINITY;
+        for _ in 0..args.repeat {
+            let t0 = std::time::Instant::now();
+            for (scene, center, points) in &inputs {
+                occupancy_grid(scene, *center, &spec)?;
+                bps_offsets(scene, points)?;
+            }
+            best = best.min(t0.elapsed().as_secs_f64() / inputs.len() as f64);
+        }
+        Ok(best)
+    };
+    let threads = rayon::current_num_threads();
+    let t1 = rayon::ThreadPoolBuilder::new().num_threads(1).build()?.install(run)?;
+    let tn = run()?;
+    let triangles = inputs.iter().map(|(s, _, _)| s.faces.len()).sum::<usize>() as f64 / inputs.len() as f64;
+    println!(
+        "scene bench: {} procedural scene clips ({triangles:.0} scene triangles on average), a {}×{}×{} grid and \
+         {} keyframes × {} anchors per clip, fastest of {}",
+        args.clips, spec.cells[0], spec.cells[1], spec.cells[2], args.keyframes, args.anchors, args.repeat
+    );
+    println!("| implementation | ms per clip |\n|---|---|");
+    println!("| ours, 1 thread | {:.2} |", 1e3 * t1);
+    println!("| ours, {threads} threads | {:.2} |", 1e3 * tn);
+    let file = tempfile::NamedTempFile::new().context("creating the clips file of the reference")?;
+    let clips: Vec<serde_json::Value> = inputs
+        .iter()
+        .map(|(scene, center, points)| {
+            serde_json::json!({
+                "vertices": scene.vertices, "faces": scene.faces, "cells": spec.cells, "cell": spec.cell,
+                "center": center, "points": points,
+            })
+        })
+        .collect();
+    std::fs::write(file.path(), serde_json::json!({ "clips": clips }).to_string())
+        .context("writing the clips file of the reference")?;
+    let reference = PythonReference {
+        python: &args.python,
+        script: &args.script,
+        args: vec![
+            "--bench".into(),
+            file.path().display().to_string(),
+            "--repeat".into(),
+            args.repeat.to_string(),
+        ],
+        threads: 1,
+    };
+    match reference.json::<SceneReference>()? {
+        Ok(r) if r.clips != inputs.len() => bail!("the reference read {} clips, not {}", r.clips, inputs.len()),
+        Ok(r) => {
+            println!("| numpy, 1 core | {:.2} |", 1e3 * r.seconds_per_clip);
+            println!(
+                "speed-up over the reference: {:.1}× (1 thread), {:.1}× ({threads} threads)",
+                r.seconds_per_clip / t1,
+                r.seconds_per_clip / tn
+            );
+        }
+        Err(Skipped(why)) => println!("reference skipped: {why}"),
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 #[derive(Args, Debug)]
@@ -193,5 +318,6 @@ pub fn exec(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
         BenchCmd::Sample(args) => super::timing::bench_sample(args),
         BenchCmd::Acap(args) => bench_acap(args),
         BenchCmd::Synth(args) => bench_synth(args),
+        BenchCmd::Scene(args) => bench_scene(args),
     }
 }

@@ -9,6 +9,9 @@ use std::path::Path;
 
 use crate::error::{DataError, Result};
 
+pub mod features;
+pub mod geometry;
+
 /// Most triangles a scene may have.
 pub const MAX_SCENE_TRIANGLES: usize = 1 << 16;
 
