@@ -25,7 +25,22 @@ pub struct PythonReference<'a> {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Skipped(pub String);
 
-impl PythonReference<'_> {
+impl<'a> PythonReference<'a> {
+    /// A reference's benchmark mode on one core: `script --bench INPUT --repeat REPEAT`.
+    pub fn bench(python: &'a Path, script: &'a Path, input: &Path, repeat: usize) -> Self {
+        PythonReference {
+            python,
+            script,
+            args: vec![
+                "--bench".into(),
+                input.display().to_string(),
+                "--repeat".into(),
+                repeat.to_string(),
+            ],
+            threads: 1,
+        }
+    }
+
     /// Runs the script and returns the last line it printed on stdout (the references print one JSON line).
     /// `Ok(Err(Skipped))` when it cannot run here: no interpreter, no script, or a missing package (exit code
     /// [`EXIT_MISSING_PACKAGE`] or Python's `No module named`). Any other failure is an error naming the script and

@@ -133,17 +133,7 @@ fn bench_scene(args: SceneBenchArgs) -> anyhow::Result<ExitCode> {
         .collect();
     std::fs::write(file.path(), serde_json::json!({ "clips": clips }).to_string())
         .context("writing the clips file of the reference")?;
-    let reference = PythonReference {
-        python: &args.python,
-        script: &args.script,
-        args: vec![
-            "--bench".into(),
-            file.path().display().to_string(),
-            "--repeat".into(),
-            args.repeat.to_string(),
-        ],
-        threads: 1,
-    };
+    let reference = PythonReference::bench(&args.python, &args.script, file.path(), args.repeat);
     match reference.json::<SceneReference>()? {
         Ok(r) if r.clips != inputs.len() => bail!("the reference read {} clips, not {}", r.clips, inputs.len()),
         Ok(r) => {
@@ -276,17 +266,7 @@ fn bench_acap(args: AcapBenchArgs) -> anyhow::Result<ExitCode> {
         serde_json::json!({ "faces": clip.faces, "frames": frames }).to_string(),
     )
     .context("writing the clip file of the reference")?;
-    let reference = PythonReference {
-        python: &args.python,
-        script: &args.script,
-        args: vec![
-            "--bench".into(),
-            file.path().display().to_string(),
-            "--repeat".into(),
-            args.repeat.to_string(),
-        ],
-        threads: 1,
-    };
+    let reference = PythonReference::bench(&args.python, &args.script, file.path(), args.repeat);
     match reference.json::<AcapReference>()? {
         Ok(r) => {
             if r.vertices != clip.n_vertices {
