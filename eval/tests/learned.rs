@@ -361,6 +361,7 @@ fn sample_latents_match_a_hand_wired_sample_mmdit() {
         z0: st.standardize_shape(enc.z0.clone()),
         z_key: st.standardize_motion(enc.mu.clone()).swap_dims(1, 2),
         mask: Tensor::from_data(TensorData::new(vec![1.0f32, 0.0, 0.0, 1.0], [1, T]), &device),
+        scene: None,
     };
     let text = ByteText.encode(&["flag".to_string()], &device).unwrap().states;
     let keep = Tensor::ones([1], &device);

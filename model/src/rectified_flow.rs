@@ -12,7 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::anchor::{anchor_of, lift};
 use crate::mmdit::{
-    Anchor, KeyframeConditioning, Mmdit, Prediction, assemble_input, build_input, replace_keyframes, split_output,
+    Anchor, KeyframeConditioning, Mmdit, Prediction, SceneInput, assemble_input, build_input, replace_keyframes,
+    split_output,
 };
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -239,6 +240,8 @@ pub struct RfBatch {
     pub text: Tensor<3>,
     /// 1 = keep the caption, 0 = dropped (CFG training), `[B]`.
     pub keep_txt: Tensor<1>,
+    /// The clips' scenes, for a network that reads them (docs/method.md §4.12); `None` = no scene.
+    pub scene: Option<SceneInput>,
 }
 
 /// Options of the RF objective.
@@ -293,7 +296,13 @@ pub fn rf_training_loss(
         ), // (R3)
     };
     let out = split_output(
-        model.forward(input, batch.text.clone(), batch.keep_txt.clone(), tau.clone()),
+        model.forward_in_scene(
+            input,
+            batch.text.clone(),
+            batch.keep_txt.clone(),
+            tau.clone(),
+            batch.scene.as_ref(),
+        ),
         frames,
     ); // (R4)
     let v = output_velocity(model.prediction(), out, x_state, tau, DATA_PREDICTION_MIN_GAP);
@@ -369,6 +378,8 @@ pub struct Conditioning {
     pub z_key: Tensor<4>,
     /// Keyframe mask m, `[B, T]`, 1 = observed.
     pub mask: Tensor<2>,
+    /// The clips' scenes, for a network that reads them (docs/method.md §4.12); `None` = no scene.
+    pub scene: Option<SceneInput>,
 }
 
 /// The network input at one evaluation: (R3), (R7) or (R9) depending on the mode.
@@ -498,7 +509,8 @@ pub fn cfg_combine(v_cond: Tensor<3>, v_uncond: Tensor<3>, guidance: f64) -> Ten
 
 /// The MMDiT as a velocity closure for [`sample`], with CFG. For w = 1 only the conditional branch runs (keep_txt =
 /// `keep`: 1, or 0 for a caption with no text, [`crate::text::caption_keep`]); otherwise both branches run as one
-/// batch of 2B, the unconditional one with keep_txt = 0 and the same input (same z₀, keyframes and mask).
+/// batch of 2B, the unconditional one with keep_txt = 0 and the same input (same z₀, keyframes, mask and scene:
+/// guidance is on the caption only).
 ///
 /// # Shapes
 /// - text: `[B, L, D_txt]`; keep: `[B]`; the closure maps `[B, P, in]`, `[B]` to `[B, P, T·C]`
@@ -507,19 +519,22 @@ pub fn mmdit_velocity(
     text: Tensor<3>,
     keep: Tensor<1>,
     guidance: f64,
+    scene: Option<SceneInput>,
 ) -> impl FnMut(Tensor<3>, Tensor<1>) -> Tensor<3> + '_ {
+    let doubled = scene.as_ref().filter(|_| guidance != 1.0).map(SceneInput::doubled);
     move |input: Tensor<3>, tau: Tensor<1>| {
         let [b, _, _] = input.dims();
         let device = input.device();
         if guidance == 1.0 {
-            return model.forward(input, text.clone(), keep.clone(), tau);
+            return model.forward_in_scene(input, text.clone(), keep.clone(), tau, scene.as_ref());
         }
         let keep = Tensor::cat(vec![keep.clone(), Tensor::zeros([b], &device)], 0);
-        let v = model.forward(
+        let v = model.forward_in_scene(
             Tensor::cat(vec![input.clone(), input], 0),
             Tensor::cat(vec![text.clone(), text.clone()], 0),
             keep,
             Tensor::cat(vec![tau.clone(), tau], 0),
+            doubled.as_ref(),
         );
         let v_cond = v.clone().narrow(0, 0, b);
         let v_uncond = v.narrow(0, b, b);
@@ -542,7 +557,7 @@ pub fn sample_mmdit(
     opts: &SampleOptions,
 ) -> Tensor<4> {
     sample_outputs(
-        mmdit_velocity(model, text, keep, guidance),
+        mmdit_velocity(model, text, keep, guidance, cond.scene.clone()),
         model.prediction(),
         model.anchor(),
         cond,

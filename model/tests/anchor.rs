@@ -67,6 +67,7 @@ fn an_anchored_sampler_lifts_the_residual_to_latents_for_the_network_and_at_the_
         z0: normal([b, p, c], &d),
         z_key: z.clone(),
         mask: m.clone(),
+        scene: None,
     };
     let eps = normal([b, p, t, c], &d);
     let opts = SampleOptions::paper(KeyframeConditioning::InputMask);
@@ -114,6 +115,7 @@ fn anchored_training_targets_the_scaled_residual() {
         mask: m.clone(),
         text: normal([b, 2, cfg.text_dim], &d),
         keep_txt: Tensor::ones([b], &d),
+        scene: None,
     };
     let opts = RfLossOptions {
         conditioning: KeyframeConditioning::InputMask,

@@ -90,6 +90,7 @@ fn oracle_velocity_maps_noise_to_data_euler_and_midpoint() {
         z0: normal([b, p, c], &d),
         z_key: x1.zeros_like(),
         mask: Tensor::zeros([b, t], &d),
+        scene: None,
     };
     for solver in [Solver::Euler, Solver::Midpoint] {
         let opts = SampleOptions {
@@ -118,6 +119,7 @@ fn noise_scale_starts_the_sampler_from_scaled_noise() {
         z0: normal([b, p, c], &d),
         z_key: normal([b, p, t, c], &d),
         mask: Tensor::from_data(TensorData::new(mask, [b, t]), &d),
+        scene: None,
     };
     // A velocity that reads its whole input (state, keyframe channels and mask), so any ε it sees shows.
     let net = |input: Tensor<3>, tau: Tensor<1>| {
@@ -171,6 +173,7 @@ fn a_data_predicting_oracle_lands_on_its_prediction_on_every_grid() {
         z0: normal([b, p, c], &d),
         z_key: x1.zeros_like(),
         mask: Tensor::zeros([b, t], &d),
+        scene: None,
     };
     for n_grid in [2, 16, 64] {
         for solver in [Solver::Euler, Solver::Midpoint] {
@@ -233,6 +236,7 @@ fn replacement_noises_keyframes_to_the_state_level() {
         z0: Tensor::zeros([b, p, c], &d),
         z_key: z_key.clone(),
         mask,
+        scene: None,
     };
     let opts = SampleOptions {
         n_grid: 5,
@@ -277,6 +281,7 @@ fn fresh_replacement_noise_differs_from_fixed() {
         z0: Tensor::zeros([b, p, c], &d),
         z_key: Tensor::zeros([b, p, t, c], &d),
         mask: Tensor::ones([b, t], &d),
+        scene: None,
     };
     let first_input = |noise: ReplaceNoise| {
         let opts = SampleOptions {
@@ -316,6 +321,7 @@ fn sampler_passes_tau_increasing_from_zero() {
         z0: Tensor::zeros([b, p, c], &d),
         z_key: Tensor::zeros([b, p, t, c], &d),
         mask: Tensor::zeros([b, t], &d),
+        scene: None,
     };
     for (solver, expected) in [
         (Solver::Euler, vec![0.0, 0.25, 0.5, 0.75]),
@@ -501,6 +507,7 @@ fn tiny_batch(cfg: &MmditConfig, b: usize, p: usize, l: usize, d: &Device) -> Rf
         mask: first_last_mask(b, cfg.frames, d),
         text: normal([b, l, cfg.text_dim], d),
         keep_txt: Tensor::ones([b], d),
+        scene: None,
     }
 }
 
@@ -587,9 +594,9 @@ fn cfg_with_unit_guidance_equals_the_conditional_branch() {
     );
     assert!(max_abs_diff(cfg_combine(v_cond.clone(), v_uncond.clone(), 1.0), v_cond.clone()) < 1e-6);
     assert!(max_abs_diff(cfg_combine(v_cond.clone(), v_uncond.clone(), 0.0), v_uncond.clone()) < 1e-6);
-    let mut w1 = mmdit_velocity(&model, text.clone(), Tensor::ones([2], &d), 1.0);
+    let mut w1 = mmdit_velocity(&model, text.clone(), Tensor::ones([2], &d), 1.0, None);
     assert!(max_abs_diff(w1(input.clone(), tau.clone()), v_cond.clone()) < 1e-5);
-    let mut w3 = mmdit_velocity(&model, text, Tensor::ones([2], &d), 3.0);
+    let mut w3 = mmdit_velocity(&model, text, Tensor::ones([2], &d), 3.0, None);
     let expect = v_uncond.clone() + (v_cond - v_uncond).mul_scalar(3.0);
     assert!(
         max_abs_diff(w3(input, tau), expect) < 1e-4,
@@ -783,6 +790,7 @@ fn impute_until_stops_replacing_after_tau_star() {
         z0: Tensor::zeros([b, p, c], &d),
         z_key,
         mask: Tensor::ones([b, t], &d),
+        scene: None,
     };
     let opts = SampleOptions {
         n_grid: 5,

@@ -68,7 +68,7 @@ struct SceneReference {
 
 /// `any4d bench scene`: (S1) + (S2) of every clip on one thread and on the pool, then the reference on one core.
 fn bench_scene(args: SceneBenchArgs) -> anyhow::Result<ExitCode> {
-    use any4d_data::scene::features::{GridSpec, bps_offsets, occupancy_grid};
+    use any4d_data::scene::features::{GridSpec, bps_offsets, frame_center, occupancy_grid};
     use any4d_data::synth::{Family, SynthConfig, generate_scened};
     if args.repeat == 0 || args.clips == 0 || args.keyframes == 0 || args.anchors == 0 {
         bail!("--clips, --keyframes, --anchors and --repeat must be at least 1");
@@ -86,8 +86,7 @@ fn bench_scene(args: SceneBenchArgs) -> anyhow::Result<ExitCode> {
     for i in 0..args.clips {
         let (clip, scene) = generate_scened(&cfg, i)?;
         let scene = scene.context("a procedural scene clip without its scene")?;
-        let (lo, hi) = any4d_data::preprocess::bounds(clip.frame(0));
-        let center: [f32; 3] = std::array::from_fn(|a| (lo[a] + hi[a]) / 2.0);
+        let center = frame_center(clip.frame(0));
         let points: Vec<[f32; 3]> = (0..args.keyframes)
             .flat_map(|k| {
                 let f = k * (clip.frames - 1) / (args.keyframes.max(2) - 1).max(1);

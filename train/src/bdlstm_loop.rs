@@ -287,6 +287,7 @@ impl BdlstmObjective {
                 vae.tokens(),
                 device,
                 workers,
+                None,
             )
         };
         let (train, valid) = (encode(Split::Train)?, encode(Split::Val)?);

@@ -139,6 +139,7 @@ pub fn time_rf_steps(cfg: &RfRunConfig, shape: RfShape, steps: u64, device: &Dev
             mask: x.mask,
             text,
             keep_txt: x.keep_txt,
+            scene: None,
         };
         let loss = rf_training_loss(&model.mmdit, &batch, x.eps, x.tau, &loss_options); // (R5)
         let value = scalar(loss.clone());

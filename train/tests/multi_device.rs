@@ -147,7 +147,7 @@ fn latents_encoded_on_two_workers_are_one_workers() {
     let one = encode_latents(&vae.model, &store, &all, 3, vae.tokens(), &dev).unwrap();
     // Two workers over every clip, and more workers than micro-batches over two clips.
     for (indices, workers) in [(&all[..], 2), (&all[..2], 4)] {
-        let got = encode_latents_on_workers(&vae.model, &store, indices, 3, vae.tokens(), &dev, workers).unwrap();
+        let got = encode_latents_on_workers(&vae.model, &store, indices, 3, vae.tokens(), &dev, workers, None).unwrap();
         assert_eq!(
             (got.frames, got.tokens, got.channels),
             (one.frames, one.tokens, one.channels)

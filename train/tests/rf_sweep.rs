@@ -76,6 +76,7 @@ fn every_combination_of_the_rf_switches_trains_and_samples() {
                     mask: mask.clone(),
                     text: text.clone(),
                     keep_txt: Tensor::ones([B], &device),
+                    scene: None,
                 };
                 let options = RfLossOptions {
                     conditioning,
@@ -106,6 +107,7 @@ fn every_combination_of_the_rf_switches_trains_and_samples() {
                             z0: z0.clone(),
                             z_key: z.clone(),
                             mask: mask.clone(),
+                            scene: None,
                         };
                         let eps = Tensor::random([B, P, t, c], normal, &device);
                         let x = sample_mmdit(&model, &cond, text.clone(), Tensor::ones([B], &device), eps, 1.0, &opts);

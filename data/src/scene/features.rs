@@ -117,3 +117,43 @@ pub fn bps_offsets(scene: &Scene, points: &[[f32; 3]]) -> Result<Vec<[f32; 3]>> 
         })
         .collect())
 }
+
+/// The centre of a frame's bounding box: where (S1)'s grid is centred (frame 0 of a clip).
+pub fn frame_center(frame: &[[f32; 3]]) -> [f32; 3] {
+    let (lo, hi) = crate::preprocess::bounds(frame);
+    std::array::from_fn(|a| (lo[a] + hi[a]) / 2.0)
+}
+
+/// (S1) and (S2) of one clip in its scene, everything a scene-aware network may be told.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClipSceneFeatures {
+    /// The occupancy grid around frame 0's centre, `[G]` in (S1)'s cell order.
+    pub grid: Vec<f32>,
+    /// The offsets of the anchor vertices at every frame, `[T, P, 3]` row-major (keyframes are chosen later).
+    pub offsets: Vec<f32>,
+}
+
+/// [`occupancy_grid`] around frame 0's bounding-box centre and [`bps_offsets`] of the vertices `anchors` (the VAE's
+/// FPS tokens, docs/method.md §2.5) at every frame of `clip`; an anchor past the clip's vertices is refused.
+pub fn clip_scene_features(
+    clip: &crate::clip::Clip,
+    scene: &Scene,
+    anchors: &[u32],
+    spec: &GridSpec,
+) -> Result<ClipSceneFeatures> {
+    if let Some(&a) = anchors.iter().find(|&&a| a as usize >= clip.n_vertices) {
+        return Err(DataError::new(
+            &clip.id,
+            "scene anchors",
+            format!("anchor vertex {a} is past the clip's {} vertices", clip.n_vertices),
+        ));
+    }
+    let grid = occupancy_grid(scene, frame_center(clip.frame(0)), spec)?;
+    let mut offsets = Vec::with_capacity(clip.frames * anchors.len() * 3);
+    for f in 0..clip.frames {
+        let frame = clip.frame(f);
+        let points: Vec<[f32; 3]> = anchors.iter().map(|&a| frame[a as usize]).collect();
+        offsets.extend(bps_offsets(scene, &points)?.into_iter().flatten());
+    }
+    Ok(ClipSceneFeatures { grid, offsets })
+}

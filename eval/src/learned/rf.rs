@@ -207,6 +207,7 @@ impl RfSampler {
             z0: m.stats.standardize_shape(z0),
             z_key: m.stats.standardize_motion(keyframe_latents.clone()).swap_dims(1, 2), // [B, P, T, C]
             mask: mask_t.clone(),
+            scene: None,
         };
         let text = m
             .text

@@ -5,7 +5,7 @@ use burn::nn::{Initializer, LayerNormConfig, Linear, LinearConfig};
 use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::{Mmdit, MmditBlock, TIME_FREQS, TimestepEmbedder};
+use super::{Mmdit, MmditBlock, SceneConditioning, TIME_FREQS, TimestepEmbedder};
 
 /// How keyframes condition the network (docs/method.md §8 A1, X2: `model.conditioning`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -92,6 +92,10 @@ pub struct MmditConfig {
     /// none.
     #[serde(default)]
     pub anchor: Anchor,
+    /// Which scene features the network reads (docs/method.md §4.12; off in the paper presets and in run folders
+    /// written before the key existed).
+    #[serde(default)]
+    pub scene: SceneConditioning,
 }
 
 impl MmditConfig {
@@ -107,6 +111,7 @@ impl MmditConfig {
             conditioning,
             prediction: Prediction::Velocity,
             anchor: Anchor::None,
+            scene: SceneConditioning::default(),
         }
     }
 
@@ -122,6 +127,7 @@ impl MmditConfig {
             conditioning: KeyframeConditioning::InputMask,
             prediction: Prediction::Velocity,
             anchor: Anchor::None,
+            scene: SceneConditioning::default(),
         }
     }
 
@@ -170,6 +176,7 @@ impl MmditConfig {
                 ));
             }
         }
+        self.scene.validate()?;
         crate::summary::check_param_estimate(
             "model.width, blocks, frames, channels and text_dim",
             self.param_estimate(),
@@ -206,6 +213,8 @@ impl MmditConfig {
             input_norm: LayerNormConfig::new(w).init(device),
             text_proj: lin(self.text_dim, w, default),
             text_norm: LayerNormConfig::new(w).init(device),
+            scene_global: self.scene.init_global(w, device),
+            scene_local: self.scene.init_local(w, self.frames, device),
             time: TimestepEmbedder {
                 fc1: lin(2 * TIME_FREQS, 4 * w, aam),
                 fc2: lin(4 * w, w, aam),
@@ -217,6 +226,7 @@ impl MmditConfig {
             text_dim: self.text_dim,
             prediction: self.prediction,
             anchor: self.anchor,
+            scene: self.scene.clone(),
         }
     }
 }

@@ -10,7 +10,7 @@ impl MmditConfig {
         let (w, b) = (self.width as u128, self.blocks as u128);
         let io = (self.in_channels() as u128 + self.out_channels() as u128 + self.text_dim as u128 + 1) * w;
         let time = 512 * 4 * w + 4 * w * w;
-        b * 40 * w * w + io + time
+        b * 40 * w * w + io + time + self.scene.param_count(self.width, self.frames) as u128
     }
 
     /// A rough count of the bytes one training micro-batch keeps for the backward pass (f32), computed without
@@ -69,11 +69,16 @@ impl MmditConfig {
     /// attention = B · 2·2·S²·W                                             QKᵀ and softmax·V, all heads
     /// ```
     ///
+    /// With scene parts (docs/method.md §4.12) the N_s grid tokens join the text stream (L + N_s in S and in the
+    /// blocks) and add N_s·patch³·W for their projection (S3); the keyframe offsets add P·(4T·W + W²) (S4).
+    ///
     /// Biases, LayerNorms, activations, the softmax, adaLN modulation and residuals are not counted (each is
     /// O(S·W) against O(S·W²)). A training step is [`FlopCount::training_step`] = 3 × forward. The text encoder
     /// that feeds `text` is not included.
     pub fn forward_flops(&self, tokens: usize, text_len: usize) -> FlopCount {
-        let [p, l, s, w] = [tokens, text_len, tokens + text_len, self.width].map(|x| x as u64);
+        let scene_tokens = self.scene.tokens();
+        let context = text_len + scene_tokens;
+        let [p, l, s, w] = [tokens, text_len, tokens + context, self.width].map(|x| x as u64);
         let [blocks, d_in, d_out, d_txt, freqs] = [
             self.blocks,
             self.in_channels(),
@@ -82,7 +87,13 @@ impl MmditConfig {
             TIME_FREQS,
         ]
         .map(|x| x as u64);
-        let projections = p * d_in * w + l * d_txt * w + p * w * d_out;
+        let mut projections = p * d_in * w + l * d_txt * w + p * w * d_out;
+        if self.scene.global {
+            projections += scene_tokens as u64 * self.scene.patch.pow(3) as u64 * w;
+        }
+        if self.scene.local {
+            projections += p * (super::LOCAL_CHANNELS * self.frames) as u64 * w + p * w * w;
+        }
         let time = 2 * freqs * 4 * w + 4 * w * w;
         let per_block = 2 * w * 6 * w + s * (3 * w * w + w * w + 4 * w * w + 4 * w * w);
         FlopCount {

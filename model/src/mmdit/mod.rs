@@ -14,10 +14,12 @@ use burn::tensor::ops::AttentionModuleOptions;
 mod config;
 mod estimates;
 mod layout;
+mod scene;
 
 pub use config::*;
 pub use estimates::*;
 pub use layout::*;
+pub use scene::*;
 
 /// Frequencies of the timestep sinusoid (docs/method.md §4.3): the embedding has `2 · TIME_FREQS` values `[cos ‖ sin]`.
 pub const TIME_FREQS: usize = 256;
@@ -215,6 +217,8 @@ pub struct Mmdit {
     input_norm: LayerNorm,
     text_proj: Linear,
     text_norm: LayerNorm,
+    scene_global: Option<GridEncoder>,
+    scene_local: Option<KeyframeSceneEmbed>,
     time: TimestepEmbedder,
     blocks: Vec<MmditBlock>,
     final_norm: LayerNorm,
@@ -225,6 +229,8 @@ pub struct Mmdit {
     prediction: Prediction,
     #[module(skip)]
     anchor: Anchor,
+    #[module(skip)]
+    scene: SceneConditioning,
 }
 
 impl Mmdit {
@@ -240,7 +246,25 @@ impl Mmdit {
     /// # Panics
     /// If the channel axes do not match the config (checked with a message naming the tensor).
     pub fn forward(&self, input: Tensor<3>, text: Tensor<3>, keep_txt: Tensor<1>, tau: Tensor<1>) -> Tensor<3> {
-        let [b, _, in_ch] = input.dims();
+        self.forward_in_scene(input, text, keep_txt, tau, None)
+    }
+
+    /// [`Mmdit::forward`] told about each clip's scene (docs/method.md §4.12): the grid's context tokens join the
+    /// text stream after its LayerNorm (S3) and the keyframe offsets' embedding joins the motion tokens (S4), for
+    /// the parts the config turns on. `None`, like a clip without a scene in training, is an empty grid and no
+    /// offsets; a network without scene parts ignores the argument.
+    ///
+    /// # Shapes
+    /// - scene: grid `[B, G]`, keyframes `[B, P, T, 4]` (see [`SceneInput`])
+    pub fn forward_in_scene(
+        &self,
+        input: Tensor<3>,
+        text: Tensor<3>,
+        keep_txt: Tensor<1>,
+        tau: Tensor<1>,
+        scene: Option<&SceneInput>,
+    ) -> Tensor<3> {
+        let [b, p, in_ch] = input.dims();
         let [bt, _, d_txt] = text.dims();
         assert_eq!(
             in_ch, self.in_channels,
@@ -253,15 +277,43 @@ impl Mmdit {
             self.text_dim
         );
         assert_eq!(bt, b, "Mmdit::forward: text batch {bt} differs from input batch {b}");
-        let motion = self.input_norm.forward(self.input_proj.forward(input));
+        let device = input.device();
+        let mut motion = self.input_norm.forward(self.input_proj.forward(input));
         let keep = keep_txt.reshape([b, 1, 1]);
-        let text = self.text_norm.forward(self.text_proj.forward(text) * keep);
+        let mut text = self.text_norm.forward(self.text_proj.forward(text) * keep);
+        if self.scene.any() {
+            let none;
+            let scene = match scene {
+                Some(s) => s,
+                None => {
+                    let t = self.scene_frames();
+                    none = SceneInput::none(b, self.scene.grid_cells(), p, t, &device);
+                    &none
+                }
+            };
+            if let Some(global) = &self.scene_global {
+                text = Tensor::cat(vec![text, global.forward(scene.grid.clone())], 1);
+            }
+            if let Some(local) = &self.scene_local {
+                motion = motion + local.forward(scene.keyframes.clone());
+            }
+        }
         let temb_act = silu(self.time.forward(tau));
         let (mut motion, mut text) = (motion, text);
         for block in &self.blocks {
             (motion, text) = block.forward(motion, text, temb_act.clone());
         }
         self.output_proj.forward(self.final_norm.forward(motion))
+    }
+
+    /// Keyframe slots T of the scene's (S4) features: the output's T·C channels over C.
+    fn scene_frames(&self) -> usize {
+        self.scene_local.as_ref().map_or(1, |local| local.frames())
+    }
+
+    /// Which scene features this network reads (docs/method.md §4.12).
+    pub fn scene(&self) -> &SceneConditioning {
+        &self.scene
     }
 
     /// The timestep embedder (exposed for the τ-direction test of docs/method.md §1.4).

@@ -6,12 +6,13 @@ use std::path::Path;
 use std::sync::Arc;
 
 use any4d_data::keyframes::sample_keyframes;
+use any4d_data::scene::features::ClipSceneFeatures;
 use any4d_data::store::{Split, Store};
 use any4d_model::anchor::keyframe_lerp;
 use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mesh_vae::{self, MeshVae};
-use any4d_model::mmdit::KeyframeConditioning;
+use any4d_model::mmdit::{KeyframeConditioning, SceneInput};
 use any4d_model::noise::{self, standard_normal};
 use any4d_model::rectified_flow::RfBatch;
 use any4d_model::text::caption_keep;
@@ -109,6 +110,7 @@ impl RfBatcher {
         } else {
             1
         };
+        let scene_grid = cfg.model.scene.any().then(|| cfg.model.scene.grid_spec());
         let split = |split: Split| -> Result<SplitLatents> {
             let store_indices = store.indices(split);
             let cached = match cfg.rf.latent_cache {
@@ -120,6 +122,7 @@ impl RfBatcher {
                     vae.tokens(),
                     device,
                     workers,
+                    scene_grid.as_ref(),
                 )?),
                 LatentCache::PerBatch => None,
             };
@@ -270,6 +273,12 @@ impl RfBatcher {
                     store_ids.len(),
                     self.tokens,
                     augment,
+                    self.cfg
+                        .model
+                        .scene
+                        .any()
+                        .then(|| self.cfg.model.scene.grid_spec())
+                        .as_ref(),
                     &inference,
                 )?;
                 (&encoded, (0..store_ids.len()).collect())
@@ -280,12 +289,14 @@ impl RfBatcher {
         let mut mu = Vec::with_capacity(b * t * p * c);
         let mut logvar = Vec::with_capacity(b * t * p * c);
         let mut captions = Vec::with_capacity(b);
+        let mut scenes = Vec::with_capacity(b);
         for &i in &positions {
             let clip = &set.clips[i];
             z0.extend_from_slice(&clip.z0);
             mu.extend_from_slice(&clip.mu);
             logvar.extend_from_slice(&clip.logvar);
             captions.push(clip.caption.clone());
+            scenes.push(clip.scene.as_ref());
         }
         let z0: Tensor<3> = Tensor::from_data(TensorData::new(z0, [b, p, c]), device);
         let mu: Tensor<4> = Tensor::from_data(TensorData::new(mu, [b, t, p, c]), device);
@@ -314,6 +325,12 @@ impl RfBatcher {
             TensorData::new(mask.iter().map(|&m| f32::from(u8::from(m))).collect::<Vec<_>>(), [b, t]),
             device,
         );
+        let scene = self
+            .cfg
+            .model
+            .scene
+            .any()
+            .then(|| scene_input(&scenes, self.cfg.model.scene.grid_cells(), t, p, mask.clone(), device));
         // A caption with no text is always the unconditional input (caption_keep), whatever the dropout draw.
         let keep: Vec<f32> = caption_keep(&captions)
             .into_iter()
@@ -333,6 +350,7 @@ impl RfBatcher {
                 mask,
                 text,
                 keep_txt: Tensor::from_data(TensorData::new(keep, [b]), device),
+                scene,
             },
             eps,
             tau,
@@ -374,6 +392,45 @@ impl RfBatcher {
         let z_key = self.stats.standardize_motion(enc.mu.swap_dims(1, 2));
         Ok(Tensor::from_data(z_key.into_data(), device))
     }
+}
+
+/// The [`SceneInput`] of a batch from each clip's (S1)–(S2) features (docs/method.md §4.12): a clip without a scene
+/// gets an empty grid and no offsets.
+///
+/// # Shapes
+/// - scenes: B entries with grid `[G]` and offsets `[T, P, 3]`; mask `[B, T]`; output grid `[B, G]`, keyframes
+///   `[B, P, T, 4]`
+pub fn scene_input(
+    scenes: &[Option<&ClipSceneFeatures>],
+    cells: usize,
+    frames: usize,
+    tokens: usize,
+    mask: Tensor<2>,
+    device: &Device,
+) -> SceneInput {
+    let b = scenes.len();
+    let mut grid = vec![0f32; b * cells];
+    let mut offsets = vec![0f32; b * tokens * frames * 3];
+    let mut present = vec![0f32; b];
+    for (i, s) in scenes.iter().enumerate() {
+        let Some(s) = s else { continue };
+        present[i] = 1.0;
+        grid[i * cells..(i + 1) * cells].copy_from_slice(&s.grid);
+        // [T, P, 3] → [P, T, 3], the token-major layout of the latents.
+        for f in 0..frames {
+            for p in 0..tokens {
+                let from = (f * tokens + p) * 3;
+                let to = ((i * tokens + p) * frames + f) * 3;
+                offsets[to..to + 3].copy_from_slice(&s.offsets[from..from + 3]);
+            }
+        }
+    }
+    SceneInput::new(
+        Tensor::from_data(TensorData::new(grid, [b, cells]), device),
+        Tensor::from_data(TensorData::new(offsets, [b, tokens, frames, 3]), device),
+        mask,
+        Tensor::from_data(TensorData::new(present, [b]), device),
+    )
 }
 
 pub(super) fn open_store(data: &Path) -> Result<Store> {

@@ -1,6 +1,7 @@
 //! Frozen-VAE latents of the clips (docs/method.md §3.4, §4.1): encoded once into host memory or per micro-batch.
 
 use any4d_data::augment::Augment;
+use any4d_data::scene::features::{ClipSceneFeatures, GridSpec, clip_scene_features};
 use any4d_data::store::Store;
 use any4d_model::any_vae::AnyMeshVae;
 use burn::prelude::{Device, Tensor};
@@ -26,6 +27,9 @@ pub struct ClipLatents {
     pub mu: Vec<f32>,
     /// Posterior log σ², `[S, P, C]` row-major.
     pub logvar: Vec<f32>,
+    /// (S1)–(S2) of the clip in its scene on the P anchor vertices (docs/method.md §4.11), when asked for and the
+    /// clip has a scene.
+    pub scene: Option<ClipSceneFeatures>,
 }
 
 /// The latents of one split and their sizes.
@@ -44,7 +48,13 @@ pub struct LatentSet {
 impl LatentSet {
     /// Host bytes held.
     pub fn bytes(&self) -> usize {
-        self.clips.len() * self.tokens * self.channels * (1 + 2 * self.frames) * std::mem::size_of::<f32>()
+        let scenes: usize = self
+            .clips
+            .iter()
+            .filter_map(|c| c.scene.as_ref())
+            .map(|s| s.grid.len() + s.offsets.len())
+            .sum();
+        (self.clips.len() * self.tokens * self.channels * (1 + 2 * self.frames) + scenes) * std::mem::size_of::<f32>()
     }
 }
 
@@ -65,12 +75,14 @@ pub fn encode_latents(
     tokens: usize,
     device: &Device,
 ) -> Result<LatentSet> {
-    encode_augmented(vae, store, store_indices, micro_batch, tokens, None, device)
+    encode_augmented(vae, store, store_indices, micro_batch, tokens, None, None, device)
 }
 
 /// [`encode_latents`] on `workers` CPU threads, each with its share of the cores ([`backend::worker_pools`]) and a
 /// contiguous run of the micro-batches: every clip is encoded in the same micro-batch as by one worker, so the
-/// latents are the same, and the parts are joined in store order.
+/// latents are the same, and the parts are joined in store order. With `scene`, each clip with a scene also keeps
+/// its (S1)–(S2) features on that grid.
+#[allow(clippy::too_many_arguments)]
 pub fn encode_latents_on_workers(
     vae: &AnyMeshVae,
     store: &Store,
@@ -79,12 +91,13 @@ pub fn encode_latents_on_workers(
     tokens: usize,
     device: &Device,
     workers: usize,
+    scene: Option<&GridSpec>,
 ) -> Result<LatentSet> {
     let micro_batch = micro_batch.max(1);
     let batches = store_indices.len().div_ceil(micro_batch);
     let workers = workers.clamp(1, batches.max(1));
     if workers == 1 {
-        return encode_latents(vae, store, store_indices, micro_batch, tokens, device);
+        return encode_augmented(vae, store, store_indices, micro_batch, tokens, None, scene, device);
     }
     let pools = backend::worker_pools(workers).map_err(|e| {
         TrainError::Setup(format!(
@@ -97,7 +110,9 @@ pub fn encode_latents_on_workers(
             .chunks(per_worker)
             .zip(&pools)
             .map(|(part, pool)| {
-                s.spawn(move || pool.install(|| encode_latents(vae, store, part, micro_batch, tokens, device)))
+                s.spawn(move || {
+                    pool.install(|| encode_augmented(vae, store, part, micro_batch, tokens, None, scene, device))
+                })
             })
             .collect();
         handles
@@ -121,7 +136,8 @@ pub fn encode_latents_on_workers(
 }
 
 /// [`encode_latents`] of the clips augmented in order with draws from the generator, when one is given
-/// (docs/method.md §2.9).
+/// (docs/method.md §2.9), keeping the scene features of [`encode_latents_on_workers`] when `scene` is given.
+#[allow(clippy::too_many_arguments)]
 pub fn encode_augmented(
     vae: &AnyMeshVae,
     store: &Store,
@@ -129,6 +145,7 @@ pub fn encode_augmented(
     micro_batch: usize,
     tokens: usize,
     mut augment: Option<(&Augment, &mut ChaCha8Rng)>,
+    scene: Option<&GridSpec>,
     device: &Device,
 ) -> Result<LatentSet> {
     let frames = if vae.clip_frames().is_some() { 1 } else { store.frames() };
@@ -136,7 +153,7 @@ pub fn encode_augmented(
     let mut channels = 0;
     for chunk in store_indices.chunks(micro_batch.max(1)) {
         let aug = augment.as_mut().map(|(a, rng)| (*a, &mut **rng));
-        let (batch, _) = load_augmented(store, chunk, aug, device)?;
+        let (batch, items) = load_augmented(store, chunk, aug, device)?;
         let enc = vae.encode_vae_batch(&vae_batch(&batch, tokens, device)?);
         let [b, t, p, c] = enc.mu.dims();
         if (t, p) != (frames, tokens) {
@@ -150,13 +167,18 @@ pub fn encode_augmented(
         let mu = host_f32(enc.mu, "mu")?;
         let logvar = host_f32(enc.logvar, "logvar")?;
         let (shape_len, motion_len) = (p * c, t * p * c);
-        for (i, (&store_index, caption)) in chunk.iter().zip(batch.captions).enumerate() {
+        for (i, ((&store_index, caption), item)) in chunk.iter().zip(batch.captions).zip(&items).enumerate() {
+            let scene = match (scene, &item.scene) {
+                (Some(spec), Some(s)) => Some(clip_scene_features(&item.clip, s, &item.fps[..tokens], spec)?),
+                _ => None,
+            };
             clips.push(ClipLatents {
                 store_index,
                 caption,
                 z0: z0[i * shape_len..(i + 1) * shape_len].to_vec(),
                 mu: mu[i * motion_len..(i + 1) * motion_len].to_vec(),
                 logvar: logvar[i * motion_len..(i + 1) * motion_len].to_vec(),
+                scene,
             });
         }
     }

@@ -55,6 +55,11 @@ pub fn copy_dir(from: &Path, to: &Path) {
 
 /// Writes `dir/store`: 10 procedural clips of 4 frames and 256–512 vertices drawn with `seed`, P = 32 FPS points.
 pub fn synth_store(dir: &Path, seed: u64) -> PathBuf {
+    synth_store_with(dir, seed, false)
+}
+
+/// [`synth_store`], each clip in a procedural scene when `scenes` is set.
+pub fn synth_store_with(dir: &Path, seed: u64, scenes: bool) -> PathBuf {
     let store = dir.join("store");
     let synth = SynthConfig {
         clips: 10,
@@ -64,7 +69,7 @@ pub fn synth_store(dir: &Path, seed: u64) -> PathBuf {
         max_vertices: 512,
         body: None,
         family: Default::default(),
-        scenes: false,
+        scenes,
     };
     write_synth_with(&synth, &store, 32, None).expect("synthetic store");
     store
@@ -304,9 +309,14 @@ pub fn tiny_dymesh_vae(steps: u64) -> VaeRunConfig {
 }
 
 /// A [`VaeFixture`] whose 6-step VAE run has the config `cfg` (its micro-batch, checkpoints and validation set here).
-pub fn vae_fixture_with(store_seed: u64, mut cfg: VaeRunConfig) -> VaeFixture {
+pub fn vae_fixture_with(store_seed: u64, cfg: VaeRunConfig) -> VaeFixture {
+    vae_fixture_in(store_seed, cfg, false)
+}
+
+/// [`vae_fixture_with`] on a store whose clips move in procedural scenes when `scenes` is set.
+pub fn vae_fixture_in(store_seed: u64, mut cfg: VaeRunConfig, scenes: bool) -> VaeFixture {
     let dir = tempfile::tempdir().expect("temp dir");
-    let store = synth_store(dir.path(), store_seed);
+    let store = synth_store_with(dir.path(), store_seed, scenes);
     cfg.train.micro_batch = 4;
     cfg.train.checkpoint_every = 6;
     cfg.train.valid_every = 6;
