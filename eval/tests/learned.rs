@@ -203,16 +203,19 @@ fn a_batch_of_requests_samples_what_each_request_samples_alone() {
                 clip: &v1,
                 keyframes: &k1,
                 seed: 5,
+                scene: None,
             },
             Request {
                 clip: &v2,
                 keyframes: &k2,
                 seed: 6,
+                scene: None,
             },
             Request {
                 clip: &v1,
                 keyframes: &k1,
                 seed: 7,
+                scene: None,
             },
         ];
         let batch = sampler.sample_batch(&requests, "a waving flag").unwrap();
@@ -611,7 +614,7 @@ fn the_vae_oracle_decodes_every_ground_truth_frame_whatever_the_keyframes() {
     }
     let inner = [0, 1, T - 1];
     let asks: [(&[usize], u64); 2] = [(&keys, 0), (&inner, 1)];
-    for (s, (k, _)) in complete_and_score_batch(&method, &gt, &asks, "")
+    for (s, (k, _)) in complete_and_score_batch(&method, &gt, &asks, "", None)
         .unwrap()
         .iter()
         .zip(asks)
@@ -786,5 +789,61 @@ fn paper_size_window_timing() {
     drop(enc);
     println!(
         "encode 3 keyframes {encode_s:.2} s; sample_latents (encode + 2 evals) {sample_s:.2} s; decode 16 frames {decode_s:.2} s"
+    );
+}
+
+/// docs/method.md §4.12 at sampling: a network reading both scene parts is told the request's scene — a box under
+/// the flag changes the sample, `None` and an empty-scene network do not need one — and the anchors of (S2) are the
+/// FPS tokens of the window's encoding. A network without scene parts samples the same with or without a scene.
+#[test]
+fn a_scene_aware_rf_reads_the_requests_scene_and_a_plain_one_ignores_it() {
+    use any4d_data::scene::Scene;
+    use any4d_model::mmdit::SceneConditioning;
+    let device = Device::flex();
+    let codec = frame_codec(&device, PadTo::BatchMax);
+    let gt = wave_clip();
+    let anchors = codec.encode(&gt, &[0]).unwrap().anchors;
+    let fps: Vec<u32> = farthest_point_sampling(gt.frame(0), P);
+    assert_eq!(anchors, fps);
+    let floor = Scene::cuboid([-2.0, -2.0, -1.0], [2.0, 2.0, -0.4]);
+    let method = |scene_parts: bool| {
+        let mut cfg = MmditConfig {
+            frames: T,
+            channels: C,
+            ..MmditConfig::tiny()
+        };
+        if scene_parts {
+            cfg.scene = SceneConditioning {
+                global: true,
+                local: true,
+                grid: [8, 4, 8],
+                cell: 0.5,
+                patch: 4,
+            };
+        }
+        let rf = cfg.init(&device).map(&mut WakeZeros);
+        let m = Arc::new(LearnedModels::new(codec.clone(), rf, cfg, stats(), Box::new(ByteText)).unwrap());
+        let sampler = RfSampler::new(m, options(KeyframeConditioning::InputMask), 1.0).unwrap();
+        RfMethod::new(MethodKind::KeyframeRf, sampler).unwrap()
+    };
+    let sample = |method: &dyn Method, scene: Option<&Scene>| {
+        let keys: &[usize] = &[0, 1, 3];
+        complete_and_score_batch(method, &gt, &[(keys, 5)], "flag", scene).unwrap()[0]
+            .prediction
+            .clone()
+    };
+    let (aware, plain) = (method(true), method(false));
+    let with_scene = sample(&aware, Some(&floor));
+    assert!(
+        rows_diff(&with_scene, &sample(&aware, Some(&floor))) == 0.0,
+        "not reproducible"
+    );
+    assert!(
+        rows_diff(&with_scene, &sample(&aware, None)) > 1e-4,
+        "the scene is not read"
+    );
+    assert!(
+        rows_diff(&sample(&plain, None), &sample(&plain, Some(&floor))) == 0.0,
+        "a plain network reads the scene"
     );
 }

@@ -428,11 +428,13 @@ fn a_mean_of_samples_averages_the_seeded_completions_with_sample_0_first() {
                     clip: &clip,
                     keyframes: &[0, 15],
                     seed,
+                    scene: None,
                 },
                 Request {
                     clip: &clip,
                     keyframes: &[0, 15],
                     seed: 99,
+                    scene: None,
                 },
             ],
             "",

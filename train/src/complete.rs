@@ -296,6 +296,7 @@ pub fn complete(
                     clip: &normalised,
                     keyframes: &key_frames,
                     seed,
+                    scene: None,
                 })
                 .collect();
             batched.extend(method.complete_batch(&requests, &opts.caption)?);

@@ -109,6 +109,13 @@ fn export_into(run: &Path, tmp: &Path, names: Names, config_text: String, device
     };
     let (network, step, tensors, averaged) = if is_rf {
         let rf = load_rf_run(run, device)?;
+        if names == Names::AnimateAnyMesh && rf.config.model.scene.any() {
+            return Err(run_err(
+                run,
+                "a scene-aware RF (model.scene): AnimateAnyMesh's MMDiT has no scene parts to name; export it with \
+                 --names any4d",
+            ));
+        }
         let averaged = rf.checkpoint.join(crate::checkpoint::EMA_FILE).is_file();
         let tensors = collect_tensors(&rf.model.mmdit, Network::Mmdit, names);
         let meta = metadata(run, Network::Mmdit, names, config_text, rf.step)?;

@@ -9,10 +9,12 @@ use std::sync::OnceLock;
 
 use any4d_data::scene::features::clip_scene_features;
 use any4d_data::store::Store;
+use any4d_model::interop::Names;
 use any4d_model::mmdit::{LOCAL_CHANNELS, SceneConditioning};
 use any4d_model::text::scratch::ScratchTokenizer;
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::Duration;
+use any4d_train::interop::{MODEL_SAFETENSORS, export_run, import_file};
 use any4d_train::loop_common::{Objective, Outcome};
 use any4d_train::rf_loop::{LatentDraw, RfObjective, RfRunConfig, RfRunOptions, Subset, TextDropout, train_rf};
 use any4d_train::run_folder::{VALID_FILE, read_table};
@@ -148,7 +150,7 @@ fn batches_carry_each_clips_grid_and_its_keyframe_offsets() {
 
 /// A network reading both parts trains; loaded from its run folder it reproduces the logged validation loss, so the
 /// scene parameters are saved and the validation batches carry the scenes they were trained with (without them the
-/// loss differs).
+/// loss differs); it exports and imports under any4d's names and is refused under AnimateAnyMesh's.
 #[test]
 fn a_scene_aware_rf_trains_and_its_run_reproduces_its_validation_loss() {
     let _g = serial();
@@ -190,4 +192,24 @@ fn a_scene_aware_rf_trains_and_its_run_reproduces_its_validation_loss() {
         rel > 1e-5,
         "the scene changes the validation loss by {rel} only: the check above could not fail"
     );
+    // Exported under any4d's names it imports whole; AnimateAnyMesh has no scene parts to name, so that is refused
+    // and nothing is written.
+    let out = tempfile::tempdir().unwrap();
+    let export = out.path().join("export");
+    export_run(run.root(), &export, Names::Any4d, &dev).unwrap();
+    import_file(
+        &export.join(MODEL_SAFETENSORS),
+        &out.path().join("back"),
+        None,
+        None,
+        &dev,
+    )
+    .unwrap();
+    let back = load_rf_run(&out.path().join("back"), &dev).unwrap();
+    assert_eq!(common::params(&back.model), common::params(&loaded.model));
+    let refused = out.path().join("aam");
+    let e = export_run(run.root(), &refused, Names::AnimateAnyMesh, &dev)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("scene-aware") && !refused.exists(), "{e}");
 }

@@ -46,6 +46,9 @@ pub struct WindowEncoding {
     pub window_frames: usize,
     /// Clip id, for error messages.
     pub id: String,
+    /// The P vertices of frame 0 whose features became the latent tokens (FPS, docs/method.md §2.5): the anchors of
+    /// the scene's (S2).
+    pub anchors: Vec<u32>,
 }
 
 /// Which latent of the posterior N(μ, σ²) an encoded window hands on (keyframe latents, latent lerp, table 5).
@@ -195,6 +198,16 @@ impl MeshCodec {
         }
         let input = self.input(clip, frames)?;
         let reference = input.reference.clone();
+        let anchors = input
+            .fps
+            .clone()
+            .into_data()
+            .convert::<i64>()
+            .try_into_vec::<i64>()
+            .map_err(|e| DataError::new(&clip.id, "fps", format!("cannot read the FPS indices: {e:?}")))?
+            .into_iter()
+            .map(|i| i as u32)
+            .collect();
         let VaeEncoding { e0, z0, mu, logvar } =
             self.vae
                 .encode(input.reference, input.frames, input.vmask, input.fps, &input.edges);
@@ -224,6 +237,7 @@ impl MeshCodec {
             n_real: clip.n_vertices,
             window_frames: clip.frames,
             id: clip.id.clone(),
+            anchors,
         })
     }
 

@@ -4,8 +4,9 @@
 use std::sync::Arc;
 
 use any4d_data::rng::{GOLDEN_GAMMA, splitmix64};
+use any4d_data::scene::features::clip_scene_features;
 use any4d_data::{Clip, DataError};
-use any4d_model::mmdit::{KeyframeConditioning, replace_keyframes};
+use any4d_model::mmdit::{KeyframeConditioning, SceneInput, replace_keyframes};
 use any4d_model::rectified_flow::{Conditioning, ReplaceNoise, SampleOptions, sample_mmdit};
 use any4d_model::text::caption_keep;
 use burn::prelude::*;
@@ -132,12 +133,67 @@ impl RfSampler {
         &self.options
     }
 
+    /// What a scene-aware network is told of the requests' scenes (docs/method.md §4.12): (S1) around each window's
+    /// frame 0 and (S2) of the anchors its encoding used, at the keyframes of `mask` (none for a network trained
+    /// without keyframes, as in its training); `None` for a network without scene parts.
+    ///
+    /// # Shapes
+    /// - mask: `[B, T]` (1 = keyframe)
+    fn scene_input(
+        &self,
+        requests: &[Request<'_>],
+        windows: &[(WindowEncoding, Tensor<4>, Vec<f32>)],
+        mask: Tensor<2>,
+    ) -> Result<Option<SceneInput>> {
+        let m = &self.models;
+        let scene = &m.rf_config.scene;
+        if !scene.any() {
+            return Ok(None);
+        }
+        let spec = scene.grid_spec();
+        let features = requests
+            .iter()
+            .zip(windows)
+            .map(|(r, (encoding, _, _))| {
+                r.scene
+                    .map(|s| clip_scene_features(r.clip, s, &encoding.anchors, &spec))
+                    .transpose()
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let refs: Vec<_> = features.iter().map(Option::as_ref).collect();
+        let [b, t] = mask.dims();
+        let mask = if self.options.conditioning.has_mask_channels() {
+            mask
+        } else {
+            mask.zeros_like()
+        };
+        let tokens = windows.first().map_or(0, |(e, _, _)| e.anchors.len());
+        let device = m.codec.device().clone();
+        debug_assert_eq!(b, refs.len());
+        Ok(Some(SceneInput::from_features(
+            &refs,
+            scene.grid_cells(),
+            t,
+            tokens,
+            mask,
+            &device,
+        )))
+    }
+
     /// Samples the trajectory latents of one window. Only frame 0 and the `keyframes` of `clip` are read.
     ///
     /// # Shapes
     /// `clip.vertices`: `[T, N_v]` rows; `latents` `[1, T, P, C]`.
     pub fn sample_latents(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<SampledWindow> {
-        let mut out = self.sample_latents_batch(&[Request { clip, keyframes, seed }], caption)?;
+        let mut out = self.sample_latents_batch(
+            &[Request {
+                clip,
+                keyframes,
+                seed,
+                scene: None,
+            }],
+            caption,
+        )?;
         Ok(out.remove(0))
     }
 
@@ -207,7 +263,7 @@ impl RfSampler {
             z0: m.stats.standardize_shape(z0),
             z_key: m.stats.standardize_motion(keyframe_latents.clone()).swap_dims(1, 2), // [B, P, T, C]
             mask: mask_t.clone(),
-            scene: None,
+            scene: self.scene_input(requests, &windows, mask_t.clone())?,
         };
         let text = m
             .text

@@ -37,7 +37,15 @@ impl Method for KeyframeCorrected {
     }
 
     fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
-        let mut out = self.complete_batch(&[Request { clip, keyframes, seed }], caption)?;
+        let mut out = self.complete_batch(
+            &[Request {
+                clip,
+                keyframes,
+                seed,
+                scene: None,
+            }],
+            caption,
+        )?;
         Ok(out.remove(0))
     }
 

@@ -7,6 +7,7 @@
 //! latent adaptation) and the AnimateAnyMesh reference (§5.5: an RF on the sequence-wise VAE, no keyframes).
 
 use any4d_data::rng::{GOLDEN_GAMMA, Rng, rng, splitmix64};
+use any4d_data::scene::Scene;
 use any4d_data::{Clip, DataError};
 
 use crate::baselines::VertexBaseline;
@@ -61,6 +62,9 @@ pub struct Request<'a> {
     pub keyframes: &'a [usize],
     /// Sampler seed.
     pub seed: u64,
+    /// The static scene the window moves in, normalised with it; read by scene-aware networks only
+    /// (docs/method.md §4.12).
+    pub scene: Option<&'a Scene>,
 }
 
 /// The training-free vertex-space methods: (L1) and the static nearest keyframe.
@@ -149,7 +153,15 @@ impl<S: WindowSampler> Method for RfMethod<S> {
     }
 
     fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
-        let mut out = self.complete_batch(&[Request { clip, keyframes, seed }], caption)?;
+        let mut out = self.complete_batch(
+            &[Request {
+                clip,
+                keyframes,
+                seed,
+                scene: None,
+            }],
+            caption,
+        )?;
         Ok(out.remove(0))
     }
 
@@ -242,7 +254,15 @@ impl Method for SampleMean {
     }
 
     fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
-        let mut out = self.complete_batch(&[Request { clip, keyframes, seed }], caption)?;
+        let mut out = self.complete_batch(
+            &[Request {
+                clip,
+                keyframes,
+                seed,
+                scene: None,
+            }],
+            caption,
+        )?;
         Ok(out.remove(0))
     }
 
@@ -342,18 +362,24 @@ pub fn complete_and_score(
 }
 
 /// [`complete_and_score`] for several (keyframes, seed) pairs of one clip in one [`Method::complete_batch`] call,
-/// in the order of `asks`.
+/// in the order of `asks`, telling the method the clip's scene when it has one.
 pub fn complete_and_score_batch(
     method: &dyn Method,
     gt: &Clip,
     asks: &[(&[usize], u64)],
     caption: &str,
+    scene: Option<&Scene>,
 ) -> Result<Vec<Scored>> {
     let visible: Vec<Clip> = asks.iter().map(|(k, _)| visible_window(method.kind(), gt, k)).collect();
     let requests: Vec<Request<'_>> = asks
         .iter()
         .zip(&visible)
-        .map(|(&(keyframes, seed), clip)| Request { clip, keyframes, seed })
+        .map(|(&(keyframes, seed), clip)| Request {
+            clip,
+            keyframes,
+            seed,
+            scene,
+        })
         .collect();
     let predictions = method.complete_batch(&requests, caption)?;
     if predictions.len() != asks.len() {

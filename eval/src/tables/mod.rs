@@ -244,7 +244,7 @@ pub fn evaluate(
             let label = method.kind().label();
             let scored: Vec<Scored> = if manifest.frames <= RolloutSpec::paper().window {
                 let pairs: Vec<(&[usize], u64)> = asks.iter().map(|&(k, _, seed)| (k, seed)).collect();
-                complete_and_score_batch(method.as_ref(), &gt, &pairs, &captions[0])?
+                complete_and_score_batch(method.as_ref(), &gt, &pairs, &captions[0], scene.as_ref())?
                     .into_iter()
                     .map(|s| (s.prediction, metrics_map(&s.metrics)))
                     .collect()

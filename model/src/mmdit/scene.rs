@@ -7,6 +7,8 @@ use burn::nn::{Initializer, LayerNorm, LayerNormConfig, Linear, LinearConfig};
 use burn::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use any4d_data::scene::features::ClipSceneFeatures;
+
 use crate::gelu::gelu;
 
 /// Channels per keyframe slot of (S4): the masked offset (3) and the slot's scene flag (1).
@@ -156,6 +158,52 @@ impl SceneInput {
             .expand([b, p, t, 1]);
         let keyframes = Tensor::cat(vec![offsets * m.clone(), m], 3);
         Self { grid, keyframes }
+    }
+
+    /// The input of a batch from each clip's (S1)–(S2) features (docs/method.md §4.12): a clip without a scene
+    /// gets an empty grid and no offsets.
+    ///
+    /// # Shapes
+    /// - scenes: B entries with grid `[G]` and offsets `[T, P, 3]`; mask `[B, T]`; output grid `[B, G]`, keyframes
+    ///   `[B, P, T, 4]`
+    pub fn from_features(
+        scenes: &[Option<&ClipSceneFeatures>],
+        cells: usize,
+        frames: usize,
+        tokens: usize,
+        mask: Tensor<2>,
+        device: &Device,
+    ) -> SceneInput {
+        let b = scenes.len();
+        let mut grid = vec![0f32; b * cells];
+        let mut offsets = vec![0f32; b * tokens * frames * 3];
+        let mut present = vec![0f32; b];
+        for (i, s) in scenes.iter().enumerate() {
+            let Some(s) = s else { continue };
+            assert!(
+                s.grid.len() == cells && s.offsets.len() == frames * tokens * 3,
+                "SceneInput::from_features: clip {i} has a grid of {} cells and {} offset values, expected {cells} and \
+                 {frames} × {tokens} × 3",
+                s.grid.len(),
+                s.offsets.len()
+            );
+            present[i] = 1.0;
+            grid[i * cells..(i + 1) * cells].copy_from_slice(&s.grid);
+            // [T, P, 3] → [P, T, 3], the token-major layout of the latents.
+            for f in 0..frames {
+                for p in 0..tokens {
+                    let from = (f * tokens + p) * 3;
+                    let to = ((i * tokens + p) * frames + f) * 3;
+                    offsets[to..to + 3].copy_from_slice(&s.offsets[from..from + 3]);
+                }
+            }
+        }
+        Self::new(
+            Tensor::from_data(TensorData::new(grid, [b, cells]), device),
+            Tensor::from_data(TensorData::new(offsets, [b, tokens, frames, 3]), device),
+            mask,
+            Tensor::from_data(TensorData::new(present, [b]), device),
+        )
     }
 
     /// No scene for any of `b` clips: an empty grid and no offsets (what a clip without a scene gets in training).

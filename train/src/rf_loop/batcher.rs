@@ -6,7 +6,6 @@ use std::path::Path;
 use std::sync::Arc;
 
 use any4d_data::keyframes::sample_keyframes;
-use any4d_data::scene::features::ClipSceneFeatures;
 use any4d_data::store::{Split, Store};
 use any4d_model::anchor::keyframe_lerp;
 use any4d_model::any_vae::AnyMeshVae;
@@ -325,12 +324,10 @@ impl RfBatcher {
             TensorData::new(mask.iter().map(|&m| f32::from(u8::from(m))).collect::<Vec<_>>(), [b, t]),
             device,
         );
-        let scene = self
-            .cfg
-            .model
-            .scene
-            .any()
-            .then(|| scene_input(&scenes, self.cfg.model.scene.grid_cells(), t, p, mask.clone(), device));
+        let scene =
+            self.cfg.model.scene.any().then(|| {
+                SceneInput::from_features(&scenes, self.cfg.model.scene.grid_cells(), t, p, mask.clone(), device)
+            });
         // A caption with no text is always the unconditional input (caption_keep), whatever the dropout draw.
         let keep: Vec<f32> = caption_keep(&captions)
             .into_iter()
@@ -392,45 +389,6 @@ impl RfBatcher {
         let z_key = self.stats.standardize_motion(enc.mu.swap_dims(1, 2));
         Ok(Tensor::from_data(z_key.into_data(), device))
     }
-}
-
-/// The [`SceneInput`] of a batch from each clip's (S1)–(S2) features (docs/method.md §4.12): a clip without a scene
-/// gets an empty grid and no offsets.
-///
-/// # Shapes
-/// - scenes: B entries with grid `[G]` and offsets `[T, P, 3]`; mask `[B, T]`; output grid `[B, G]`, keyframes
-///   `[B, P, T, 4]`
-pub fn scene_input(
-    scenes: &[Option<&ClipSceneFeatures>],
-    cells: usize,
-    frames: usize,
-    tokens: usize,
-    mask: Tensor<2>,
-    device: &Device,
-) -> SceneInput {
-    let b = scenes.len();
-    let mut grid = vec![0f32; b * cells];
-    let mut offsets = vec![0f32; b * tokens * frames * 3];
-    let mut present = vec![0f32; b];
-    for (i, s) in scenes.iter().enumerate() {
-        let Some(s) = s else { continue };
-        present[i] = 1.0;
-        grid[i * cells..(i + 1) * cells].copy_from_slice(&s.grid);
-        // [T, P, 3] → [P, T, 3], the token-major layout of the latents.
-        for f in 0..frames {
-            for p in 0..tokens {
-                let from = (f * tokens + p) * 3;
-                let to = ((i * tokens + p) * frames + f) * 3;
-                offsets[to..to + 3].copy_from_slice(&s.offsets[from..from + 3]);
-            }
-        }
-    }
-    SceneInput::new(
-        Tensor::from_data(TensorData::new(grid, [b, cells]), device),
-        Tensor::from_data(TensorData::new(offsets, [b, tokens, frames, 3]), device),
-        mask,
-        Tensor::from_data(TensorData::new(present, [b]), device),
-    )
 }
 
 pub(super) fn open_store(data: &Path) -> Result<Store> {
