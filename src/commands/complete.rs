@@ -81,7 +81,8 @@ pub struct CompleteArgs {
     pub view: Option<PathBuf>,
     /// A static scene (`.obj` of closed parts, in the keyframes' coordinates): each output is scored in it
     /// ((E8)–(E10), docs/method.md §6.5: does the completion pass through walls or sink into the floor?) and the
-    /// `--view` page draws it. The completion itself does not see the scene.
+    /// `--view` page draws it. A scene-aware RF (`model.scene`, docs/method.md §4.12) also completes in it, one window
+    /// at a time only; other RFs do not see it.
     #[arg(long)]
     pub scene: Option<PathBuf>,
     /// Compute backend.
@@ -174,6 +175,7 @@ pub fn exec(args: CompleteArgs, extend: bool) -> anyhow::Result<ExitCode> {
         caption: caption.clone(),
         seed: args.seed,
         samples: args.samples,
+        scene: scene.clone().filter(|_| model.reads_scene),
     };
     let mut clips = complete(&keys, model.method.as_ref(), model.window, model.tokens, &opts)?;
     if args.average {
@@ -281,6 +283,7 @@ pub fn bench(args: BenchArgs) -> anyhow::Result<ExitCode> {
             caption: String::new(),
             seed: 42,
             samples: 1,
+            scene: None,
         };
         let mut times = Vec::with_capacity(args.reps);
         for rep in 0..=args.reps {

@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 
 use any4d_data::formats::{self, obj};
 use any4d_data::preprocess::normalize;
+use any4d_data::scene::Scene;
 use any4d_data::{Clip, DataError};
 use any4d_eval::methods::{Method, Request};
 use any4d_eval::rollout::{OverlapSource, RolloutSpec};
@@ -186,6 +187,9 @@ pub struct CompleteOptions {
     pub seed: u64,
     /// Number of samples.
     pub samples: usize,
+    /// The static scene, in the keyframes' coordinates, for a method that reads it (normalised with the keyframes;
+    /// one window only: the rollout of a longer clip is not told it).
+    pub scene: Option<Scene>,
 }
 
 /// Completes `keys` with `method` (built for windows of `window` frames) into `opts.samples` clips of
@@ -276,6 +280,26 @@ pub fn complete(
         "any4d complete",
     )?;
     let (normalised, norm) = normalize(&user);
+    let scene = match &opts.scene {
+        Some(_) if opts.frames > window => {
+            return setup(
+                "scene",
+                format!(
+                    "a scene is told to one window of {window} frames; {} frames roll out window by window, which \
+                     is not told it",
+                    opts.frames
+                ),
+            );
+        }
+        Some(s) => Some(s.normalized(&norm).ok_or_else(|| {
+            bad(
+                &keys.id,
+                "scene",
+                "is not finite in the keyframes' normalised frame".into(),
+            )
+        })?),
+        None => None,
+    };
     let spec = RolloutSpec {
         window,
         stride: window - 1,
@@ -296,7 +320,7 @@ pub fn complete(
                     clip: &normalised,
                     keyframes: &key_frames,
                     seed,
-                    scene: None,
+                    scene: scene.as_ref(),
                 })
                 .collect();
             batched.extend(method.complete_batch(&requests, &opts.caption)?);

@@ -114,6 +114,8 @@ pub struct RunMethod {
     pub window: usize,
     /// FPS tokens P its VAE encodes.
     pub tokens: usize,
+    /// Whether its network reads the scene a window moves in (docs/method.md §4.12).
+    pub reads_scene: bool,
 }
 
 /// The keyframe RF of `run_dir` as a method (`any4d complete` / `extend`), with the keyframe correction (L2) when
@@ -139,6 +141,7 @@ fn rf_method(kind: MethodKind, run_dir: &Path, sampling: SamplingSetup, device: 
     let codec = codec_of(&vae, sampling.posterior, device)?;
     let label = checkpoint_label(&rf.run, rf.step);
     let rf_config = rf.config.model.clone();
+    let reads_scene = rf_config.scene.any();
     // A generated window: the RF's frames, or the clip length of the sequence-wise VAE (one trajectory slot).
     let window = codec.vae().clip_frames().unwrap_or(rf_config.frames);
     let tokens = codec.tokens();
@@ -164,6 +167,7 @@ fn rf_method(kind: MethodKind, run_dir: &Path, sampling: SamplingSetup, device: 
         checkpoint: label,
         window,
         tokens,
+        reads_scene,
     })
 }
 

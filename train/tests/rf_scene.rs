@@ -17,7 +17,7 @@ use any4d_train::config::Duration;
 use any4d_train::interop::{MODEL_SAFETENSORS, export_run, import_file};
 use any4d_train::loop_common::{Objective, Outcome};
 use any4d_train::rf_loop::{LatentDraw, RfObjective, RfRunConfig, RfRunOptions, Subset, TextDropout, train_rf};
-use any4d_train::run_folder::{VALID_FILE, read_table};
+use any4d_train::run_folder::{RunFolder, VALID_FILE, read_table};
 use any4d_train::runs::{load_rf_run, load_vae_run};
 use burn::prelude::Device;
 use common::{VaeFixture, root, run_options, serial, tiny_vae, vae_fixture_in};
@@ -151,18 +151,28 @@ fn batches_carry_each_clips_grid_and_its_keyframe_offsets() {
 /// A network reading both parts trains; loaded from its run folder it reproduces the logged validation loss, so the
 /// scene parameters are saved and the validation batches carry the scenes they were trained with (without them the
 /// loss differs); it exports and imports under any4d's names and is refused under AnimateAnyMesh's.
+/// The scene RF of 12 steps, trained once per test process.
+fn trained() -> &'static RunFolder {
+    static RUN: OnceLock<RunFolder> = OnceLock::new();
+    RUN.get_or_init(|| {
+        let f = fixture();
+        let opts = RfRunOptions {
+            run: run_options(&f.store, &f.dir, "rf-scene"),
+            vae_run: Some(f.vae_run.clone()),
+            init: None,
+        };
+        let (run, outcome) = train_rf(&scene_rf(12), &opts).expect("scene RF run");
+        assert!(matches!(outcome, Outcome::Finished { steps: 12, .. }), "{outcome:?}");
+        run
+    })
+}
+
 #[test]
 fn a_scene_aware_rf_trains_and_its_run_reproduces_its_validation_loss() {
     let _g = serial();
     let f = fixture();
     let cfg = scene_rf(12);
-    let opts = RfRunOptions {
-        run: run_options(&f.store, &f.dir, "rf-scene"),
-        vae_run: Some(f.vae_run.clone()),
-        init: None,
-    };
-    let (run, outcome) = train_rf(&cfg, &opts).expect("scene RF run");
-    assert!(matches!(outcome, Outcome::Finished { steps: 12, .. }), "{outcome:?}");
+    let run = trained();
     let dev = cpu();
     let loaded = load_rf_run(run.root(), &dev).unwrap();
     assert_eq!(loaded.config.model.scene, cfg.model.scene);
@@ -212,4 +222,63 @@ fn a_scene_aware_rf_trains_and_its_run_reproduces_its_validation_loss() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("scene-aware") && !refused.exists(), "{e}");
+}
+
+/// `any4d complete` with a scene-aware RF: the scene (in the keyframes' coordinates) changes the completion of one
+/// window, and a longer clip, which rolls out window by window without it, is refused rather than completed blind.
+#[test]
+fn complete_tells_a_scene_aware_rf_the_scene_of_one_window_only() {
+    use any4d_train::complete::{CompleteOptions, KeyMeshes, complete};
+    use any4d_train::evaluate::{SamplingSetup, keyframe_method};
+    let _g = serial();
+    let run = trained();
+    let dev = cpu();
+    let model = keyframe_method(run.root(), SamplingSetup::default(), false, &dev).unwrap();
+    assert!(model.reads_scene);
+    let store = Store::open(&fixture().store).unwrap();
+    let item = store.get(0).unwrap();
+    let clip = &item.clip;
+    let keys = KeyMeshes {
+        id: clip.id.clone(),
+        n_vertices: clip.n_vertices,
+        faces: clip.faces.clone(),
+        keys: vec![(0, clip.frame(0).to_vec()), (3, clip.frame(3).to_vec())],
+        clip_frames: Some(clip.frames),
+        clip_caption: None,
+    };
+    let opts = |scene, frames| CompleteOptions {
+        frames,
+        caption: String::new(),
+        seed: 1,
+        samples: 1,
+        scene,
+    };
+    let run_with = |scene| {
+        complete(
+            &keys,
+            model.method.as_ref(),
+            model.window,
+            model.tokens,
+            &opts(scene, 4),
+        )
+        .unwrap()
+    };
+    let (blind, seen) = (run_with(None), run_with(item.scene.clone()));
+    let gap = blind[0]
+        .vertices
+        .iter()
+        .zip(&seen[0].vertices)
+        .flat_map(|(a, b)| (0..3).map(move |k| (a[k] - b[k]).abs()))
+        .fold(0f32, f32::max);
+    assert!(gap > 1e-6, "the scene did not change the completion");
+    let e = complete(
+        &keys,
+        model.method.as_ref(),
+        model.window,
+        model.tokens,
+        &opts(item.scene.clone(), 7),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("scene") && e.contains("window"), "{e}");
 }
