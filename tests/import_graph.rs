@@ -25,7 +25,6 @@ const CRATES: &[(&str, &str)] = &[
 const KNOWN_CIRCLES: &[(&str, &[&str])] = &[
     ("data", &["formats::bvh", "formats::iqm"]),
     ("model", &["any_vae", "dymesh_vae", "frame_vae", "mesh_vae"]),
-    ("eval", &["tables::long_horizon", "tables::summary", "tables::timing"]),
     (
         "train",
         &[

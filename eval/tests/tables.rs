@@ -5,9 +5,8 @@ use std::collections::BTreeMap;
 
 use any4d_eval::plot::{Canvas, PALETTE, Series, WHITE, line_plot, nice_ticks};
 use any4d_eval::tables::short_horizon::LAYOUT as TABLE1;
-use any4d_eval::tables::summary::{
-    ClipRecord, TableHeader, TimingRecord, csv, markdown, mean_ci95, summarize, timing_tables, write_clip_parquet,
-};
+use any4d_eval::tables::summary::{ClipRecord, TableHeader, csv, markdown, mean_ci95, summarize, write_clip_parquet};
+use any4d_eval::tables::timing::{TimingRecord, timing_tables};
 use any4d_model::bench::median;
 use polars::prelude::{ParquetReader, SerReader};
 

@@ -2,13 +2,15 @@
 //! meshes of 512…4096 vertices, 16 frames (one window) and 31 (the two-stage rollout), batch 1, median of the timed
 //! runs after one warm-up.
 
+use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 
 use any4d_data::{Clip, DataError};
+use any4d_model::bench::median;
 
 use super::long_horizon::generate_long;
-use super::summary::{Layout, TimingRecord, timing_tables};
+use super::summary::{Layout, TableHeader, csv_field, header_lines};
 use super::{TableOptions, TableReport, header_for, progress_bar, write_text};
 use crate::rollout::{OverlapSource, RolloutSpec};
 
@@ -170,4 +172,63 @@ impl Timing {
             files,
         })
     }
+}
+
+/// One P-Table 4 measurement: a method at one (frames, vertices) size, the timed repetitions in seconds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimingRecord {
+    pub method: String,
+    pub frames: usize,
+    pub vertices: usize,
+    /// Seconds per timed run (the warm-up excluded).
+    pub seconds: Vec<f64>,
+}
+
+/// P-Table 4 in Markdown and CSV: one row per (method, frames), one column per vertex count (median seconds), and
+/// the mean over vertex counts.
+pub fn timing_tables(records: &[TimingRecord], header: &TableHeader) -> (String, String) {
+    let mut sizes: Vec<usize> = records.iter().map(|r| r.vertices).collect();
+    sizes.sort_unstable();
+    sizes.dedup();
+    let mut keys: Vec<(&str, usize)> = Vec::new();
+    for r in records {
+        if !keys.contains(&(r.method.as_str(), r.frames)) {
+            keys.push((r.method.as_str(), r.frames));
+        }
+    }
+    let reps = records.iter().map(|r| r.seconds.len()).max().unwrap_or(0);
+    let mut md = header_lines(LAYOUT.title, header, 1);
+    let _ = writeln!(md, "Median of {reps} timed runs after one warm-up, batch 1, seconds.\n");
+    md.push_str("| Method | Frames |");
+    let mut csv = String::from("method,frames");
+    for n in &sizes {
+        let _ = write!(md, " {n} |");
+        let _ = write!(csv, ",v{n}");
+    }
+    md.push_str(" Mean |\n|---|---|");
+    md.push_str(&"---|".repeat(sizes.len() + 1));
+    md.push('\n');
+    let _ = writeln!(csv, ",mean,device");
+    for (method, frames) in keys {
+        let meds: Vec<Option<f64>> = sizes
+            .iter()
+            .map(|&n| {
+                records
+                    .iter()
+                    .find(|r| r.method == method && r.frames == frames && r.vertices == n)
+                    .map(|r| median(&r.seconds))
+            })
+            .collect();
+        let present: Vec<f64> = meds.iter().flatten().copied().collect();
+        let mean = present.iter().sum::<f64>() / present.len().max(1) as f64;
+        let _ = write!(md, "| {method} | {frames} |");
+        let _ = write!(csv, "{},{frames}", csv_field(method));
+        for m in &meds {
+            let _ = write!(md, " {} |", m.map_or("–".into(), |x| format!("{x:.3}")));
+            let _ = write!(csv, ",{}", m.map_or(String::new(), |x| format!("{x}")));
+        }
+        let _ = writeln!(md, " {mean:.3} |");
+        let _ = writeln!(csv, ",{mean},{}", csv_field(&header.device));
+    }
+    (md, csv)
 }
