@@ -17,7 +17,7 @@ use any4d_train::config::Duration;
 use any4d_train::interop::{MODEL_SAFETENSORS, export_run, import_file};
 use any4d_train::loop_common::{Objective, Outcome};
 use any4d_train::rf_loop::{LatentDraw, RfObjective, RfRunConfig, RfRunOptions, Subset, TextDropout, train_rf};
-use any4d_train::run_folder::{RunFolder, VALID_FILE, read_table};
+use any4d_train::run_folder::{RunFolder, SAMPLES_FILE, VALID_FILE, read_table};
 use any4d_train::runs::{load_rf_run, load_vae_run};
 use burn::prelude::Device;
 use common::{VaeFixture, root, run_options, serial, tiny_vae, vae_fixture_in};
@@ -161,7 +161,18 @@ fn trained() -> &'static RunFolder {
             vae_run: Some(f.vae_run.clone()),
             init: None,
         };
-        let (run, outcome) = train_rf(&scene_rf(12), &opts).expect("scene RF run");
+        // Validation samples at the end too: 2 VAL clips completed in their scenes on a 4-point grid.
+        let mut cfg = scene_rf(12);
+        cfg.rf.valid_sample_every = 12;
+        cfg.rf.valid_sample_clips = 2;
+        cfg.rf.valid_sample_grid = 4;
+        let (run, outcome) = train_rf(&cfg, &opts).expect("scene RF run");
+        let samples = read_table(&run.root().join(SAMPLES_FILE)).expect("samples.csv");
+        assert!(
+            samples.rows.iter().all(|(_, v)| v.iter().all(|x| x.is_finite())),
+            "{:?}",
+            samples.rows
+        );
         assert!(matches!(outcome, Outcome::Finished { steps: 12, .. }), "{outcome:?}");
         run
     })
@@ -171,7 +182,12 @@ fn trained() -> &'static RunFolder {
 fn a_scene_aware_rf_trains_and_its_run_reproduces_its_validation_loss() {
     let _g = serial();
     let f = fixture();
-    let cfg = scene_rf(12);
+    let mut cfg = scene_rf(12);
+    (
+        cfg.rf.valid_sample_every,
+        cfg.rf.valid_sample_clips,
+        cfg.rf.valid_sample_grid,
+    ) = (12, 2, 4);
     let run = trained();
     let dev = cpu();
     let loaded = load_rf_run(run.root(), &dev).unwrap();

@@ -15,9 +15,10 @@ impl MmditConfig {
 
     /// A rough count of the bytes one training micro-batch keeps for the backward pass (f32), computed without
     /// allocating: per block and token about 16 W values (norms, qkv, attention output, projections, the 4W MLP
-    /// twice, residuals) and per block and clip two `heads × S × S` attention maps, S = `tokens + text_len`.
+    /// twice, residuals) and per block and clip two `heads × S × S` attention maps, S = `tokens + text_len` (+ the
+    /// scene's context tokens, docs/method.md §4.12).
     pub fn activation_bytes(&self, micro_batch: usize, tokens: usize, text_len: usize) -> u128 {
-        let (b, s) = (micro_batch as u128, (tokens + text_len) as u128);
+        let (b, s) = (micro_batch as u128, (tokens + text_len + self.scene.tokens()) as u128);
         let per_block = b * (16 * self.width as u128 * s + 2 * self.heads as u128 * s * s);
         4 * self.blocks as u128 * per_block
     }

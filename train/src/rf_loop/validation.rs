@@ -7,7 +7,7 @@ use std::sync::Arc;
 use any4d_data::batch::PadTo;
 use any4d_data::keyframes::sample_keyframes;
 use any4d_eval::learned::{LearnedModels, MeshCodec, RfSampler};
-use any4d_eval::methods::{AAM_GUIDANCE, KeyframeNoise, MethodKind, RfMethod, complete_and_score};
+use any4d_eval::methods::{AAM_GUIDANCE, KeyframeNoise, MethodKind, RfMethod, complete_and_score_batch};
 use any4d_model::mmdit::KeyframeConditioning;
 use any4d_model::rectified_flow::SampleOptions;
 use any4d_model::text::scratch::{ScratchTextModel, ScratchTokenizer};
@@ -114,7 +114,8 @@ pub fn validation_samples(batcher: &RfBatcher, model: &RfModel, device: &Device)
     let mut key_rng = ChaCha8Rng::seed_from_u64(seed);
     let mut sums = [0.0f64; 3];
     for (i, &store_index) in batcher.valid_indices()[..n].iter().enumerate() {
-        let clip = batcher.store().get(store_index)?.clip;
+        let item = batcher.store().get(store_index)?;
+        let clip = item.clip;
         let keyframes: Vec<usize> = sample_keyframes(&VALID_SAMPLE_KEYFRAMES, frames, &mut key_rng)
             .iter()
             .enumerate()
@@ -122,8 +123,10 @@ pub fn validation_samples(batcher: &RfBatcher, model: &RfModel, device: &Device)
             .collect();
         let clip_seed = seed.wrapping_add(i as u64);
         device.seed(clip_seed);
-        let scored = complete_and_score(&method, &clip, &keyframes, &clip.caption, clip_seed)?;
-        let m = scored.metrics;
+        // A scene-aware network is told the clip's scene, as in its training batches.
+        let asks = [(keyframes.as_slice(), clip_seed)];
+        let scored = complete_and_score_batch(&method, &clip, &asks, &clip.caption, item.scene.as_ref())?;
+        let m = &scored[0].metrics;
         for (s, v) in sums.iter_mut().zip([m.rmse, m.chamfer, m.dtw]) {
             *s += v / n as f64;
         }
