@@ -792,9 +792,10 @@ fn paper_size_window_timing() {
     );
 }
 
-/// docs/method.md §4.12 at sampling: a network reading both scene parts is told the request's scene — a box under
-/// the flag changes the sample, `None` and an empty-scene network do not need one — and the anchors of (S2) are the
-/// FPS tokens of the window's encoding. A network without scene parts samples the same with or without a scene.
+/// docs/method.md §4.12 at sampling: a network reading the keyframe offsets (S4) only — so nothing but the offsets
+/// can carry the scene — is told the request's scene: a box under the flag changes the sample against no scene. The
+/// anchors of (S2) are the window encoding's FPS tokens (frame 0's farthest points, as the store's). A network without
+/// scene parts samples the same with or without a scene.
 #[test]
 fn a_scene_aware_rf_reads_the_requests_scene_and_a_plain_one_ignores_it() {
     use any4d_data::scene::Scene;
@@ -814,7 +815,7 @@ fn a_scene_aware_rf_reads_the_requests_scene_and_a_plain_one_ignores_it() {
         };
         if scene_parts {
             cfg.scene = SceneConditioning {
-                global: true,
+                global: false,
                 local: true,
                 grid: [8, 4, 8],
                 cell: 0.5,

@@ -81,8 +81,8 @@ pub struct CompleteArgs {
     pub view: Option<PathBuf>,
     /// A static scene (`.obj` of closed parts, in the keyframes' coordinates): each output is scored in it
     /// ((E8)–(E10), docs/method.md §6.5: does the completion pass through walls or sink into the floor?) and the
-    /// `--view` page draws it. A scene-aware RF (`model.scene`, docs/method.md §4.12) also completes in it, one window
-    /// at a time only; other RFs do not see it.
+    /// `--view` page draws it. A scene-aware RF (`model.scene`, docs/method.md §4.12) also completes in it, for one
+    /// window of the model's length only (more frames are refused); other RFs do not see it.
     #[arg(long)]
     pub scene: Option<PathBuf>,
     /// Compute backend.

@@ -200,6 +200,15 @@ fn runs_given_to_the_wrong_flag_and_configs_on_the_wrong_vae_are_refused() {
         .to_string();
     assert!(e.contains("model.frames = 1") && e.contains("\"none\""), "{e}");
     assert!(!dymesh().dir.join("runs/ours-on-dymesh-1").exists());
+    // The AAM config told the scene: its one trajectory slot has no frames for the scene's features.
+    let mut scened = aam_tiny(2);
+    scened.model.scene.global = true;
+    let e = train_rf(&scened, &opts(dymesh(), "aam-scene"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("sequence-wise") && e.contains("model.scene.global"), "{e}");
+    assert!(!dymesh().dir.join("runs/aam-scene-1").exists());
 }
 
 #[test]

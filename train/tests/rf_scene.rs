@@ -16,7 +16,9 @@ use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::Duration;
 use any4d_train::interop::{MODEL_SAFETENSORS, export_run, import_file};
 use any4d_train::loop_common::{Objective, Outcome};
-use any4d_train::rf_loop::{LatentDraw, RfObjective, RfRunConfig, RfRunOptions, Subset, TextDropout, train_rf};
+use any4d_train::rf_loop::{
+    LatentCache, LatentDraw, RfObjective, RfRunConfig, RfRunOptions, Subset, TextDropout, train_rf,
+};
 use any4d_train::run_folder::{RunFolder, SAMPLES_FILE, VALID_FILE, read_table};
 use any4d_train::runs::{load_rf_run, load_vae_run};
 use burn::prelude::Device;
@@ -72,13 +74,41 @@ fn values<const D: usize>(t: burn::prelude::Tensor<D>) -> Vec<f32> {
 
 /// Each clip's grid row is its (S1) around frame 0; at a keyframe its slot holds the anchors' (S2) offsets and the
 /// flag 1, at any other frame zeros (m = 1 is a keyframe). The anchors are the store's first P FPS points, the
-/// VAE's tokens.
+/// VAE's tokens. The same with latents cached in memory and encoded per batch.
 #[test]
 fn batches_carry_each_clips_grid_and_its_keyframe_offsets() {
     let _g = serial();
     let dev = cpu();
+    for cache in [LatentCache::Memory, LatentCache::PerBatch] {
+        let mut cfg = scene_rf(1);
+        cfg.rf.latent_cache = cache;
+        check_batches(&cfg, &dev);
+    }
     let cfg = scene_rf(1);
-    let (obj, vocab) = objective(&cfg, &dev);
+    let positions = [0usize, 1, 2];
+    // The same objective without the scene keys tells the network nothing.
+    let mut plain = cfg.clone();
+    plain.model.scene = SceneConditioning::default();
+    let (obj, vocab) = objective(&plain, &dev);
+    let model = plain.model_config(vocab).init(&dev);
+    let step = obj
+        .batcher()
+        .batch(
+            &model,
+            Subset::Train,
+            &positions,
+            &mut ChaCha8Rng::seed_from_u64(0),
+            TextDropout::Off,
+            &dev,
+        )
+        .unwrap();
+    assert!(step.batch.scene.is_none());
+}
+
+/// The batch checks of [`batches_carry_each_clips_grid_and_its_keyframe_offsets`] under `cfg`.
+fn check_batches(cfg: &RfRunConfig, dev: &Device) {
+    let dev = dev.clone();
+    let (obj, vocab) = objective(cfg, &dev);
     let model = cfg.model_config(vocab).init(&dev);
     let batcher = obj.batcher();
     let store = batcher.store();
@@ -129,28 +159,8 @@ fn batches_carry_each_clips_grid_and_its_keyframe_offsets() {
         keyframes_seen > 0,
         "no keyframe was drawn, so the offsets were never checked"
     );
-    // The same objective without the scene keys tells the network nothing.
-    let mut plain = cfg.clone();
-    plain.model.scene = SceneConditioning::default();
-    let (obj, vocab) = objective(&plain, &dev);
-    let model = plain.model_config(vocab).init(&dev);
-    let step = obj
-        .batcher()
-        .batch(
-            &model,
-            Subset::Train,
-            &positions,
-            &mut ChaCha8Rng::seed_from_u64(0),
-            TextDropout::Off,
-            &dev,
-        )
-        .unwrap();
-    assert!(step.batch.scene.is_none());
 }
 
-/// A network reading both parts trains; loaded from its run folder it reproduces the logged validation loss, so the
-/// scene parameters are saved and the validation batches carry the scenes they were trained with (without them the
-/// loss differs); it exports and imports under any4d's names and is refused under AnimateAnyMesh's.
 /// The scene RF of 12 steps, trained once per test process.
 fn trained() -> &'static RunFolder {
     static RUN: OnceLock<RunFolder> = OnceLock::new();
@@ -178,6 +188,9 @@ fn trained() -> &'static RunFolder {
     })
 }
 
+/// A network reading both parts trains; loaded from its run folder it reproduces the logged validation loss, so the
+/// scene parameters are saved and the validation batches carry the scenes they were trained with (without them the
+/// loss differs); it exports and imports under any4d's names and is refused under AnimateAnyMesh's.
 #[test]
 fn a_scene_aware_rf_trains_and_its_run_reproduces_its_validation_loss() {
     let _g = serial();

@@ -110,6 +110,13 @@ impl RfSampler {
             }
         };
         let sequencewise = models.codec.vae().clip_frames().is_some();
+        if sequencewise && models.rf_config.scene.any() {
+            return Err(DataError::new(
+                "rf sampler",
+                "model.scene",
+                "an RF on a sequence-wise VAE has no frames for the scene's features to join",
+            ));
+        }
         if (kind == MethodKind::Aam) != sequencewise {
             let reason = if sequencewise {
                 "needs an RF trained on a frame-wise VAE; this one is the AnimateAnyMesh reference (an RF on the \

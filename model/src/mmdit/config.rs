@@ -177,6 +177,13 @@ impl MmditConfig {
             }
         }
         self.scene.validate()?;
+        if self.scene.local && !self.conditioning.has_mask_channels() {
+            return Err(format!(
+                "model.scene.local reads the scene at keyframes, and model.conditioning = {:?} trains without any: \
+                 use model.scene.global only",
+                self.conditioning
+            ));
+        }
         crate::summary::check_param_estimate(
             "model.width, blocks, frames, channels and text_dim",
             self.param_estimate(),

@@ -86,6 +86,14 @@ impl SceneConditioning {
                 "model.scene.grid has {g} cells along an axis; each must be 1..=64"
             ));
         }
+        if self.grid_cells() > any4d_data::scene::features::MAX_GRID_CELLS {
+            return Err(format!(
+                "model.scene.grid {:?} has {} cells, more than {}",
+                self.grid,
+                self.grid_cells(),
+                any4d_data::scene::features::MAX_GRID_CELLS
+            ));
+        }
         if !(self.cell.is_finite() && self.cell > 0.0) {
             return Err(format!("model.scene.cell {} must be finite and positive", self.cell));
         }

@@ -32,7 +32,7 @@ fn linear_flops_of_weights(model: &Mmdit, tokens: u64, text_len: u64) -> u64 {
             ("input_proj" | "output_proj", _) => tokens,
             ("text_proj", _) => text_len - scene_tokens,
             ("scene_global", "patch_proj") => scene_tokens,
-            ("scene_global", _) => 0, // the learned positions are added, not multiplied
+            ("scene_global", "scene_global") if p.path.last().is_some_and(|n| n == "position") => 0, // added
             ("scene_local", _) => tokens,
             ("time", _) | ("blocks", "ada_motion" | "ada_text") => 1,
             ("blocks", "qkv" | "proj" | "fc1" | "fc2") => tokens + text_len,
@@ -145,8 +145,7 @@ fn forward_embeds_tau_not_one_minus_tau() {
     }
 }
 
-/// A network that reads both scene parts at the layout of [`linear_flops_match_the_weights_of_the_initialised_module`]:
-/// 3 × 1 × 3 = 9 patches of 2³ cells.
+/// A network that reads both scene parts: a 6 × 2 × 6 grid in 3 × 1 × 3 = 9 patches of 2³ cells.
 fn scene_config() -> MmditConfig {
     let mut cfg = MmditConfig::tiny();
     cfg.scene = SceneConditioning {
@@ -202,6 +201,14 @@ fn scene_layouts_that_do_not_tile_are_refused_by_key() {
     assert!(cfg.validate().unwrap_err().contains("model.scene.cell"));
     cfg.scene.local = false; // nothing read, nothing checked
     cfg.validate().unwrap();
+    let mut big = scene_config();
+    big.scene.grid = [64, 64, 64];
+    assert!(big.validate().unwrap_err().contains("more than 65536"));
+    let mut baseline = scene_config();
+    baseline.conditioning = KeyframeConditioning::ReplaceNoised;
+    assert!(baseline.validate().unwrap_err().contains("model.scene.local"));
+    baseline.scene.local = false;
+    baseline.validate().unwrap();
 }
 
 /// (S3)–(S4) at the network, with every zero-initialised layer woken: the scene changes the output only through

@@ -6,6 +6,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use any4d_data::keyframes::sample_keyframes;
+use any4d_data::scene::features::GridSpec;
 use any4d_data::store::{Split, Store};
 use any4d_model::anchor::keyframe_lerp;
 use any4d_model::any_vae::AnyMeshVae;
@@ -70,6 +71,8 @@ pub struct RfBatcher {
     vae: AnyMeshVae,
     /// FPS tokens P of the VAE run (`vae.tokens`).
     tokens: usize,
+    /// The grid of (S1) when the network reads the scene (docs/method.md §4.12).
+    scene_grid: Option<GridSpec>,
     store: Store,
     train: SplitLatents,
     valid: SplitLatents,
@@ -134,6 +137,7 @@ impl RfBatcher {
             tokenizer: Arc::new(tokenizer),
             vae: frozen,
             tokens: vae.tokens(),
+            scene_grid,
             store,
             train,
             valid,
@@ -272,12 +276,7 @@ impl RfBatcher {
                     store_ids.len(),
                     self.tokens,
                     augment,
-                    self.cfg
-                        .model
-                        .scene
-                        .any()
-                        .then(|| self.cfg.model.scene.grid_spec())
-                        .as_ref(),
+                    self.scene_grid.as_ref(),
                     &inference,
                 )?;
                 (&encoded, (0..store_ids.len()).collect())
@@ -437,6 +436,14 @@ pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae
 fn check_slots(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
     let aam_config = cfg.model.frames == 1 && cfg.model.conditioning == KeyframeConditioning::None;
     if vae.model.clip_frames().is_some() {
+        if cfg.model.scene.any() {
+            return Err(TrainError::Setup(format!(
+                "the VAE run {} is sequence-wise (the AnimateAnyMesh reference, one trajectory latent per clip): its \
+                 tokens have no frames for the scene's keyframe offsets or grid to join; set model.scene.global and \
+                 model.scene.local to false",
+                vae.run.display()
+            )));
+        }
         if !aam_config {
             return Err(TrainError::Setup(format!(
                 "the VAE run {} is sequence-wise (one trajectory latent per clip): an RF on it is the AnimateAnyMesh \
