@@ -12,56 +12,9 @@ fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// A committed CSV: header and rows of strings (the files cited hold no quoted fields).
-struct Csv {
-    path: String,
-    header: Vec<String>,
-    rows: Vec<Vec<String>>,
-}
-
-impl Csv {
-    fn read(path: &str) -> Csv {
-        let text = std::fs::read_to_string(root().join(path)).unwrap_or_else(|e| panic!("{path}: {e}"));
-        let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-        let header = lines
-            .next()
-            .unwrap_or_else(|| panic!("{path}: empty"))
-            .split(',')
-            .map(String::from)
-            .collect();
-        let rows = lines.map(|l| l.split(',').map(String::from).collect()).collect();
-        Csv {
-            path: path.to_string(),
-            header,
-            rows,
-        }
-    }
-
-    /// The value of `column` in the one row whose columns `key` equal the given values.
-    fn get(&self, key: &[(&str, &str)], column: &str) -> f64 {
-        let col = |name: &str| {
-            self.header
-                .iter()
-                .position(|h| h == name)
-                .unwrap_or_else(|| panic!("{}: no column {name}", self.path))
-        };
-        let matching: Vec<&Vec<String>> = self
-            .rows
-            .iter()
-            .filter(|r| key.iter().all(|(k, v)| r[col(k)] == *v))
-            .collect();
-        assert_eq!(
-            matching.len(),
-            1,
-            "{}: {} rows match {key:?}",
-            self.path,
-            matching.len()
-        );
-        let cell = &matching[0][col(column)];
-        cell.parse()
-            .unwrap_or_else(|e| panic!("{}: {column} = {cell:?}: {e}", self.path))
-    }
-}
+#[path = "common/csv.rs"]
+mod csv;
+use csv::Csv;
 
 /// `a / b / c / d` with `digits` decimals.
 fn per_kx(values: impl Iterator<Item = f64>, digits: usize) -> String {

@@ -192,15 +192,7 @@ impl RfSampler {
     /// # Shapes
     /// `clip.vertices`: `[T, N_v]` rows; `latents` `[1, T, P, C]`.
     pub fn sample_latents(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<SampledWindow> {
-        let mut out = self.sample_latents_batch(
-            &[Request {
-                clip,
-                keyframes,
-                seed,
-                scene: None,
-            }],
-            caption,
-        )?;
+        let mut out = self.sample_latents_batch(&[Request::new(clip, keyframes, seed)], caption)?;
         Ok(out.remove(0))
     }
 

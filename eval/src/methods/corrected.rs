@@ -37,15 +37,7 @@ impl Method for KeyframeCorrected {
     }
 
     fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
-        let mut out = self.complete_batch(
-            &[Request {
-                clip,
-                keyframes,
-                seed,
-                scene: None,
-            }],
-            caption,
-        )?;
+        let mut out = self.complete_batch(&[Request::new(clip, keyframes, seed)], caption)?;
         Ok(out.remove(0))
     }
 

@@ -67,6 +67,18 @@ pub struct Request<'a> {
     pub scene: Option<&'a Scene>,
 }
 
+impl<'a> Request<'a> {
+    /// One window without a scene (what [`Method::complete`] asks).
+    pub fn new(clip: &'a Clip, keyframes: &'a [usize], seed: u64) -> Self {
+        Self {
+            clip,
+            keyframes,
+            seed,
+            scene: None,
+        }
+    }
+}
+
 /// The training-free vertex-space methods: (L1) and the static nearest keyframe.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VertexMethod(pub VertexBaseline);
@@ -153,15 +165,7 @@ impl<S: WindowSampler> Method for RfMethod<S> {
     }
 
     fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
-        let mut out = self.complete_batch(
-            &[Request {
-                clip,
-                keyframes,
-                seed,
-                scene: None,
-            }],
-            caption,
-        )?;
+        let mut out = self.complete_batch(&[Request::new(clip, keyframes, seed)], caption)?;
         Ok(out.remove(0))
     }
 
@@ -254,15 +258,7 @@ impl Method for SampleMean {
     }
 
     fn complete(&self, clip: &Clip, keyframes: &[usize], caption: &str, seed: u64) -> Result<Vec<[f32; 3]>> {
-        let mut out = self.complete_batch(
-            &[Request {
-                clip,
-                keyframes,
-                seed,
-                scene: None,
-            }],
-            caption,
-        )?;
+        let mut out = self.complete_batch(&[Request::new(clip, keyframes, seed)], caption)?;
         Ok(out.remove(0))
     }
 

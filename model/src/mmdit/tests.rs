@@ -48,15 +48,7 @@ fn linear_flops_match_the_weights_of_the_initialised_module() {
     let device = Device::flex();
     let mut other = MmditConfig::tiny();
     (other.conditioning, other.text_dim, other.blocks, other.width) = (KeyframeConditioning::None, 12, 3, 24);
-    let mut scene = MmditConfig::tiny();
-    scene.scene = SceneConditioning {
-        global: true,
-        local: true,
-        grid: [4, 2, 6],
-        cell: 0.5,
-        patch: 2,
-    };
-    for (cfg, tokens, text_len) in [(MmditConfig::tiny(), 7, 3), (other, 5, 11), (scene, 6, 2)] {
+    for (cfg, tokens, text_len) in [(MmditConfig::tiny(), 7, 3), (other, 5, 11), (scene_config(), 6, 2)] {
         let weights = linear_flops_of_weights(&cfg.init(&device), tokens, text_len);
         let counted = cfg.forward_flops(tokens as usize, text_len as usize);
         assert_eq!(counted.linear, weights, "{cfg:?}");
