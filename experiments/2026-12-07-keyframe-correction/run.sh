@@ -40,6 +40,8 @@ t1 heldout-shipped "$tmp/heldout/store" --split all --manifest $V/heldout/manife
   --methods lerp_latent,lerp_latent_corrected,keyframe_rf_corrected
 t1 heldout-anchored "$tmp/heldout/store" --split all --manifest $V/heldout/manifest.json --rf "$anchored" \
   --methods lerp_latent_corrected,keyframe_rf_corrected
+t1 heldout-anchored-mean8 "$tmp/heldout/store" --split all --manifest $V/heldout/manifest.json --rf "$anchored" \
+  --methods keyframe_rf_mean8_corrected
 C=experiments/2026-12-06-real-rf/compare.py
 B=$e/motion_bins.py
 R=$e/realval
@@ -63,6 +65,7 @@ S=experiments/2026-12-07-stk-vae/heldout/clips.parquet
 "$py" $C $e/heldout.csv lerp=$V/heldout/clips.parquet:lerp \
   shipped=$V/heldout/clips.parquet:keyframe_rf shipped_corrected=$e/heldout-shipped/clips.parquet:keyframe_rf_corrected \
   anchored=$S:keyframe_rf anchored_corrected=$e/heldout-anchored/clips.parquet:keyframe_rf_corrected \
+  anchored_mean8_corrected=$e/heldout-anchored-mean8/clips.parquet:keyframe_rf_mean8_corrected \
   shipped_latent_lerp=$e/heldout-shipped/clips.parquet:lerp_latent \
   shipped_latent_lerp_corrected=$e/heldout-shipped/clips.parquet:lerp_latent_corrected \
   anchored_latent_lerp=$S:lerp_latent anchored_latent_lerp_corrected=$e/heldout-anchored/clips.parquet:lerp_latent_corrected
