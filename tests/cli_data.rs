@@ -492,3 +492,62 @@ fn render_draws_a_store_clips_scene() {
     let (_, err) = text(&out);
     assert!(!out.status.success() && err.contains("scene stored with it"), "{err}");
 }
+
+#[test]
+fn shards_written_by_two_processes_merge_into_one_store() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = tmp.path().join("store");
+    let synth = |shard: &str, out: &Path| {
+        let args = [
+            "data", "synth", "--clips", "6", "--seed", "5", "--p", "16", "--shard", shard, "--out",
+        ];
+        std::process::Command::new(env!("CARGO_BIN_EXE_any4d"))
+            .args(args)
+            .arg(out)
+            .spawn()
+            .unwrap()
+    };
+    // Two processes at once, as an array job would run them.
+    let (a, b) = (store.join("shard-0"), store.join("shard-1"));
+    let children = [synth("0/2", &a), synth("1/2", &b)];
+    for mut c in children {
+        assert!(c.wait().unwrap().success());
+    }
+    let out = any4d(&["data", "merge", p(&store), p(&a), p(&b)]);
+    let (stdout, stderr) = text(&out);
+    assert!(
+        out.status.success() && stdout.contains("2 shards, 6 clips"),
+        "{stdout}{stderr}"
+    );
+    let out = any4d(&["data", "inspect", p(&store)]);
+    let (stdout, _) = text(&out);
+    assert!(
+        out.status.success() && stdout.contains("6 ok") && stdout.contains("shard-1"),
+        "{stdout}"
+    );
+    let out = any4d(&["data", "verify", p(&store)]);
+    let (stdout, _) = text(&out);
+    assert!(out.status.success() && stdout.contains("2 shards match"), "{stdout}");
+    let out = any4d(&["data", "render", p(&store), "--out", p(&tmp.path().join("s.png"))]);
+    assert!(out.status.success(), "{:?}", text(&out));
+    for bad in ["3/2", "0/0", "1"] {
+        let out = any4d(&[
+            "data",
+            "synth",
+            "--clips",
+            "2",
+            "--seed",
+            "5",
+            "--shard",
+            bad,
+            "--out",
+            p(&tmp.path().join("x")),
+        ]);
+        let (_, stderr) = text(&out);
+        assert!(
+            !out.status.success() && stderr.contains("--shard") && stderr.contains(bad),
+            "{bad}: {stderr}"
+        );
+        assert!(!tmp.path().join("x").exists());
+    }
+}

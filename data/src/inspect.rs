@@ -11,7 +11,7 @@ use crate::clip::object_uid;
 use crate::error::{DataError, Result};
 use crate::formats::skeletal::{ReadOptions, SkinStats, TakeInfo};
 use crate::formats::{self, Format};
-use crate::store::{CLIPS_FILE, IndexRow, Split, Status, Store, check_index, read_index};
+use crate::store::{IndexRow, Split, Status, Store, check_index, read_index};
 
 /// Lower edge of the vertex histogram (docs/method.md §2.2 filter).
 pub const HIST_MIN: u32 = 512;
@@ -72,6 +72,8 @@ pub struct Summary {
     /// Stored clips that move in a scene (docs/method.md §6.5); `None` when the store's records carry no scene
     /// section.
     pub scenes: Option<usize>,
+    /// The shards of a sharded store, as its manifest lists them (`None`: a one-file store).
+    pub shards: Option<Vec<crate::store::shards::ShardEntry>>,
 }
 
 /// Facts about one clip file.
@@ -122,7 +124,7 @@ impl Inspection {
 
 /// Inspect a store folder (one holding `clips.bin`) or a clip file / OBJ-sequence folder.
 pub fn inspect(path: &Path) -> Result<Inspection> {
-    if path.is_dir() && path.join(CLIPS_FILE).exists() {
+    if path.is_dir() && crate::store::is_store(path) {
         return summarize(path).map(Inspection::Store);
     }
     if !path.exists() {
@@ -144,6 +146,9 @@ pub fn summarize(dir: &Path) -> Result<Summary> {
             with += usize::from(store.get(i)?.scene.is_some());
         }
         summary.scenes = Some(with);
+    }
+    if dir.join(crate::store::MANIFEST_FILE).is_file() {
+        summary.shards = Some(crate::store::shards::read_manifest(dir)?.shards);
     }
     Ok(summary)
 }
@@ -184,6 +189,7 @@ pub fn summarize_rows(dir: &Path, rows: &[IndexRow]) -> Summary {
         reject_reasons: BTreeMap::new(),
         rejected_files: Vec::new(),
         scenes: None,
+        shards: None,
     };
     let mut objects = std::collections::HashSet::new();
     let mut package_objects = std::collections::HashSet::new();
@@ -309,6 +315,25 @@ impl Summary {
         let _ = writeln!(o, "empty captions     {}", self.empty_captions);
         if let Some(n) = self.scenes {
             let _ = writeln!(o, "scenes             {n} of {} clips move in a scene", self.ok);
+        }
+        if let Some(shards) = &self.shards {
+            let bytes: u64 = shards.iter().map(|s| s.bytes).sum();
+            let sizes = shards.iter().map(|s| s.clips);
+            let _ = writeln!(
+                o,
+                "shards             {} ({} to {} clips, {:.2} GB in all; manifest.json lists them)",
+                shards.len(),
+                sizes.clone().min().unwrap_or(0),
+                sizes.max().unwrap_or(0),
+                bytes as f64 / 1e9
+            );
+            for s in shards {
+                let _ = writeln!(
+                    o,
+                    "  {:<16} {} clips ({} train, {} val), {} rejected, {} bytes",
+                    s.path, s.clips, s.train, s.val, s.rejected, s.bytes
+                );
+            }
         }
         let _ = writeln!(
             o,

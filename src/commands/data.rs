@@ -16,7 +16,7 @@ use any4d_data::formats;
 use any4d_data::inspect;
 use any4d_data::preprocess::{self, VertexFilter};
 use any4d_data::render::{RenderOptions, render_contact_sheet};
-use any4d_data::store::{self, DEFAULT_P, ImportOptions, Store, Weld};
+use any4d_data::store::{self, DEFAULT_P, ImportOptions, ShardSpec, Store, Weld};
 use any4d_data::synth::rigged::{Action, Template};
 use any4d_data::synth::{Family, RiggedKinds, ShapeFamily, SynthConfig};
 
@@ -30,6 +30,9 @@ pub enum DataCmd {
     Import(ImportArgs),
     /// Write procedural clips into a dataset store.
     Synth(SynthArgs),
+    /// Make a sharded store of shard folders (each written by `data import --shard K/N` or `data synth --shard
+    /// K/N`): writes STORE/manifest.json listing them, copying no clip. Run again after re-importing a shard.
+    Merge(MergeArgs),
     /// Summarise a dataset store (checking clips.bin against its index) or one clip file.
     Inspect(InspectArgs),
     /// Check every clip of a dataset store: checksum, decoding, index row. Exit code 1 when any clip fails.
@@ -68,6 +71,16 @@ pub struct ConvertArgs {
 }
 
 #[derive(Args, Debug)]
+pub struct MergeArgs {
+    /// The sharded store folder (created; must not be a one-file store).
+    pub store: PathBuf,
+    /// Shard folders, in the order their clips are numbered (inside STORE, or anywhere: paths outside it are
+    /// recorded absolute).
+    #[arg(required = true)]
+    pub shards: Vec<PathBuf>,
+}
+
+#[derive(Args, Debug)]
 pub struct ImportArgs {
     /// Clip files or folders (searched recursively).
     #[arg(required = true)]
@@ -100,6 +113,11 @@ pub struct ImportArgs {
     /// idle loop); without it such takes are rejected.
     #[arg(long)]
     pub loop_short: bool,
+    /// Import only shard K of N (counted from 0): the sources whose path below the folder given hashes to K, so
+    /// N processes or machines (a Slurm array, an indexed Job, GNU parallel) write N shard folders that `data
+    /// merge` makes one store.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<ShardSpec>,
 }
 
 #[derive(Args, Debug)]
@@ -151,6 +169,10 @@ pub struct SynthArgs {
     /// table, never touching the clip), stored with its windows; the caption names the furniture.
     #[arg(long)]
     pub scenes: bool,
+    /// Write only shard K of N (counted from 0): the clips whose source `synth:<seed>:<index>` hashes to K (see
+    /// `data import --shard`).
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<ShardSpec>,
 }
 
 /// The one of `all` called `name`, else an error listing the names.
@@ -225,6 +247,20 @@ pub fn exec(cmd: DataCmd) -> anyhow::Result<ExitCode> {
         DataCmd::Convert(a) => convert(a),
         DataCmd::Import(a) => import(a),
         DataCmd::Synth(a) => synth(a),
+        DataCmd::Merge(a) => {
+            let manifest = store::merge(&a.store, &a.shards)?;
+            let clips: usize = manifest.shards.iter().map(|s| s.clips).sum();
+            let bytes: u64 = manifest.shards.iter().map(|s| s.bytes).sum();
+            emit(&format!(
+                "{}: {} shards, {clips} clips, {bytes} bytes (T = {}, P = {}); {} written\n",
+                a.store.display(),
+                manifest.shards.len(),
+                manifest.frames,
+                manifest.p,
+                store::MANIFEST_FILE
+            ))?;
+            Ok(ExitCode::SUCCESS)
+        }
         DataCmd::Inspect(a) => {
             let found = inspect::inspect(&a.path)?;
             match a.format {
@@ -324,6 +360,7 @@ fn import(a: ImportArgs) -> anyhow::Result<ExitCode> {
         p: a.p,
         max_frames: a.max_frames,
         loop_short: a.loop_short,
+        shard: a.shard,
         ..ImportOptions::default()
     };
     opts.validate()?;
@@ -364,7 +401,8 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     };
-    let report = store::write_synth_windows(&cfg, &a.out, a.p, a.window.unwrap_or(a.frames), a.stride, Some(&tick))?;
+    let windows = (a.window.unwrap_or(a.frames), a.stride);
+    let report = store::write_synth_shard(&cfg, &a.out, a.p, windows, a.shard, Some(&tick))?;
     bar.finish_and_clear();
     emit(&report.to_string())?;
     if report.rejected.is_empty() {
@@ -375,7 +413,7 @@ fn synth(a: SynthArgs) -> anyhow::Result<ExitCode> {
 }
 
 fn render(a: RenderArgs) -> anyhow::Result<ExitCode> {
-    let (clip, scene) = if a.path.is_dir() && a.path.join(store::CLIPS_FILE).exists() {
+    let (clip, scene) = if a.path.is_dir() && store::is_store(&a.path) {
         if a.scene.is_some() {
             bail!("--scene draws around a clip file; a store clip is drawn in the scene stored with it");
         }

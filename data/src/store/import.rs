@@ -7,7 +7,7 @@
 //! are imported. Only problems with the output folder or an existing store abort, and then no temporary file is
 //! left behind.
 
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, HashSet};
 use std::fmt;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -18,16 +18,16 @@ use rayon::prelude::*;
 use crate::clip::object_uid;
 use crate::error::{DataError, Result};
 use crate::formats::skeletal::SkinStats;
-use crate::formats::{self, Format};
 use crate::limits::FRAMES;
 use crate::synth::{self, SynthConfig};
 
 use super::clips::{preprocess_windows, process_file, reason};
+use super::discover::discover;
 use super::jobs::{Job, Outcome, Process, run_one};
 use super::options::check_p;
 pub use super::options::{FILE_TIME_LIMIT, ImportOptions, Weld};
-use super::provenance::provenance_of;
 pub use super::provenance::{PROVENANCE_FILE, Provenance};
+use super::shards::{ShardSpec, shard_key};
 
 use super::{
     CLIPS_FILE, DEFAULT_P, IndexRow, Split, Status, Store, StoreWriter, StoredClip, check_index, read_index,
@@ -141,7 +141,14 @@ pub fn import_with_progress(
 ) -> Result<ImportReport> {
     opts.validate()?;
     let existing = prepare_out(out, opts.frames, opts.p)?;
-    let (jobs, skipped) = discover(sources, out)?;
+    let (mut jobs, skipped) = discover(sources, out)?;
+    if let Some(shard) = opts.shard {
+        let roots: Vec<PathBuf> = sources.iter().filter_map(|s| std::fs::canonicalize(s).ok()).collect();
+        jobs.retain(|job| match job {
+            Job::File { path, .. } => shard.takes(&shard_key(path, &roots)),
+            Job::Synth { source, .. } => shard.takes(source),
+        });
+    }
     let owned = opts.clone();
     let limits = Limits {
         frames: opts.frames,
@@ -182,6 +189,19 @@ pub fn write_synth_windows(
     stride: usize,
     progress: Progress,
 ) -> Result<ImportReport> {
+    write_synth_shard(cfg, out, p, (window, stride), None, progress)
+}
+
+/// [`write_synth_windows`] (`windows` = (window, stride)) writing only the procedural clips of `shard` (by the hash
+/// of their source `synth:<seed>:<index>`; the [`super::shards`] module doc), all of them when `None`.
+pub fn write_synth_shard(
+    cfg: &SynthConfig,
+    out: &Path,
+    p: usize,
+    (window, stride): (usize, usize),
+    shard: Option<ShardSpec>,
+    progress: Progress,
+) -> Result<ImportReport> {
     check_p(p, "synth options")?;
     if window < 2 || window > cfg.frames || stride == 0 || stride > FRAMES.get_usize() {
         return Err(DataError::new(
@@ -200,6 +220,7 @@ pub fn write_synth_windows(
             source: cfg.source(index),
             index,
         })
+        .filter(|job| shard.is_none_or(|s| s.takes(job.source())))
         .collect();
     let cfg = cfg.clone();
     let limits = Limits {
@@ -227,6 +248,13 @@ pub fn write_synth_windows(
 /// Create `out`, or open the store already in it (checking that T and P agree); refuse a non-empty folder that
 /// holds no store.
 fn prepare_out(out: &Path, frames: usize, p: usize) -> Result<Option<(Store, Vec<IndexRow>)>> {
+    if out.join(super::shards::MANIFEST_FILE).exists() {
+        return Err(DataError::new(
+            out,
+            super::shards::MANIFEST_FILE,
+            "a sharded store: import into one of its shard folders with `--shard K/N`, then `data merge` again",
+        ));
+    }
     if out.join(CLIPS_FILE).exists() {
         let store = Store::open(out)?;
         if store.frames() != frames || store.p() != p {
@@ -257,131 +285,6 @@ fn prepare_out(out: &Path, frames: usize, p: usize) -> Result<Option<(Store, Vec
     }
     std::fs::create_dir_all(out).map_err(|e| DataError::io(out, e))?;
     Ok(None)
-}
-
-/// Find import jobs under `sources`, sorted and deduplicated by canonical path; skips the output folder and any
-/// folder that holds a store. Also counts, by extension, the files of the searched folders that are not sources
-/// (an OBJ folder's frames aside) and a glTF's buffer files.
-fn discover(sources: &[PathBuf], out: &Path) -> Result<(Vec<Job>, BTreeMap<String, usize>)> {
-    let out_canon = std::fs::canonicalize(out).map_err(|e| DataError::io(out, e))?;
-    let mut found: Vec<(PathBuf, Result<Format>)> = Vec::new();
-    let mut seen = HashSet::new();
-    let mut skipped = BTreeMap::new();
-    for src in sources {
-        match std::fs::canonicalize(src) {
-            Err(e) => found.push((src.clone(), Err(DataError::io(src, e)))),
-            Ok(path) if path.is_dir() => {
-                if path.join(CLIPS_FILE).exists() {
-                    found.push((
-                        path,
-                        Err(DataError::new(
-                            src,
-                            CLIPS_FILE,
-                            "this folder is an any4d store, not a source",
-                        )),
-                    ));
-                } else {
-                    walk(&path, &out_canon, &mut found, &mut seen, &mut skipped);
-                }
-            }
-            Ok(path) => {
-                if seen.insert(path.clone()) {
-                    let format = Format::from_path(&path);
-                    found.push((path, format));
-                }
-            }
-        }
-    }
-    found.sort_by(|a, b| a.0.cmp(&b.0));
-    found.dedup_by(|a, b| a.0 == b.0);
-    // A glTF's external buffers are parts of it, not clips of their own.
-    let buffers: HashSet<PathBuf> = found
-        .iter()
-        .filter(|(p, f)| matches!(f, Ok(Format::Gltf)) && p.is_file())
-        .flat_map(|(p, _)| formats::gltf::buffer_files(p))
-        .filter_map(|b| std::fs::canonicalize(b).ok())
-        .collect();
-    if !buffers.is_empty() {
-        found.retain(|(p, _)| {
-            let keep = std::fs::canonicalize(p).map_or(true, |c| !buffers.contains(&c));
-            if !keep {
-                *skipped.entry(extension(p)).or_insert(0) += 1;
-            }
-            keep
-        });
-    }
-    let mut cache = HashMap::new();
-    let jobs = found
-        .into_iter()
-        .map(|(path, format)| Job::File {
-            source: path.display().to_string(),
-            provenance: provenance_of(&path, &mut cache),
-            path,
-            format,
-        })
-        .collect();
-    Ok((jobs, skipped))
-}
-
-/// A path's lower-case extension, `""` when it has none.
-fn extension(p: &Path) -> String {
-    p.extension()
-        .map_or_else(String::new, |e| e.to_string_lossy().to_ascii_lowercase())
-}
-
-/// Recursively collect clip files and OBJ-sequence folders under `dir`. Unreadable folders become rejected jobs.
-/// Every folder and file is visited once by its canonical path (`seen`), so a symlink cycle ends and a file
-/// reached through two links is imported once, under the first path met. Files that are not sources (an OBJ
-/// folder's `.obj` frames and the store's own files aside) are counted by extension in `skipped`.
-fn walk(
-    dir: &Path,
-    out: &Path,
-    found: &mut Vec<(PathBuf, Result<Format>)>,
-    seen: &mut HashSet<PathBuf>,
-    skipped: &mut BTreeMap<String, usize>,
-) {
-    if dir == out || dir.join(CLIPS_FILE).exists() {
-        return;
-    }
-    match std::fs::canonicalize(dir) {
-        Ok(canon) => {
-            if !seen.insert(canon) {
-                return;
-            }
-        }
-        Err(e) => {
-            found.push((dir.to_path_buf(), Err(DataError::io(dir, e))));
-            return;
-        }
-    }
-    let mut entries: Vec<PathBuf> =
-        match std::fs::read_dir(dir).and_then(|rd| rd.map(|e| e.map(|e| e.path())).collect()) {
-            Ok(v) => v,
-            Err(e) => {
-                found.push((dir.to_path_buf(), Err(DataError::io(dir, e))));
-                return;
-            }
-        };
-    entries.sort();
-    if entries
-        .iter()
-        .any(|p| p.is_file() && extension(p) == "obj" && !formats::obj::is_scene_file(p))
-    {
-        found.push((dir.to_path_buf(), Format::from_path(dir)));
-    }
-    for p in entries {
-        if p.is_dir() {
-            walk(&p, out, found, seen, skipped);
-        } else if formats::is_source(&p) {
-            // A link that resolves to nothing is still listed: its read fails with the reason.
-            if std::fs::canonicalize(&p).map_or(true, |c| seen.insert(c)) {
-                let format = Format::from_path(&p);
-                found.push((p, format));
-            }
-        } else if extension(&p) != "obj" && p.file_name().is_none_or(|n| n != PROVENANCE_FILE) {
-            *skipped.entry(extension(&p)).or_insert(0) += 1;
-        }
-    }
 }
 
 /// The index row of a stored clip; called after [`StoreWriter::append`] accepted it, which checked that the
@@ -457,7 +360,7 @@ fn run_jobs(
     // Records carry a scene section when a source has a scene (beside it, or a glTF's still meshes) or the existing
     // store's records do.
     let scenes = limits.scenes
-        || existing.as_ref().is_some_and(|(store, _)| store.catalog.scenes)
+        || existing.as_ref().is_some_and(|(store, _)| store.has_scenes())
         || jobs.iter().any(|j| match j {
             Job::File { path, .. } => super::clips::scene_of(path).is_ok_and(|s| s.is_some()),
             _ => false,
@@ -486,7 +389,7 @@ fn run_jobs(
                 ));
             }
             let old_sum = super::checksum(&raw);
-            let sum = match store.catalog.scenes == scenes {
+            let sum = match store.has_scenes() == scenes {
                 true => writer.append_encoded(&raw, store.split(i)?)?,
                 // An old store without scenes joined by sources with them: its records gain an empty scene section.
                 false => writer.append(&store.get(i)?)?,

@@ -110,8 +110,9 @@ pub fn write_index(dir: &Path, rows: &[IndexRow]) -> Result<()> {
     written
 }
 
-/// Read `dir/index.parquet`; a missing column, a wrong type or an unknown status/split names the column and row.
-pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
+/// Read `dir/index.parquet` of a one-file store (a shard); a missing column, a wrong type or an unknown
+/// status/split names the column and row. [`super::read_index`] reads either kind of store.
+pub fn read_index_file(dir: &Path) -> Result<Vec<IndexRow>> {
     let path = dir.join(INDEX_FILE);
     let file = File::open(&path).map_err(|e| DataError::io(&path, e))?;
     let df = ParquetReader::new(file)

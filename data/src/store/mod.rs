@@ -41,6 +41,12 @@
 //! finaliser. The rule reads nothing but the uid, so all clips of one object land on the same side, the split
 //! never depends on which other files were imported, and it is identical on every platform and Rust version.
 //!
+//! # Sharded stores
+//! A store too large for one process is written as shard folders, each a one-file store as above, by `data import
+//! --shard K/N` (any number of processes or machines at once), and listed by a `manifest.json` that `data merge`
+//! writes; [`Store::open`] reads either kind, numbering a sharded store's clips shard after shard. Layout, checks
+//! and which shard a source lands on: [`shards`].
+//!
 //! # Re-importing
 //! Importing into a folder that already holds a store rewrites it from the union of the old clips and the new
 //! import, keyed by source path: every old clip and rejection of a source that is imported again is replaced,
@@ -49,6 +55,7 @@
 //! refused rather than written into.
 
 mod clips;
+mod discover;
 mod format;
 mod import;
 mod index;
@@ -56,6 +63,7 @@ mod jobs;
 mod options;
 mod provenance;
 mod record;
+pub mod shards;
 mod verify;
 
 use std::fs::File;
@@ -70,10 +78,11 @@ pub use format::{
 };
 pub use import::{
     FILE_TIME_LIMIT, ImportOptions, ImportReport, PROVENANCE_FILE, Progress, Provenance, Rejected, Weld, import,
-    import_with_progress, write_synth, write_synth_windows, write_synth_with,
+    import_with_progress, write_synth, write_synth_shard, write_synth_windows, write_synth_with,
 };
-pub use index::{CHECKSUM_COLUMN, IndexRow, Status, read_index, write_index};
+pub use index::{CHECKSUM_COLUMN, IndexRow, Status, write_index};
 pub use record::decode_clip_bytes;
+pub use shards::{MANIFEST_FILE, Manifest, ShardSpec, merge};
 pub use verify::{Problem, VerifyReport, check_index, record_len, verify_store};
 
 /// File name of the clip records inside a store folder.
@@ -160,17 +169,31 @@ pub struct StoredClip {
     pub scene: Option<crate::scene::Scene>,
 }
 
-/// A store opened for reading: the catalogue is in memory, clips are read from disk on demand.
+/// A store opened for reading: the catalogue of every shard is in memory (13 bytes a clip, with its shard's
+/// position), clips are read from disk on demand. A one-file store is a store of one shard; a sharded store
+/// ([`shards`]) numbers its clips shard after shard, in the manifest's order.
 #[derive(Debug, Clone)]
 pub struct Store {
     dir: PathBuf,
-    path: PathBuf,
-    catalog: Catalog,
+    parts: Vec<Part>,
+    /// Index of each part's first clip (ascending; `starts[0] = 0`).
+    starts: Vec<usize>,
+    len: usize,
+    frames: usize,
+    p: usize,
+    scenes: bool,
 }
 
-impl Store {
-    /// Open the store in `dir` (reads and checks the header, table and trailer of `clips.bin`).
-    pub fn open(dir: &Path) -> Result<Self> {
+/// One `clips.bin` of a store: the store itself, or one shard of a sharded store.
+#[derive(Debug, Clone)]
+pub(crate) struct Part {
+    /// Its `clips.bin`.
+    pub(crate) path: PathBuf,
+    pub(crate) catalog: Catalog,
+}
+
+impl Part {
+    fn open(dir: &Path) -> Result<Self> {
         let path = dir.join(CLIPS_FILE);
         if !path.is_file() {
             return Err(DataError::new(
@@ -180,11 +203,61 @@ impl Store {
             ));
         }
         let catalog = read_catalog(&path)?;
-        Ok(Self {
+        Ok(Self { path, catalog })
+    }
+}
+
+/// The index of the store in `dir`: its `index.parquet`, or for a sharded store ([`shards`]) every shard's stored
+/// rows in the store's clip order, then every shard's rejected rows.
+pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
+    if dir.join(shards::MANIFEST_FILE).is_file() {
+        shards::read_index(dir)
+    } else {
+        index::read_index_file(dir)
+    }
+}
+
+/// Whether `dir` holds a store: a one-file store's `clips.bin` or a sharded store's manifest.
+pub fn is_store(dir: &Path) -> bool {
+    dir.join(CLIPS_FILE).is_file() || dir.join(shards::MANIFEST_FILE).is_file()
+}
+
+impl Store {
+    /// Open the store in `dir`: a one-file store (reads and checks the header, table and trailer of `clips.bin`)
+    /// or a sharded one (reads its manifest, then checks every shard's `clips.bin` against it: present, of the
+    /// size, T, P and clip count the manifest records; [`shards`]).
+    pub fn open(dir: &Path) -> Result<Self> {
+        if dir.join(shards::MANIFEST_FILE).is_file() {
+            if dir.join(CLIPS_FILE).exists() {
+                return Err(DataError::new(
+                    dir,
+                    shards::MANIFEST_FILE,
+                    format!("the folder holds both a manifest and {CLIPS_FILE}: remove the one that is not the store"),
+                ));
+            }
+            return shards::open(dir);
+        }
+        Ok(Self::of_parts(dir, vec![Part::open(dir)?]))
+    }
+
+    /// A store of `parts` (non-empty, all of one T, P and scene flag: checked by the callers).
+    pub(crate) fn of_parts(dir: &Path, parts: Vec<Part>) -> Self {
+        let mut starts = Vec::with_capacity(parts.len());
+        let mut len = 0;
+        for part in &parts {
+            starts.push(len);
+            len += part.catalog.entries.len();
+        }
+        let first = &parts[0].catalog;
+        Self {
             dir: dir.to_path_buf(),
-            path,
-            catalog,
-        })
+            frames: first.frames,
+            p: first.p,
+            scenes: first.scenes,
+            parts,
+            starts,
+            len,
+        }
     }
 
     /// The store folder.
@@ -194,29 +267,47 @@ impl Store {
 
     /// Number of clips.
     pub fn len(&self) -> usize {
-        self.catalog.entries.len()
+        self.len
     }
 
     /// True when the store holds no clip.
     pub fn is_empty(&self) -> bool {
-        self.catalog.entries.is_empty()
+        self.len == 0
     }
 
     /// Frames per clip T (the same for every clip).
     pub fn frames(&self) -> usize {
-        self.catalog.frames
+        self.frames
     }
 
     /// FPS indices per clip P (the same for every clip).
     pub fn p(&self) -> usize {
-        self.catalog.p
+        self.p
+    }
+
+    /// Number of shards (1 for a one-file store).
+    pub fn shard_count(&self) -> usize {
+        self.parts.len()
+    }
+
+    /// The shard that holds clip `i` (0 for a one-file store). Errors if `i` is out of range.
+    pub fn shard_of(&self, i: usize) -> Result<usize> {
+        self.locate(i).map(|(k, _)| k)
+    }
+
+    /// The clips of shard `k`, as store indices.
+    pub fn shard_range(&self, k: usize) -> std::ops::Range<usize> {
+        match self.starts.get(k) {
+            Some(&start) => start..start + self.parts[k].catalog.entries.len(),
+            None => self.len..self.len,
+        }
     }
 
     /// An upper bound of the vertices of any clip, from the record sizes alone (a record holds T · N · 12 bytes of
     /// coordinates besides its faces and FPS indices): for memory estimates before any clip is read.
     pub fn vertex_bound(&self) -> usize {
-        let per_vertex = 12 * self.catalog.frames.max(1) as u64;
-        let longest = self.catalog.entries.iter().map(|e| e.len).max().unwrap_or(0);
+        let per_vertex = 12 * self.frames.max(1) as u64;
+        let longest = self.entries().map(|e| e.len).max().unwrap_or(0);
         usize::try_from(longest / per_vertex).unwrap_or(usize::MAX)
     }
 
@@ -227,20 +318,29 @@ impl Store {
 
     /// Indices of the clips in `split`, in store order.
     pub fn indices(&self, split: Split) -> Vec<usize> {
-        (0..self.len())
-            .filter(|&i| self.catalog.entries[i].split == split)
+        self.entries()
+            .enumerate()
+            .filter(|(_, e)| e.split == split)
+            .map(|(i, _)| i)
             .collect()
     }
 
     /// The `source` of each clip in `indices` (its file, `path#take`, or `synth:<seed>:<index>`), reading only the
     /// start of each record.
     pub fn sources(&self, indices: &[usize]) -> Result<Vec<String>> {
-        let mut file = File::open(&self.path).map_err(|err| DataError::io(&self.path, err))?;
+        let mut open: Option<(usize, File)> = None;
         indices
             .iter()
             .map(|&i| {
-                let e = self.entry(i)?;
-                format::read_source(&mut file, &self.path, e.offset, e.len, i)
+                let (k, local) = self.locate(i)?;
+                let part = &self.parts[k];
+                if open.as_ref().is_none_or(|(at, _)| *at != k) {
+                    let file = File::open(&part.path).map_err(|err| DataError::io(&part.path, err))?;
+                    open = Some((k, file));
+                }
+                let e = part.catalog.entries[local];
+                let (_, file) = open.as_mut().expect("opened above");
+                format::read_source(file, &part.path, e.offset, e.len, i)
             })
             .collect()
     }
@@ -254,14 +354,21 @@ impl Store {
 
     /// Whether the store's records carry scenes (docs/method.md §6.5).
     pub fn has_scenes(&self) -> bool {
-        self.catalog.scenes
+        self.scenes
     }
 
     /// Read and decode clip `i`.
     pub fn get(&self, i: usize) -> Result<StoredClip> {
         let bytes = self.raw(i)?;
-        let e = self.catalog.entries[i];
-        record::decode(&bytes, e.offset, &self.path, i, e.split, &self.catalog)
+        self.decode(i, &bytes)
+    }
+
+    /// Decode the record `bytes` of clip `i` (as [`Store::raw`] read it).
+    pub(crate) fn decode(&self, i: usize, bytes: &[u8]) -> Result<StoredClip> {
+        let (k, local) = self.locate(i)?;
+        let part = &self.parts[k];
+        let e = part.catalog.entries[local];
+        record::decode(bytes, e.offset, &part.path, local, e.split, &part.catalog)
     }
 
     /// Position of the clip with this id, if any (reads every clip until found).
@@ -276,19 +383,40 @@ impl Store {
 
     /// The encoded bytes of record `i`, as [`encode`] wrote them.
     pub fn raw(&self, i: usize) -> Result<Vec<u8>> {
-        let e = self.entry(i)?;
-        let mut file = File::open(&self.path).map_err(|err| DataError::io(&self.path, err))?;
-        format::read_at(&mut file, &self.path, e.offset, e.len as usize, &format!("clip {i}"))
+        let (k, local) = self.locate(i)?;
+        let part = &self.parts[k];
+        let e = part.catalog.entries[local];
+        let mut file = File::open(&part.path).map_err(|err| DataError::io(&part.path, err))?;
+        format::read_at(
+            &mut file,
+            &part.path,
+            e.offset,
+            e.len as usize,
+            &format!("clip {local}"),
+        )
+    }
+
+    /// Every clip's entry, in store order.
+    pub(crate) fn entries(&self) -> impl Iterator<Item = &Entry> {
+        self.parts.iter().flat_map(|p| &p.catalog.entries)
     }
 
     fn entry(&self, i: usize) -> Result<Entry> {
-        self.catalog.entries.get(i).copied().ok_or_else(|| {
-            DataError::new(
-                &self.path,
+        let (k, local) = self.locate(i)?;
+        Ok(self.parts[k].catalog.entries[local])
+    }
+
+    /// (part, index inside it) of clip `i`.
+    fn locate(&self, i: usize) -> Result<(usize, usize)> {
+        if i >= self.len {
+            return Err(DataError::new(
+                &self.dir,
                 "clip index",
-                format!("clip {i} requested, the store holds {}", self.len()),
-            )
-        })
+                format!("clip {i} requested, the store holds {}", self.len),
+            ));
+        }
+        let k = self.starts.partition_point(|&s| s <= i) - 1;
+        Ok((k, i - self.starts[k]))
     }
 }
 

@@ -74,6 +74,9 @@ pub struct ImportOptions {
     /// Play a take shorter than the window as a cycle when it loops (docs/method.md §2.6,
     /// [`crate::preprocess::loop_to`]); off by default, when such a take is rejected.
     pub loop_short: bool,
+    /// Import only the sources of this shard (a share of the sources by a stable hash of their path; the
+    /// [`super::shards`] module doc); `None` imports them all.
+    pub shard: Option<super::shards::ShardSpec>,
 }
 
 impl Default for ImportOptions {
@@ -87,6 +90,7 @@ impl Default for ImportOptions {
             time_limit: FILE_TIME_LIMIT,
             max_frames: skeletal::MAX_FRAMES,
             loop_short: false,
+            shard: None,
         }
     }
 }

@@ -36,11 +36,11 @@ pub fn check_index(store: &Store, rows: &[IndexRow]) -> Result<()> {
             ),
         ));
     }
-    for (i, (row, entry)) in ok.iter().zip(&store.catalog.entries).enumerate() {
+    for (i, (row, entry)) in ok.iter().zip(store.entries()).enumerate() {
         let want = record_len(row, store.p());
         // A record of a store with scenes adds its scene section (8 bytes and the scene), which the index does not
         // size: it must hold at least the clip and the section's counts; `data verify` decodes it whole.
-        let fits = match store.catalog.scenes {
+        let fits = match store.has_scenes() {
             false => want == Some(entry.len),
             true => want.and_then(|w| w.checked_add(8)).is_some_and(|w| entry.len >= w),
         };
@@ -82,6 +82,8 @@ pub struct VerifyReport {
     pub dir: PathBuf,
     /// Clips read and decoded.
     pub clips: usize,
+    /// Shards whose `clips.bin` matched the size and checksum of the manifest (`None`: a one-file store).
+    pub shards: Option<usize>,
     /// Of those, clips whose index row has a checksum (0 for a store written before checksums).
     pub with_checksum: usize,
     /// Every clip that failed, with the reason.
@@ -105,6 +107,9 @@ impl fmt::Display for VerifyReport {
             self.with_checksum,
             self.problems.len()
         )?;
+        if let Some(n) = self.shards {
+            writeln!(f, "  {n} shards match the size and checksum their manifest records")?;
+        }
         if self.with_checksum < self.clips {
             writeln!(
                 f,
@@ -123,7 +128,14 @@ impl fmt::Display for VerifyReport {
 /// Check every clip of the store in `dir`: its record against the index checksum, its decoding (the checks of
 /// [`Store::get`]) and the decoded id, source, caption, sizes and split against its index row. Damage that makes
 /// clips and index rows impossible to pair (counts, sizes) is an error; anything per clip is a [`Problem`].
+///
+/// A sharded store is checked whole: every shard's `clips.bin` against the size and checksum of its manifest line
+/// first (a mismatch is an error naming the shard), then every clip as above, numbered in store order.
 pub fn verify_store(dir: &Path) -> Result<VerifyReport> {
+    let sharded = dir.join(super::shards::MANIFEST_FILE).is_file();
+    if sharded {
+        super::shards::check_checksums(dir)?;
+    }
     let store = Store::open(dir)?;
     let rows = read_index(dir)?;
     check_index(&store, &rows)?;
@@ -131,6 +143,7 @@ pub fn verify_store(dir: &Path) -> Result<VerifyReport> {
     let mut report = VerifyReport {
         dir: dir.to_path_buf(),
         clips: store.len(),
+        shards: sharded.then(|| store.shard_count()),
         with_checksum: 0,
         problems: Vec::new(),
     };
@@ -159,8 +172,8 @@ fn verify_clip(store: &Store, i: usize, row: &IndexRow, with_checksum: &mut usiz
             ));
         }
     }
-    let e = store.catalog.entries[i];
-    let c = super::record::decode(&raw, e.offset, &store.path, i, e.split, &store.catalog)
+    let c = store
+        .decode(i, &raw)
         .map_err(|e| format!("{}: {}", e.field, e.reason))?;
     let found = (
         c.clip.id.as_str(),
