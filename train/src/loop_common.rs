@@ -48,6 +48,12 @@ pub trait Objective {
     /// Number of training examples.
     fn train_len(&self) -> usize;
 
+    /// Training examples per shard of the store, in example order ([`crate::data_order::WholeClips::blocks`]);
+    /// one block, all of them, unless the objective reads a sharded store.
+    fn train_blocks(&self) -> Result<Vec<usize>> {
+        Ok(vec![self.train_len()])
+    }
+
     /// Loss of the training examples `indices` on the autodiff `device`. All randomness comes from `rng` or
     /// from the device RNG, which the loop reseeds from (seed, step) before every step.
     fn loss(&self, model: &Self::Model, indices: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses>;
@@ -319,6 +325,7 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
             "a run either resumes or starts from another run's parameters, not both".into(),
         ));
     }
+    let order = DataOrder::sharded(cfg.seed, &objective.train_blocks()?, cfg.shuffle_buffer);
     let (mut model, mut optim, mut state, mut ema) = match &resume {
         Some(ckpt) => {
             let (m, o, s) = checkpoint::load(ckpt, model, optim_cfg.init())?;
@@ -333,7 +340,7 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
             let state = TrainState {
                 step: 0,
                 rng: ChaCha8Rng::seed_from_u64(cfg.seed),
-                order: DataOrder::new(cfg.seed, len),
+                order: order.clone(),
                 best_valid: None,
             };
             let model = match &init {
@@ -350,6 +357,21 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
             (model, optim_cfg.init(), state, ema)
         }
     };
+    if state.order.len == len && !state.order.same_layout(&order) {
+        return Err(TrainError::Checkpoint {
+            path: resume.unwrap_or_default(),
+            reason: format!(
+                "saved reading {} shards ({:?} examples each) through a shuffle buffer of {}; the data and config now \
+                 give {} shards ({:?}) and a buffer of {}: resume on the store and train.shuffle_buffer it trained on",
+                state.order.blocks.len().max(1),
+                state.order.blocks,
+                state.order.buffer,
+                order.blocks.len().max(1),
+                order.blocks,
+                order.buffer
+            ),
+        });
+    }
     if state.order.len != len {
         return Err(TrainError::Checkpoint {
             path: resume.unwrap_or_default(),

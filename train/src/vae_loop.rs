@@ -347,6 +347,10 @@ impl<V: MeshVae + Module + Clone> Objective for VaeObjective<V> {
         self.train_clips.len()
     }
 
+    fn train_blocks(&self) -> Result<Vec<usize>> {
+        Ok(self.train_clips.blocks(|pos| self.store.shard_of(self.train[pos]))?)
+    }
+
     fn loss(&self, model: &V, idx: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
         let ids: Vec<usize> = self
             .train_clips

@@ -12,7 +12,7 @@ use any4d_train::loop_common::{Outcome, RunOptions, StopFlag, train};
 use any4d_train::progress::ProgressMode;
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, read_table};
 use any4d_train::vae_loop::{LATENT_STATS_FILE, StoredLatentStats, VaeObjective, VaeRunConfig, train_vae};
-use common::{params, quiet_setup, serial, synth_store, tiny_vae};
+use common::{params, quiet_setup, serial, sharded_synth_store, synth_store, tiny_vae};
 
 fn tiny(steps: u64) -> VaeRunConfig {
     let mut cfg = tiny_vae(steps);
@@ -147,6 +147,57 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
         params(&plain),
         params(&straight),
         "the augmentation changed what the VAE saw"
+    );
+}
+
+#[test]
+fn a_sharded_store_streams_and_resumes_mid_epoch_across_shards_exactly() {
+    let _g = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let data = sharded_synth_store(dir.path(), 3, 3);
+    let store = any4d_data::store::Store::open(&data).unwrap();
+    assert_eq!((store.shard_count(), store.len()), (3, 10));
+    let train_shards: std::collections::BTreeSet<usize> = store
+        .indices(any4d_data::store::Split::Train)
+        .into_iter()
+        .map(|i| store.shard_of(i).unwrap())
+        .collect();
+    assert!(
+        train_shards.len() >= 2,
+        "the training clips span shards: {train_shards:?}"
+    );
+    let go = |run: &RunFolder, steps: u64, buffer: usize, resume: Option<std::path::PathBuf>| {
+        let mut cfg = tiny(steps);
+        cfg.train.checkpoint_every = 3;
+        cfg.train.shuffle_buffer = buffer;
+        let AnyMeshVaeConfig::Framewise(m) = &cfg.model else {
+            panic!("tiny is frame-wise")
+        };
+        let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
+        dev.seed(cfg.train.seed);
+        let model = m.init(&dev);
+        let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch, &cfg.vae).unwrap();
+        train(&objective, model, quiet_setup(run, &cfg.train, &cfg.optim, dev, resume))
+    };
+    // Batches of 4 of the store's ~8 training clips: 3 steps stop in the second epoch, between shards.
+    let runs = dir.path().join("runs");
+    let straight_run = RunFolder::create(&runs, "straight", "", &["rec", "kl"]).unwrap();
+    let (straight, _) = go(&straight_run, 6, 2, None).unwrap();
+    let split_run = RunFolder::create(&runs, "split", "", &["rec", "kl"]).unwrap();
+    let (_, first) = go(&split_run, 3, 2, None).unwrap();
+    let Outcome::Finished { checkpoint, .. } = first else {
+        panic!("{first:?}")
+    };
+    let refused = go(&split_run, 6, 5, Some(checkpoint.clone())).unwrap_err().to_string();
+    assert!(
+        refused.contains("shuffle buffer of 2") && refused.contains("shuffle_buffer"),
+        "{refused}"
+    );
+    let (resumed, _) = go(&split_run, 6, 2, Some(checkpoint)).unwrap();
+    assert_eq!(
+        params(&straight),
+        params(&resumed),
+        "resumed VAE differs from straight training"
     );
 }
 

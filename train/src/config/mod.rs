@@ -91,6 +91,11 @@ pub struct TrainConfig {
     /// existed resumes as it trained.
     #[serde(default)]
     pub flush_denormals: bool,
+    /// On a sharded store, examples held by the shuffle buffer that mixes the shards an epoch reads one after
+    /// another (docs/training.md, "Data order on a sharded store"); a one-file store is shuffled whole and ignores
+    /// it. Absent from a file means 0: each shard's examples in their own shuffled order.
+    #[serde(default)]
+    pub shuffle_buffer: usize,
 }
 
 /// How the learning rate moves over a run.

@@ -120,6 +120,11 @@ impl Objective for RfObjective {
         self.train_clips.len()
     }
 
+    fn train_blocks(&self) -> Result<Vec<usize>> {
+        let (store, train) = (self.batcher.store(), self.batcher.train_indices());
+        Ok(self.train_clips.blocks(|pos| store.shard_of(train[pos]))?)
+    }
+
     fn loss(&self, model: &RfModel, indices: &[usize], rng: &mut ChaCha8Rng, device: &Device) -> Result<Losses> {
         let windows = self.train_clips.draw(indices, rng);
         let step = self

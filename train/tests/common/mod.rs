@@ -75,6 +75,31 @@ pub fn synth_store_with(dir: &Path, seed: u64, scenes: bool) -> PathBuf {
     store
 }
 
+/// The clips of [`synth_store`] as a sharded store of `shards` shards (`dir/sharded`, shard folders inside it).
+pub fn sharded_synth_store(dir: &Path, seed: u64, shards: usize) -> PathBuf {
+    let store = dir.join("sharded");
+    let synth = SynthConfig {
+        clips: 10,
+        seed,
+        frames: 4,
+        min_vertices: 256,
+        max_vertices: 512,
+        body: None,
+        family: Default::default(),
+        scenes: false,
+    };
+    let dirs: Vec<PathBuf> = (0..shards).map(|k| store.join(format!("shard-{k}"))).collect();
+    for (k, d) in dirs.iter().enumerate() {
+        let spec = any4d_data::store::ShardSpec {
+            index: k,
+            count: shards,
+        };
+        any4d_data::store::write_synth_shard(&synth, d, 32, (4, 1), Some(spec), None).expect("a shard");
+    }
+    any4d_data::store::merge(&store, &dirs).expect("merged shards");
+    store
+}
+
 /// configs/vae/tiny.toml for `steps` steps of 4 clips; callers set micro-batches, checkpoints and validation.
 pub fn tiny_vae(steps: u64) -> VaeRunConfig {
     let mut cfg = VaeRunConfig::load(&root().join("configs/vae/tiny.toml"), &[]).expect("configs/vae/tiny.toml");
@@ -267,6 +292,7 @@ pub fn toy_configs(steps: u64) -> (TrainConfig, OptimConfig) {
         progress_every_secs: 5.0,
         ema_decay: 0.0,
         flush_denormals: true,
+        shuffle_buffer: 0,
     };
     let optim = OptimConfig {
         lr: 1e-2,
