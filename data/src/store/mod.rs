@@ -169,8 +169,8 @@ pub struct StoredClip {
     pub scene: Option<crate::scene::Scene>,
 }
 
-/// A store opened for reading: the catalogue of every shard is in memory (13 bytes a clip, with its shard's
-/// position), clips are read from disk on demand. A one-file store is a store of one shard; a sharded store
+/// A store opened for reading: the catalogue of every shard is in memory (24 bytes a clip: offset, length,
+/// split), clips are read from disk on demand. A one-file store is a store of one shard; a sharded store
 /// ([`shards`]) numbers its clips shard after shard, in the manifest's order.
 #[derive(Debug, Clone)]
 pub struct Store {
