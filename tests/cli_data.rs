@@ -530,6 +530,33 @@ fn shards_written_by_two_processes_merge_into_one_store() {
     assert!(out.status.success() && stdout.contains("2 shards match"), "{stdout}");
     let out = any4d(&["data", "render", p(&store), "--out", p(&tmp.path().join("s.png"))]);
     assert!(out.status.success(), "{:?}", text(&out));
+    // The same store over HTTP, as a URL in place of the folder, cached where ANY4D_CACHE says.
+    let mut server = std::process::Command::new("python3")
+        .args(["-u", "-m", "http.server", "0", "--bind", "127.0.0.1", "--directory"])
+        .arg(tmp.path())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufRead::read_line(&mut std::io::BufReader::new(server.stdout.take().unwrap()), &mut line).unwrap();
+    let port = line
+        .split(" port ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .unwrap()
+        .to_owned();
+    let url = format!("http://127.0.0.1:{port}/store");
+    for cmd in ["inspect", "verify"] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_any4d"))
+            .args(["data", cmd, &url])
+            .env("ANY4D_CACHE", tmp.path().join("cache"))
+            .output()
+            .unwrap();
+        let (stdout, stderr) = text(&out);
+        assert!(out.status.success() && stdout.contains("6 "), "{cmd}: {stdout}{stderr}");
+    }
+    let _ = server.kill();
+    let _ = server.wait();
     for bad in ["3/2", "0/0", "1"] {
         let out = any4d(&[
             "data",

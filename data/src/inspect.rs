@@ -124,6 +124,9 @@ impl Inspection {
 
 /// Inspect a store folder (one holding `clips.bin`) or a clip file / OBJ-sequence folder.
 pub fn inspect(path: &Path) -> Result<Inspection> {
+    if crate::store::remote::is_url(path) {
+        return summarize(&crate::store::remote::local_dir(path)?).map(Inspection::Store);
+    }
     if path.is_dir() && crate::store::is_store(path) {
         return summarize(path).map(Inspection::Store);
     }

@@ -63,6 +63,7 @@ mod jobs;
 mod options;
 mod provenance;
 mod record;
+pub mod remote;
 pub mod shards;
 mod verify;
 
@@ -210,23 +211,30 @@ impl Part {
 /// The index of the store in `dir`: its `index.parquet`, or for a sharded store ([`shards`]) every shard's stored
 /// rows in the store's clip order, then every shard's rejected rows.
 pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
-    if dir.join(shards::MANIFEST_FILE).is_file() {
-        shards::read_index(dir)
+    let local = remote::local_dir(dir)?;
+    if local.join(shards::MANIFEST_FILE).is_file() {
+        shards::read_index(&local)
     } else {
-        index::read_index_file(dir)
+        index::read_index_file(&local)
     }
 }
 
-/// Whether `dir` holds a store: a one-file store's `clips.bin` or a sharded store's manifest.
+/// Whether `dir` holds a store: a one-file store's `clips.bin` or a sharded store's manifest, or is the URL of one
+/// in object storage (not checked until it is opened).
 pub fn is_store(dir: &Path) -> bool {
-    dir.join(CLIPS_FILE).is_file() || dir.join(shards::MANIFEST_FILE).is_file()
+    remote::is_url(dir) || dir.join(CLIPS_FILE).is_file() || dir.join(shards::MANIFEST_FILE).is_file()
 }
 
 impl Store {
     /// Open the store in `dir`: a one-file store (reads and checks the header, table and trailer of `clips.bin`)
     /// or a sharded one (reads its manifest, then checks every shard's `clips.bin` against it: present, of the
     /// size, T, P and clip count the manifest records; [`shards`]).
+    ///
+    /// `dir` may also be the URL of a sharded store in object storage (`s3://…`, `gs://…`, `az://…`, `https://…`):
+    /// it is fetched into the local cache first ([`remote`]).
     pub fn open(dir: &Path) -> Result<Self> {
+        let local = remote::local_dir(dir)?;
+        let dir = local.as_path();
         if dir.join(shards::MANIFEST_FILE).is_file() {
             if dir.join(CLIPS_FILE).exists() {
                 return Err(DataError::new(

@@ -337,7 +337,13 @@ pub fn read_manifest(store: &Path) -> Result<Manifest> {
     file.take(MAX_MANIFEST_BYTES)
         .read_to_string(&mut text)
         .map_err(|e| DataError::io(&path, e))?;
-    let manifest: Manifest = serde_json::from_str(&text).map_err(|e| {
+    parse_manifest(&text, &path)
+}
+
+/// [`read_manifest`] of a manifest's text; `path` names it in errors.
+pub fn parse_manifest(text: &str, path: &Path) -> Result<Manifest> {
+    let err = |field: &str, reason: String| DataError::new(path, field, reason);
+    let manifest: Manifest = serde_json::from_str(text).map_err(|e| {
         err(
             &format!("line {} column {}", e.line(), e.column()),
             format!("{e}: not a manifest of this build"),

@@ -132,6 +132,8 @@ impl fmt::Display for VerifyReport {
 /// A sharded store is checked whole: every shard's `clips.bin` against the size and checksum of its manifest line
 /// first (a mismatch is an error naming the shard), then every clip as above, numbered in store order.
 pub fn verify_store(dir: &Path) -> Result<VerifyReport> {
+    let local = super::remote::local_dir(dir)?;
+    let dir = local.as_path();
     let sharded = dir.join(super::shards::MANIFEST_FILE).is_file();
     if sharded {
         super::shards::check_checksums(dir)?;
