@@ -216,25 +216,16 @@ fn a_store_in_s3_is_read_through_the_s3_client() {
     );
     let endpoint = format!("http://127.0.0.1:{port}");
     // The bucket and its objects, written by boto3 (moto's own dependency), once the server answers.
-    let upload = r#"
-import os, sys, time, boto3
-endpoint, root = sys.argv[1], sys.argv[2]
-s3 = boto3.client("s3", endpoint_url=endpoint, aws_access_key_id="test", aws_secret_access_key="test",
-                  region_name="us-east-1")
-for attempt in range(100):
-    try:
-        s3.create_bucket(Bucket="clips")
-        break
-    except Exception:
-        time.sleep(0.1)
-for folder, _, files in os.walk(root):
-    for name in files:
-        path = os.path.join(folder, name)
-        s3.upload_file(path, "clips", "corpus/" + os.path.relpath(path, root).replace(os.sep, "/"))
-"#;
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scripts/upload_store.py");
     let status = Command::new("python3")
-        .args(["-c", upload, &endpoint])
+        .arg(script)
+        .args([&endpoint, "clips", "corpus"])
         .arg(&root)
+        .envs([
+            ("AWS_ACCESS_KEY_ID", "test"),
+            ("AWS_SECRET_ACCESS_KEY", "test"),
+            ("AWS_DEFAULT_REGION", "us-east-1"),
+        ])
         .status()
         .unwrap();
     assert!(status.success(), "uploading to moto");

@@ -99,6 +99,23 @@ fn windows_of_one_clip_are_one_training_example() {
     assert!(l.total.into_scalar::<f32>().is_finite());
 }
 
+/// `cfg`'s frame-wise VAE, freshly seeded, trained on the store `data` in `run` (resuming from `resume`).
+fn train_framewise(
+    data: &std::path::Path,
+    cfg: &VaeRunConfig,
+    run: &RunFolder,
+    resume: Option<std::path::PathBuf>,
+) -> any4d_train::error::Result<(FrameVae, Outcome)> {
+    let AnyMeshVaeConfig::Framewise(m) = &cfg.model else {
+        panic!("tiny is frame-wise")
+    };
+    let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
+    dev.seed(cfg.train.seed);
+    let model = m.init(&dev);
+    let objective = VaeObjective::<FrameVae>::new(data, cfg.train.micro_batch, &cfg.vae)?;
+    train(&objective, model, quiet_setup(run, &cfg.train, &cfg.optim, dev, resume))
+}
+
 #[test]
 fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
     let _g = serial();
@@ -117,14 +134,7 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
         |augment: &any4d_data::augment::Augment, run: &RunFolder, steps: u64, resume: Option<std::path::PathBuf>| {
             let mut cfg = tiny(steps);
             cfg.vae.augment = augment.clone();
-            let AnyMeshVaeConfig::Framewise(m) = &cfg.model else {
-                panic!("tiny is frame-wise")
-            };
-            let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
-            dev.seed(cfg.train.seed);
-            let model = m.init(&dev);
-            let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch, &cfg.vae).unwrap();
-            train(&objective, model, quiet_setup(run, &cfg.train, &cfg.optim, dev, resume)).unwrap()
+            train_framewise(&data, &cfg, run, resume).unwrap()
         };
     let go = |run: &RunFolder, steps: u64, resume: Option<std::path::PathBuf>| go_with(&augment, run, steps, resume);
     let runs = dir.path().join("runs");
@@ -170,14 +180,7 @@ fn a_sharded_store_streams_and_resumes_mid_epoch_across_shards_exactly() {
         let mut cfg = tiny(steps);
         cfg.train.checkpoint_every = 3;
         cfg.train.shuffle_buffer = buffer;
-        let AnyMeshVaeConfig::Framewise(m) = &cfg.model else {
-            panic!("tiny is frame-wise")
-        };
-        let dev = device(Backend::Flex, Precision::F32).unwrap().autodiff();
-        dev.seed(cfg.train.seed);
-        let model = m.init(&dev);
-        let objective = VaeObjective::<FrameVae>::new(&data, cfg.train.micro_batch, &cfg.vae).unwrap();
-        train(&objective, model, quiet_setup(run, &cfg.train, &cfg.optim, dev, resume))
+        train_framewise(&data, &cfg, run, resume)
     };
     // Batches of 4 of the store's ~8 training clips: 3 steps stop in the second epoch, between shards.
     let runs = dir.path().join("runs");

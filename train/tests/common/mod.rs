@@ -61,7 +61,13 @@ pub fn synth_store(dir: &Path, seed: u64) -> PathBuf {
 /// [`synth_store`], each clip in a procedural scene when `scenes` is set.
 pub fn synth_store_with(dir: &Path, seed: u64, scenes: bool) -> PathBuf {
     let store = dir.join("store");
-    let synth = SynthConfig {
+    write_synth_with(&synth_config(seed, scenes), &store, 32, None).expect("synthetic store");
+    store
+}
+
+/// The procedural clips of [`synth_store`]: 10 clips of 4 frames, 256–512 vertices.
+fn synth_config(seed: u64, scenes: bool) -> SynthConfig {
+    SynthConfig {
         clips: 10,
         seed,
         frames: 4,
@@ -70,24 +76,13 @@ pub fn synth_store_with(dir: &Path, seed: u64, scenes: bool) -> PathBuf {
         body: None,
         family: Default::default(),
         scenes,
-    };
-    write_synth_with(&synth, &store, 32, None).expect("synthetic store");
-    store
+    }
 }
 
 /// The clips of [`synth_store`] as a sharded store of `shards` shards (`dir/sharded`, shard folders inside it).
 pub fn sharded_synth_store(dir: &Path, seed: u64, shards: usize) -> PathBuf {
     let store = dir.join("sharded");
-    let synth = SynthConfig {
-        clips: 10,
-        seed,
-        frames: 4,
-        min_vertices: 256,
-        max_vertices: 512,
-        body: None,
-        family: Default::default(),
-        scenes: false,
-    };
+    let synth = synth_config(seed, false);
     let dirs: Vec<PathBuf> = (0..shards).map(|k| store.join(format!("shard-{k}"))).collect();
     for (k, d) in dirs.iter().enumerate() {
         let spec = any4d_data::store::ShardSpec {
