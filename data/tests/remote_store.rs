@@ -174,7 +174,21 @@ fn unreachable_truncated_and_changed_remote_shards_are_named_and_leave_no_store(
     assert!(e.contains("inside it"), "{e}");
     // Not a store at all.
     let e = fetch(&format!("{base}/nothing"), &[], &cache).unwrap_err().to_string();
-    assert!(e.contains(MANIFEST_FILE), "{e}");
+    assert!(e.contains(MANIFEST_FILE) && e.contains("data merge"), "{e}");
+    // Stores are written locally, never to a URL.
+    let e = store::import(
+        &[tmp.path().join("store")],
+        Path::new("s3://bucket/new"),
+        &Default::default(),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("upload_store.py"), "{e}");
+    let e = store::merge(Path::new("s3://bucket/new"), &[root.join("shard-0")])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("upload_store.py"), "{e}");
+    assert!(!Path::new("s3:").exists());
     assert!(cache_root().is_ok());
 }
 

@@ -248,6 +248,13 @@ pub fn write_synth_shard(
 /// Create `out`, or open the store already in it (checking that T and P agree); refuse a non-empty folder that
 /// holds no store.
 fn prepare_out(out: &Path, frames: usize, p: usize) -> Result<Option<(Store, Vec<IndexRow>)>> {
+    if super::is_url(out) {
+        return Err(DataError::new(
+            out,
+            "out",
+            "stores are written to a local folder; put one into object storage with scripts/upload_store.py",
+        ));
+    }
     if out.join(super::shards::MANIFEST_FILE).exists() {
         return Err(DataError::new(
             out,

@@ -208,6 +208,17 @@ impl Part {
     }
 }
 
+/// The URL schemes of stores read through object storage ([`remote`]).
+pub const URL_SCHEMES: &[&str] = &[
+    "s3://", "s3a://", "gs://", "az://", "abfs://", "abfss://", "http://", "https://",
+];
+
+/// Whether `p` is an object-storage URL ([`URL_SCHEMES`]) rather than a folder.
+pub fn is_url(p: &Path) -> bool {
+    p.to_str()
+        .is_some_and(|s| URL_SCHEMES.iter().any(|scheme| s.starts_with(scheme)))
+}
+
 /// The index of the store in `dir`: its `index.parquet`, or for a sharded store ([`shards`]) every shard's stored
 /// rows in the store's clip order, then every shard's rejected rows.
 pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
@@ -222,7 +233,7 @@ pub fn read_index(dir: &Path) -> Result<Vec<IndexRow>> {
 /// Whether `dir` holds a store: a one-file store's `clips.bin` or a sharded store's manifest, or is the URL of one
 /// in object storage (not checked until it is opened).
 pub fn is_store(dir: &Path) -> bool {
-    remote::is_url(dir) || dir.join(CLIPS_FILE).is_file() || dir.join(shards::MANIFEST_FILE).is_file()
+    is_url(dir) || dir.join(CLIPS_FILE).is_file() || dir.join(shards::MANIFEST_FILE).is_file()
 }
 
 impl Store {

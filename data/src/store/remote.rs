@@ -28,10 +28,7 @@ use super::shards::{MANIFEST_FILE, MAX_MANIFEST_BYTES, Manifest, parse_manifest}
 use super::{CLIPS_FILE, INDEX_FILE};
 use crate::error::{DataError, Result};
 
-/// The URL schemes read through object storage.
-pub const SCHEMES: &[&str] = &[
-    "s3://", "s3a://", "gs://", "az://", "abfs://", "abfss://", "http://", "https://",
-];
+pub use super::{URL_SCHEMES, is_url};
 
 /// Largest shard index file fetched (its `clips.bin` is bounded by the manifest's size instead).
 pub const MAX_INDEX_BYTES: u64 = 1 << 30;
@@ -39,12 +36,6 @@ pub const MAX_INDEX_BYTES: u64 = 1 << 30;
 /// Name of the marker beside a cached shard's files: the checksum of the `clips.bin` it holds, written once both
 /// files are in place.
 const MARKER: &str = ".fetched";
-
-/// Whether `p` is an object-storage URL rather than a folder.
-pub fn is_url(p: &Path) -> bool {
-    p.to_str()
-        .is_some_and(|s| SCHEMES.iter().any(|scheme| s.starts_with(scheme)))
-}
 
 /// `p` itself for a folder; for a URL the local cache folder of the store it names, fetched first ([`fetch`]
 /// with the environment's options, in [`cache_root`]).
@@ -120,7 +111,12 @@ fn cache_name(url: &str) -> String {
 async fn fetch_into(store: &dyn ObjectStore, base: &ObjectPath, url: &str, dir: &Path) -> Result<()> {
     let at = |rel: &str| -> ObjectPath { rel.split('/').fold(base.clone(), |p, part| p.clone().join(part)) };
     let manifest_url = format!("{}/{MANIFEST_FILE}", url.trim_end_matches('/'));
-    let text = fetch_small(store, &at(MANIFEST_FILE), &manifest_url, MAX_MANIFEST_BYTES).await?;
+    let text = fetch_small(store, &at(MANIFEST_FILE), &manifest_url, MAX_MANIFEST_BYTES)
+        .await
+        .map_err(|mut e| {
+            e.reason += " (a store in object storage is a sharded store: `data merge` writes its manifest.json)";
+            e
+        })?;
     let text = String::from_utf8(text).map_err(|e| DataError::new(&manifest_url, "file", e.to_string()))?;
     let manifest = parse_manifest(&text, Path::new(&manifest_url))?;
     for (k, entry) in manifest.shards.iter().enumerate() {

@@ -182,6 +182,16 @@ pub fn merge(store: &Path, shards: &[PathBuf]) -> Result<Manifest> {
     if shards.is_empty() {
         return Err(DataError::new(store, "shards", "no shard folder given"));
     }
+    if let Some(url) = std::iter::once(store)
+        .chain(shards.iter().map(PathBuf::as_path))
+        .find(|p| super::is_url(p))
+    {
+        return Err(DataError::new(
+            url,
+            "merge",
+            "a merge reads and writes local folders; upload the merged store with scripts/upload_store.py",
+        ));
+    }
     if store.join(CLIPS_FILE).exists() {
         return Err(DataError::new(
             store,
