@@ -478,7 +478,7 @@ fn run_jobs(
 
 /// Whether an index row's source (`path` or `path#take`) belongs to a source of this run.
 fn is_replaced(replaced: &HashSet<&str>, source: &str) -> bool {
-    replaced.contains(source) || source.rsplit_once('#').is_some_and(|(path, _)| replaced.contains(path))
+    replaced.contains(source) || replaced.contains(super::shards::source_base(source))
 }
 
 /// The id at the start of an encoded record, if it is well formed.

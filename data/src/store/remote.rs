@@ -24,7 +24,7 @@ use object_store::ObjectStore;
 use object_store::ObjectStoreExt;
 use object_store::path::Path as ObjectPath;
 
-use super::shards::{MANIFEST_FILE, MAX_MANIFEST_BYTES, Manifest, parse_manifest};
+use super::shards::{MANIFEST_FILE, MAX_MANIFEST_BYTES, parse_manifest};
 use super::{CLIPS_FILE, INDEX_FILE};
 use crate::error::{DataError, Result};
 
@@ -166,13 +166,7 @@ async fn fetch_into(store: &dyn ObjectStore, base: &ObjectPath, url: &str, dir: 
         crate::io::write_atomic(&marker, entry.checksum.as_bytes())?;
     }
     // Last: until it is written, the cache folder is not a store.
-    write_manifest_copy(dir, &manifest)
-}
-
-fn write_manifest_copy(dir: &Path, manifest: &Manifest) -> Result<()> {
-    let path = dir.join(MANIFEST_FILE);
-    let text = serde_json::to_string_pretty(manifest).map_err(|e| DataError::new(&path, "manifest", e.to_string()))?;
-    crate::io::write_atomic(&path, text.as_bytes())
+    super::shards::write_manifest(dir, &manifest)
 }
 
 /// A whole object of at most `limit` bytes (its size is checked before it is read).

@@ -28,7 +28,6 @@
 //! object-uid rule of [`super::Split::of_object`], which does not depend on the sharding.
 
 use std::collections::HashMap;
-use std::fmt;
 use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -120,12 +119,6 @@ impl ShardSpec {
     }
 }
 
-impl fmt::Display for ShardSpec {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}/{}", self.index, self.count)
-    }
-}
-
 impl FromStr for ShardSpec {
     type Err = String;
 
@@ -163,11 +156,7 @@ pub fn shard_key(path: &Path, roots: &[PathBuf]) -> String {
         .filter_map(|r| path.strip_prefix(r).ok())
         .min_by_key(|rel| rel.components().count());
     match below {
-        Some(rel) => rel
-            .components()
-            .map(|c| c.as_os_str().to_string_lossy())
-            .collect::<Vec<_>>()
-            .join("/"),
+        Some(rel) => slash_path(rel),
         None => path
             .file_name()
             .map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned()),
@@ -219,23 +208,23 @@ pub fn merge(store: &Path, shards: &[PathBuf]) -> Result<Manifest> {
                 "this folder is itself a sharded store: merge its shard folders instead",
             ));
         }
-        let part = Part::open(&canon)?;
+        let shard = Store::open(&canon)?;
         let rows = super::index::read_index_file(&canon)?;
-        check_index(&Store::of_parts(&canon, vec![part.clone()]), &rows)?;
-        let c = &part.catalog;
+        check_index(&shard, &rows)?;
+        let shape = (shard.frames(), shard.p(), shard.has_scenes());
         match &first {
-            None => first = Some((dir.clone(), c.frames, c.p, c.scenes)),
+            None => first = Some((dir.clone(), shape.0, shape.1, shape.2)),
             Some((d0, t, p, s)) => {
-                if (c.frames, c.p, c.scenes) != (*t, *p, *s) {
+                if shape != (*t, *p, *s) {
                     return Err(DataError::new(
                         dir,
                         "shard",
                         format!(
                             "holds T = {}, P = {}, scenes {}; shard {} holds T = {t}, P = {p}, scenes {s}: all \
                              shards of a store must agree",
-                            c.frames,
-                            c.p,
-                            c.scenes,
+                            shape.0,
+                            shape.1,
+                            shape.2,
                             d0.display()
                         ),
                     ));
@@ -261,7 +250,7 @@ pub fn merge(store: &Path, shards: &[PathBuf]) -> Result<Manifest> {
         }
         let ok: Vec<&IndexRow> = rows.iter().filter(|r| r.status == Status::Ok).collect();
         let val = ok.iter().filter(|r| r.split == Some(super::Split::Val)).count();
-        let (bytes, sum) = file_checksum(&part.path)?;
+        let (bytes, sum) = file_checksum(&canon.join(CLIPS_FILE))?;
         entries.push(ShardEntry {
             // Made relative to the store below, once every shard passed and the folder exists.
             path: canon.display().to_string(),
@@ -279,11 +268,7 @@ pub fn merge(store: &Path, shards: &[PathBuf]) -> Result<Manifest> {
         if let Ok(rel) = Path::new(&entry.path).strip_prefix(&store_canon)
             && rel.components().count() > 0
         {
-            entry.path = rel
-                .components()
-                .map(|c| c.as_os_str().to_string_lossy())
-                .collect::<Vec<_>>()
-                .join("/");
+            entry.path = slash_path(rel);
         }
     }
     let (_, frames, p, scenes) = first.expect("at least one shard");
@@ -300,8 +285,16 @@ pub fn merge(store: &Path, shards: &[PathBuf]) -> Result<Manifest> {
     Ok(manifest)
 }
 
+/// A relative path with `/` between its parts, whatever the platform.
+fn slash_path(rel: &Path) -> String {
+    rel.components()
+        .map(|c| c.as_os_str().to_string_lossy())
+        .collect::<Vec<_>>()
+        .join("/")
+}
+
 /// The file part of a source (`path#take` → `path`): all takes of a file are imported together.
-fn source_base(source: &str) -> &str {
+pub(super) fn source_base(source: &str) -> &str {
     source.rsplit_once('#').map_or(source, |(path, _)| path)
 }
 
@@ -322,7 +315,8 @@ pub fn file_checksum(path: &Path) -> Result<(u64, u64)> {
     Ok((bytes, hasher.digest()))
 }
 
-fn write_manifest(store: &Path, manifest: &Manifest) -> Result<()> {
+/// Write `store/manifest.json` atomically.
+pub(super) fn write_manifest(store: &Path, manifest: &Manifest) -> Result<()> {
     let path = store.join(MANIFEST_FILE);
     let mut text =
         serde_json::to_string_pretty(manifest).map_err(|e| DataError::new(&path, "manifest", e.to_string()))?;
