@@ -1,7 +1,7 @@
 //! Writing a file so that nothing is lost when a run is killed: the one `write_atomic` every crate uses.
 
 use std::fs::File;
-use std::io::Write;
+use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use crate::error::{DataError, Result};
@@ -11,13 +11,20 @@ use crate::error::{DataError, Result};
 /// and renamed over `path`; the folder is then synced so the rename itself lasts. The sibling is removed when a
 /// step fails.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic_with(path, |out, tmp| out.write_all(bytes).map_err(|e| DataError::io(tmp, e)))
+}
+
+/// [`write_atomic`] of what `write` streams into the (buffered) hidden sibling, whose path it is given for its
+/// errors: for files too large to build in memory first. Nothing is at `path` until `write` has succeeded.
+pub fn write_atomic_with(path: &Path, write: impl FnOnce(&mut BufWriter<File>, &Path) -> Result<()>) -> Result<()> {
     let name = path
         .file_name()
         .ok_or_else(|| DataError::new(path, "file", "path has no file name"))?;
     let tmp = path.with_file_name(format!(".{}.tmp", name.to_string_lossy()));
     let written = (|| {
-        let mut file = File::create(&tmp).map_err(|e| DataError::io(&tmp, e))?;
-        file.write_all(bytes).map_err(|e| DataError::io(&tmp, e))?;
+        let mut out = BufWriter::new(File::create(&tmp).map_err(|e| DataError::io(&tmp, e))?);
+        write(&mut out, &tmp)?;
+        let file = out.into_inner().map_err(|e| DataError::io(&tmp, e.into_error()))?;
         file.sync_all().map_err(|e| DataError::io(&tmp, e))?;
         std::fs::rename(&tmp, path).map_err(|e| DataError::io(path, e))
     })();

@@ -13,7 +13,9 @@ use any4d_train::config::{DeviceConfig, Override, RunConfig, TrainConfig};
 use any4d_train::loop_common::{Outcome, RunOptions};
 use any4d_train::multi_device::{Parallel, Strategy};
 use any4d_train::progress::ProgressMode;
-use any4d_train::rf_loop::{RfRunConfig, RfRunOptions, resume_rf, train_rf};
+use any4d_train::rf_loop::{
+    FileState, RfRunConfig, RfRunOptions, encode_store_latents, resume_rf, shard_file, train_rf,
+};
 use any4d_train::run_folder::RunFolder;
 use any4d_train::vae_loop::{VaeRunConfig, resume_vae, train_vae};
 use anyhow::{Context, bail};
@@ -27,6 +29,10 @@ pub enum TrainCmd {
     Vae(VaeArgs),
     /// Train the keyframe rectified flow on a frozen VAE (docs/method.md §4).
     Rf(RfArgs),
+    /// Encode a store's clips with a frozen VAE into the RF's latent files (`rf.latent_cache = "disk"`), one file
+    /// per shard: `--vae RUN --data STORE --latents DIR`, or one shard per process with `--shard K`. Files already
+    /// current are kept; `train rf --latents DIR` reads them.
+    Latents(LatentsArgs),
     /// Train the BD-LSTM baseline (docs/method.md §5.3): the latent adaptation on a frozen VAE
     /// (`--config configs/bdlstm/<preset>.toml --vae RUN --data STORE`), or the original on ACAP features of a
     /// single-topology store (`--variant acap --config configs/bdlstm/<preset>.toml --data STORE`).
@@ -50,8 +56,34 @@ pub struct RfArgs {
     /// step count, learning-rate schedule, random streams and parameter average start afresh under `--config`.
     #[arg(long, conflicts_with = "resume")]
     init: Option<PathBuf>,
+    /// Folder of the latent files with `rf.latent_cache = "disk"` (made by `any4d train latents`, or here: shards
+    /// whose file is missing or stale are encoded into it). Default: `latents/` in the run folder.
+    #[arg(long)]
+    latents: Option<PathBuf>,
     #[command(flatten)]
     common: RunArgs,
+}
+
+#[derive(Args, Debug)]
+pub struct LatentsArgs {
+    /// The VAE run folder whose newest checkpoint encodes the clips.
+    #[arg(long)]
+    vae: PathBuf,
+    /// Dataset store folder or URL.
+    #[arg(long)]
+    data: PathBuf,
+    /// Folder of the latent files (`shard-KKKKK.latents`).
+    #[arg(long)]
+    latents: PathBuf,
+    /// Encode only shard K (0-based, in the store's manifest order), so that shards run as separate processes.
+    #[arg(long)]
+    shard: Option<usize>,
+    /// Clips per VAE forward.
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u64).range(1..=4096))]
+    micro_batch: u64,
+    /// Backend of the encoding.
+    #[arg(long, value_parser = enum_parser(&Backend::ALL), default_value = "flex")]
+    backend: Backend,
 }
 
 #[derive(Args, Debug)]
@@ -149,14 +181,37 @@ pub fn exec(cmd: TrainCmd) -> anyhow::Result<ExitCode> {
     match cmd {
         TrainCmd::Vae(args) => vae(args),
         TrainCmd::Rf(args) => rf(args),
+        TrainCmd::Latents(args) => latents(args),
         TrainCmd::Bdlstm(args) => bdlstm(args),
     }
+}
+
+fn latents(args: LatentsArgs) -> anyhow::Result<ExitCode> {
+    let dir = &args.latents;
+    encode_store_latents(
+        &args.vae,
+        &args.data,
+        dir,
+        args.shard,
+        args.micro_batch as usize,
+        args.backend,
+        &mut |k, state| {
+            let file = shard_file(dir, k);
+            match state {
+                FileState::Current => eprintln!("shard {k}: {} is current, kept", file.display()),
+                FileState::Missing => eprintln!("shard {k}: encoded into {}", file.display()),
+                FileState::Stale(why) => eprintln!("shard {k}: {} was stale ({why}), encoded again", file.display()),
+            }
+        },
+    )?;
+    Ok(ExitCode::SUCCESS)
 }
 
 fn rf(
     RfArgs {
         vae,
         init,
+        latents,
         common: args,
     }: RfArgs,
 ) -> anyhow::Result<ExitCode> {
@@ -164,6 +219,7 @@ fn rf(
         run: args.options("rf")?,
         vae_run: vae,
         init,
+        latents,
     };
     let outcome = match &args.resume {
         Some(run_dir) => resume_rf(run_dir, args.backend, &opts)?,

@@ -172,6 +172,7 @@ pub fn quickstart(opts: &QuickstartOptions, say: &dyn Fn(&str)) -> Result<Quicks
         },
         vae_run: Some(vae_run.root().to_path_buf()),
         init: None,
+        latents: None,
     };
     stage("3/5 training the tiny keyframe-conditioned RF (ours)".into());
     let (rf_run, outcome) = train_rf(&rf_cfg, &rf_opts("rf"))?;

@@ -52,6 +52,7 @@ fn opts(f: &VaeFixture, name: &str) -> RfRunOptions {
         run: run_options(&f.store, &f.dir, name),
         vae_run: Some(f.vae_run.clone()),
         init: None,
+        latents: None,
     }
 }
 

@@ -490,6 +490,14 @@ fn augmentation_keys_are_off_in_the_presets_set_by_override_and_checked_at_load(
     assert!(err.contains("per_batch"), "{err}");
     let ok = RfRunConfig::load(&rf, &set(&["rf.latent_cache=\"per_batch\"", "rf.augment.reverse=0.5"])).unwrap();
     assert_eq!(ok.rf.augment.reverse, 0.5);
+    // Latent files hold no augmentation and no scene features.
+    for extra in ["rf.augment.reverse=0.5", "model.scene.global=true"] {
+        let err = RfRunConfig::load(&rf, &set(&["rf.latent_cache=\"disk\"", extra]))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("latent_cache"), "{extra}: {err}");
+    }
+    assert!(RfRunConfig::load(&rf, &set(&["rf.latent_cache=\"disk\""])).is_ok());
 }
 
 /// `vae.stats_windows` caps the windows latent statistics are computed from: 0 (all windows) in every preset, kept

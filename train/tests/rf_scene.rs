@@ -65,7 +65,10 @@ fn objective(cfg: &RfRunConfig, dev: &Device) -> (RfObjective, usize) {
     let captions: Vec<String> = (0..store.len()).map(|i| store.get(i).unwrap().clip.caption).collect();
     let tokenizer = ScratchTokenizer::train(&captions, cfg.text.vocab_size).unwrap();
     let vocab = tokenizer.vocab_size();
-    (RfObjective::new(cfg, &f.store, &vae, tokenizer, dev).unwrap(), vocab)
+    (
+        RfObjective::new(cfg, &f.store, None, &vae, tokenizer, dev).unwrap(),
+        vocab,
+    )
 }
 
 fn values<const D: usize>(t: burn::prelude::Tensor<D>) -> Vec<f32> {
@@ -170,6 +173,7 @@ fn trained() -> &'static RunFolder {
             run: run_options(&f.store, &f.dir, "rf-scene"),
             vae_run: Some(f.vae_run.clone()),
             init: None,
+            latents: None,
         };
         // Validation samples at the end too: 2 VAL clips completed in their scenes on a 4-point grid.
         let mut cfg = scene_rf(12);
@@ -208,7 +212,7 @@ fn a_scene_aware_rf_trains_and_its_run_reproduces_its_validation_loss() {
     assert_eq!(loaded.model.mmdit.scene(), &cfg.model.scene);
     let vae = loaded.load_vae(&dev).unwrap();
     let tokenizer = ScratchTokenizer::load(run.root()).unwrap();
-    let obj = RfObjective::new(&cfg, &f.store, &vae, tokenizer, &dev).unwrap();
+    let obj = RfObjective::new(&cfg, &f.store, None, &vae, tokenizer, &dev).unwrap();
     let got = obj
         .validate(&loaded.model, &dev, loaded.step)
         .unwrap()
@@ -221,7 +225,7 @@ fn a_scene_aware_rf_trains_and_its_run_reproduces_its_validation_loss() {
     let mut blind = cfg.clone();
     blind.model.scene = SceneConditioning::default();
     let tokenizer = ScratchTokenizer::load(run.root()).unwrap();
-    let obj = RfObjective::new(&blind, &f.store, &vae, tokenizer, &dev).unwrap();
+    let obj = RfObjective::new(&blind, &f.store, None, &vae, tokenizer, &dev).unwrap();
     let without = obj
         .validate(&loaded.model, &dev, loaded.step)
         .unwrap()

@@ -68,6 +68,7 @@ fn rf_opts(name: &str) -> RfRunOptions {
         run: run_options(&f.store, &f.dir, name),
         vae_run: Some(f.vae_run.clone()),
         init: None,
+        latents: None,
     }
 }
 
@@ -120,7 +121,10 @@ fn make_objective(cfg: &RfRunConfig, vae: &LoadedVae, dev: &Device) -> (RfObject
     let f = fixture();
     let tokenizer = ScratchTokenizer::load(tokenizer_dir()).unwrap();
     let vocab = tokenizer.vocab_size();
-    (RfObjective::new(cfg, &f.store, vae, tokenizer, dev).unwrap(), vocab)
+    (
+        RfObjective::new(cfg, &f.store, None, vae, tokenizer, dev).unwrap(),
+        vocab,
+    )
 }
 
 #[test]
@@ -159,7 +163,7 @@ fn load_rf_run_round_trips_the_trained_run() {
     // The loaded network reproduces the final validation loss logged by the run (fixed validation seed).
     let tokenizer = ScratchTokenizer::load(run).unwrap();
     assert_eq!(tokenizer.vocab_size(), loaded.tokenizer.vocab_size());
-    let objective = RfObjective::new(cfg, &fixture().store, &vae, tokenizer, &dev).unwrap();
+    let objective = RfObjective::new(cfg, &fixture().store, None, &vae, tokenizer, &dev).unwrap();
     let values = objective
         .validate(&loaded.model, &dev, loaded.step)
         .unwrap()
@@ -623,7 +627,7 @@ fn validation_samples_are_logged_at_their_steps_and_seeded() {
     let loaded = load_rf_run(run.root(), &dev).unwrap();
     let vae = loaded.load_vae(&dev).unwrap();
     let tokenizer = ScratchTokenizer::load(run.root()).unwrap();
-    let objective = RfObjective::new(&cfg, &fixture().store, &vae, tokenizer, &dev).unwrap();
+    let objective = RfObjective::new(&cfg, &fixture().store, None, &vae, tokenizer, &dev).unwrap();
     let scores = objective
         .validation_samples(&loaded.model, &dev)
         .unwrap()
@@ -695,6 +699,7 @@ fn init_starts_a_new_run_from_another_runs_parameters() {
     cfg.optim.lr = 1e-30;
     let init_opts = |name: &str, vae_run: Option<PathBuf>| RfRunOptions {
         init: Some(source.clone()),
+        latents: None,
         vae_run,
         ..rf_opts(name)
     };

@@ -400,9 +400,18 @@ pub fn read_at<R: Read + Seek>(file: &mut R, path: &Path, offset: u64, len: usiz
     Ok(buf)
 }
 
-/// The `source` string of the record at `offset` (`len` bytes): reads the three length-prefixed strings that open
-/// it (id, caption, source) and nothing else, each length checked against the record before it is read.
-pub fn read_source<R: Read + Seek>(file: &mut R, path: &Path, offset: u64, len: u64, clip: usize) -> Result<String> {
+/// The strings a record starts with, in order: `id`, `caption`, `source`.
+pub const HEADER_STRINGS: [&str; 3] = ["id", "caption", "source"];
+
+/// The `field` string of the record at `offset` (`len` bytes) of `path`, one of [`HEADER_STRINGS`], reading only
+/// the start of the record.
+pub fn read_header_string<R: Read + Seek>(
+    file: &mut R,
+    path: &Path,
+    (offset, len): (u64, u64),
+    clip: usize,
+    field: &str,
+) -> Result<String> {
     let err = |field: &str, at: u64, reason: String| {
         DataError::new(path, format!("clip {clip} {field} at byte {at}"), reason)
     };
@@ -427,10 +436,17 @@ pub fn read_source<R: Read + Seek>(file: &mut R, path: &Path, offset: u64, len: 
         }
         Ok(n)
     };
-    for field in ["id", "caption"] {
-        at += 4 + string_len(at, field)?;
+    let Some(position) = HEADER_STRINGS.iter().position(|&f| f == field) else {
+        return Err(err(
+            field,
+            offset,
+            format!("not one of the record's strings {HEADER_STRINGS:?}"),
+        ));
+    };
+    for before in &HEADER_STRINGS[..position] {
+        at += 4 + string_len(at, before)?;
     }
-    let n = string_len(at, "source")?;
-    let bytes = read_at(file, path, at + 4, n as usize, "source")?;
-    String::from_utf8(bytes).map_err(|e| err("source", at + 4, e.to_string()))
+    let n = string_len(at, field)?;
+    let bytes = read_at(file, path, at + 4, n as usize, field)?;
+    String::from_utf8(bytes).map_err(|e| err(field, at + 4, e.to_string()))
 }

@@ -191,6 +191,8 @@ pub(crate) struct Part {
     /// Its `clips.bin`.
     pub(crate) path: PathBuf,
     pub(crate) catalog: Catalog,
+    /// The xxh3-64 of `clips.bin` that a sharded store's manifest records (not read from the file).
+    pub(crate) checksum: Option<u64>,
 }
 
 impl Part {
@@ -204,7 +206,11 @@ impl Part {
             ));
         }
         let catalog = read_catalog(&path)?;
-        Ok(Self { path, catalog })
+        Ok(Self {
+            path,
+            catalog,
+            checksum: None,
+        })
     }
 }
 
@@ -347,6 +353,16 @@ impl Store {
     /// The `source` of each clip in `indices` (its file, `path#take`, or `synth:<seed>:<index>`), reading only the
     /// start of each record.
     pub fn sources(&self, indices: &[usize]) -> Result<Vec<String>> {
+        self.header_strings(indices, "source")
+    }
+
+    /// The caption of each clip in `indices`, reading only the start of each record.
+    pub fn captions(&self, indices: &[usize]) -> Result<Vec<String>> {
+        self.header_strings(indices, "caption")
+    }
+
+    /// One of the strings that open a record ([`format::HEADER_STRINGS`]) for each clip in `indices`.
+    fn header_strings(&self, indices: &[usize], field: &str) -> Result<Vec<String>> {
         let mut open: Option<(usize, File)> = None;
         indices
             .iter()
@@ -359,9 +375,26 @@ impl Store {
                 }
                 let e = part.catalog.entries[local];
                 let (_, file) = open.as_mut().expect("opened above");
-                format::read_source(file, &part.path, e.offset, e.len, i)
+                format::read_header_string(file, &part.path, (e.offset, e.len), i, field)
             })
             .collect()
+    }
+
+    /// The xxh3-64 of shard `k`'s `clips.bin`: the one its manifest records for a sharded store (checked against
+    /// the file by `data verify`), computed by reading the file for a one-file store. It names the shard's content,
+    /// so that files derived from a shard (the RF's latent files) can tell when it was re-imported.
+    pub fn shard_checksum(&self, k: usize) -> Result<u64> {
+        let part = self.parts.get(k).ok_or_else(|| {
+            DataError::new(
+                &self.dir,
+                "shard",
+                format!("shard {k} requested, the store has {}", self.parts.len()),
+            )
+        })?;
+        match part.checksum {
+            Some(sum) => Ok(sum),
+            None => Ok(shards::file_checksum(&part.path)?.1),
+        }
     }
 
     /// The clips in `indices` grouped into the whole clips they were cut from (docs/method.md §2.6): positions

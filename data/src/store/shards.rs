@@ -448,7 +448,17 @@ pub(super) fn open(dir: &Path) -> Result<Store> {
                 ),
             ));
         }
-        parts.push(part);
+        let checksum = u64::from_str_radix(&entry.checksum, 16).map_err(|_| {
+            DataError::new(
+                dir.join(MANIFEST_FILE),
+                format!("shards[{k}].checksum ({})", entry.path),
+                format!("{:?} is not 16 hex digits", entry.checksum),
+            )
+        })?;
+        parts.push(Part {
+            checksum: Some(checksum),
+            ..part
+        });
     }
     Ok(Store::of_parts(dir, parts))
 }

@@ -26,6 +26,7 @@ use crate::runs::LoadedVae;
 use crate::vae_loop::{load_clips, vae_batch};
 
 use super::config::{LatentCache, LatentDraw, RfRunConfig, RfSection};
+use super::latent_files::{DiskLatents, Encoder, FileState};
 use super::latents::{LatentSet, encode_augmented, encode_latents_on_workers};
 use super::network::RfModel;
 
@@ -76,6 +77,8 @@ pub struct RfBatcher {
     store: Store,
     train: SplitLatents,
     valid: SplitLatents,
+    /// With [`LatentCache::Disk`]: the latent files of every shard, and what preparing them did.
+    disk: Option<(DiskLatents, String)>,
 }
 
 /// The keyframe mask m of one training window of `frames` frames (true = observed keyframe), drawn with
@@ -95,10 +98,12 @@ pub fn training_mask(
 
 impl RfBatcher {
     /// Checks that the RF config fits the VAE and the store in `data`; with [`LatentCache::Memory`] encodes the
-    /// TRAIN and VAL clips once with the frozen VAE (on the inference `device`).
+    /// TRAIN and VAL clips once with the frozen VAE (on the inference `device`); with [`LatentCache::Disk`] makes the
+    /// latent files of every shard in `latents` current (encoding those missing or stale) and opens them.
     pub fn new(
         cfg: &RfRunConfig,
         data: &Path,
+        latents: Option<&Path>,
         vae: &LoadedVae,
         tokenizer: ScratchTokenizer,
         device: &Device,
@@ -126,11 +131,30 @@ impl RfBatcher {
                     workers,
                     scene_grid.as_ref(),
                 )?),
-                LatentCache::PerBatch => None,
+                LatentCache::PerBatch | LatentCache::Disk => None,
             };
             Ok(SplitLatents { store_indices, cached })
         };
         let (train, valid) = (split(Split::Train)?, split(Split::Val)?);
+        let disk = match cfg.rf.latent_cache {
+            LatentCache::Disk => {
+                let dir = latents.ok_or_else(|| {
+                    TrainError::Setup("rf.latent_cache = \"disk\" needs a folder for the latent files".into())
+                })?;
+                let encoder = Encoder::new(vae, cfg.train.micro_batch, workers, device)?;
+                let (mut reused, mut encoded) = (0, 0);
+                let disk = DiskLatents::prepare(dir, &store, &encoder, &mut |_, state| match state {
+                    FileState::Current => reused += 1,
+                    FileState::Missing | FileState::Stale(_) => encoded += 1,
+                })?;
+                let note = format!(
+                    "latent files in {}: {reused} shard(s) reused, {encoded} encoded",
+                    dir.display()
+                );
+                Some((disk, note))
+            }
+            LatentCache::Memory | LatentCache::PerBatch => None,
+        };
         Ok(RfBatcher {
             cfg: cfg.clone(),
             stats: vae.stats,
@@ -141,7 +165,13 @@ impl RfBatcher {
             store,
             train,
             valid,
+            disk,
         })
+    }
+
+    /// What preparing the latent files did ([`LatentCache::Disk`]); `None` otherwise.
+    pub fn latent_files_note(&self) -> Option<&str> {
+        self.disk.as_ref().map(|(_, note)| note.as_str())
     }
 
     /// Number of TRAIN clips (stored windows).
@@ -207,7 +237,16 @@ impl RfBatcher {
     /// §4.10: the size the anchor's scale s should have), on standardized posterior means with training keyframe masks
     /// from `rng`; `None` without cached latents or TRAIN clips.
     pub fn anchor_residual_rms(&self, clips: usize, rng: &mut ChaCha8Rng, device: &Device) -> Option<f64> {
-        let set = self.train.cached.as_ref()?;
+        let read;
+        let set = match (&self.train.cached, &self.disk) {
+            (Some(set), _) => set,
+            (None, Some((disk, _))) => {
+                let ids = &self.train.store_indices[..clips.min(self.train.store_indices.len())];
+                read = disk.read(&self.store, ids).ok()?;
+                &read
+            }
+            (None, None) => return None,
+        };
         let n = clips.min(set.clips.len());
         if n == 0 {
             return None;
@@ -262,9 +301,13 @@ impl RfBatcher {
             })
             .collect::<Result<Vec<_>>>()?;
         let encoded;
-        let (set, positions) = match &split.cached {
-            Some(set) => (set, indices.to_vec()),
-            None => {
+        let (set, positions) = match (&split.cached, &self.disk) {
+            (Some(set), _) => (set, indices.to_vec()),
+            (None, Some((disk, _))) => {
+                encoded = disk.read(&self.store, &store_ids)?;
+                (&encoded, (0..store_ids.len()).collect())
+            }
+            (None, None) => {
                 let inference = device.clone().without_autodiff();
                 // Training examples are augmented (docs/method.md §2.9) with draws from the micro-batch's generator.
                 let augment = &self.cfg.rf.augment;

@@ -36,6 +36,11 @@ pub enum LatentCache {
     Memory,
     /// Encode each micro-batch with the frozen VAE when it is drawn: no memory, one VAE forward per batch.
     PerBatch,
+    /// Encode every clip once into one file per store shard (`--latents DIR`, or `latents/` in the run folder; files
+    /// already current are reused, so shards can be encoded beforehand by separate `any4d train latents --shard K`
+    /// processes) and read each batch's latents from disk: no VAE forward per batch and resident memory independent
+    /// of the store's size.
+    Disk,
 }
 
 /// The `[rf]` table: options of the RF objective.
@@ -197,6 +202,12 @@ impl RfRunConfig {
                     .check(cfg.model.frames)
                     .map_err(|e| bad(format!("rf.valid_sample_every > 0 needs model.frames ≥ 3: {e}")))?;
             }
+        }
+        if rf.latent_cache == LatentCache::Disk && cfg.model.scene.any() {
+            return Err(bad(
+                "rf.latent_cache = \"disk\" keeps no scene features: use \"memory\" or \"per_batch\" with model.scene"
+                    .into(),
+            ));
         }
         rf.augment.validate("rf.augment").map_err(bad)?;
         if !rf.augment.is_off() {

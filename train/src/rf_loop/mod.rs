@@ -16,6 +16,7 @@ use any4d_data::keyframes::KeyframeStrategy;
 
 mod batcher;
 mod config;
+mod latent_files;
 mod latents;
 mod network;
 mod objective;
@@ -24,6 +25,9 @@ mod validation;
 
 pub use batcher::*;
 pub use config::*;
+pub use latent_files::{
+    DiskLatents, Encoder, FileState, LatentHeader, check_file, encode_store_latents, shard_file, vae_fingerprint,
+};
 pub use latents::*;
 pub use network::*;
 pub use objective::*;

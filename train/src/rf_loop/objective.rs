@@ -36,11 +36,12 @@ impl RfObjective {
     pub fn new(
         cfg: &RfRunConfig,
         data: &Path,
+        latents: Option<&Path>,
         vae: &LoadedVae,
         tokenizer: ScratchTokenizer,
         device: &Device,
     ) -> Result<Self> {
-        let batcher = RfBatcher::new(cfg, data, vae, tokenizer, device)?;
+        let batcher = RfBatcher::new(cfg, data, latents, vae, tokenizer, device)?;
         let train_clips = WholeClips::new(batcher.store().whole_clips(batcher.train_indices())?);
         Ok(RfObjective {
             batcher,

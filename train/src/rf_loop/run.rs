@@ -36,7 +36,13 @@ pub struct RfRunOptions {
     /// optimiser, the step count, the schedule, the random streams and the parameter average start afresh under the
     /// new config.
     pub init: Option<PathBuf>,
+    /// The folder of the latent files with `rf.latent_cache = "disk"` (`--latents`): files already current there are
+    /// reused, the others encoded into it. Default: `latents/` in the run folder.
+    pub latents: Option<PathBuf>,
 }
+
+/// The latent files' folder inside a run folder when `--latents` is not given.
+pub const LATENTS_DIR: &str = "latents";
 
 /// The file of a run started with `--init` that names the checkpoint folder and step it started from.
 pub const INIT_FILE: &str = "init.json";
@@ -198,11 +204,7 @@ pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRun
 }
 
 fn train_captions(store: &Store) -> Result<Vec<String>> {
-    store
-        .indices(Split::Train)
-        .into_iter()
-        .map(|i| Ok(store.get(i)?.clip.caption))
-        .collect()
+    Ok(store.captions(&store.indices(Split::Train))?)
 }
 
 fn run_rf(
@@ -220,7 +222,11 @@ fn run_rf(
         Start::Init(ckpt) => (None, Some(ckpt)),
     };
     let vocab = tokenizer.vocab_size();
-    let mut objective = RfObjective::new(cfg, &opts.run.data, vae, tokenizer, &devices[0])?;
+    let latents = opts.latents.clone().unwrap_or_else(|| run.path(LATENTS_DIR));
+    let mut objective = RfObjective::new(cfg, &opts.run.data, Some(&latents), vae, tokenizer, &devices[0])?;
+    if let Some(note) = objective.batcher().latent_files_note() {
+        run.log(note)?;
+    }
     objective.log_validation_samples(run)?;
     if let Anchor::KeyframeLerp { scale } = cfg.model.anchor {
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.train.seed);
