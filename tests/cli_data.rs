@@ -555,6 +555,56 @@ fn shards_written_by_two_processes_merge_into_one_store() {
         let (stdout, stderr) = text(&out);
         assert!(out.status.success() && stdout.contains("6 "), "{cmd}: {stdout}{stderr}");
     }
+    // The streaming reader's benchmark: the same clips as one file, as two shards, and over HTTP (cold, cached).
+    let one = tmp.path().join("one");
+    let out = any4d(&[
+        "data",
+        "synth",
+        "--clips",
+        "6",
+        "--seed",
+        "5",
+        "--p",
+        "16",
+        "--out",
+        p(&one),
+    ]);
+    assert!(out.status.success(), "{:?}", text(&out));
+    let csv = tmp.path().join("bench.csv");
+    let out = any4d(&[
+        "bench",
+        "store",
+        p(&one),
+        p(&store),
+        &url,
+        "--rounds",
+        "2",
+        "--csv",
+        p(&csv),
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success() && stdout.contains("clips/s"), "{stdout}{stderr}");
+    let rows: Vec<Vec<String>> = std::fs::read_to_string(&csv)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.rsplitn(8, ',').map(str::to_owned).collect())
+        .collect();
+    // Columns from the right: ratio, MB/s, clips/s, seconds, bytes, clips, shards, store.
+    let shards: Vec<&str> = rows.iter().map(|r| r[6].as_str()).collect();
+    assert_eq!(shards, ["1", "2", "2", "2"], "{rows:?}");
+    assert!(rows.iter().all(|r| r[5] == "6"), "{rows:?}");
+    assert_eq!(rows[0][0], "1.0000");
+    assert!(
+        rows[2][7].contains("empty cache") && rows[3][7].contains("cache filled"),
+        "{rows:?}"
+    );
+    let out = any4d(&["bench", "store", p(&one), "--rounds", "0"]);
+    assert!(
+        !out.status.success() && text(&out).1.contains("--rounds"),
+        "{:?}",
+        text(&out)
+    );
     let _ = server.kill();
     let _ = server.wait();
     for bad in ["3/2", "0/0", "1"] {

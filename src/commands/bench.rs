@@ -35,6 +35,122 @@ pub enum BenchCmd {
     /// Scene features per clip (the occupancy grid (S1) and the keyframes' basis-point offsets (S2)) against the
     /// numpy reference, on procedural scene clips.
     Scene(SceneBenchArgs),
+    /// The streaming reader: every clip of each store read and decoded in a training epoch's order (shard by shard
+    /// through the shuffle buffer), alternating between the stores; the first is the reference of the ratios. An
+    /// object-storage URL is fetched into an empty cache first (cold), then read from the filled cache.
+    Store(StoreBenchArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct StoreBenchArgs {
+    /// Stores: folders or object-storage URLs (`s3://…`, `http://…`); the first is the reference.
+    #[arg(required = true)]
+    pub stores: Vec<PathBuf>,
+    /// Clips read from each store per round (default: all of it).
+    #[arg(long)]
+    pub clips: Option<usize>,
+    /// Shuffle buffer of the data order (the presets' `train.shuffle_buffer`).
+    #[arg(long, default_value_t = 8192)]
+    pub buffer: usize,
+    /// Seed of the data order.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Timed rounds, alternating between the stores; medians are reported.
+    #[arg(long, default_value_t = 3)]
+    pub rounds: usize,
+    /// Also write the rows as CSV to this file.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+}
+
+/// One row of `bench store`: a store as it was opened, and its timed reads.
+struct StoreRow {
+    name: String,
+    store: any4d_data::store::Store,
+    /// Seconds to fetch an object-storage store into an empty cache (`None` for a folder).
+    fetch_s: Option<f64>,
+    reads: Vec<any4d_train::bench::StoreRead>,
+}
+
+/// `any4d bench store`: see [`BenchCmd::Store`].
+fn bench_store(args: StoreBenchArgs) -> anyhow::Result<ExitCode> {
+    use any4d_data::store::{Store, is_url, remote};
+    use any4d_model::bench::median;
+    use any4d_train::bench::time_store_read;
+    if args.rounds == 0 || args.clips == Some(0) {
+        bail!("--rounds and --clips must be at least 1");
+    }
+    let cache = tempfile::tempdir().context("a temporary cache folder")?;
+    let mut rows = Vec::new();
+    for path in &args.stores {
+        let name = path.display().to_string();
+        match path.to_str().filter(|_| is_url(path)) {
+            Some(url) => {
+                let start = std::time::Instant::now();
+                let local = remote::fetch(url, &remote::env_options(), cache.path())?;
+                let fetch_s = start.elapsed().as_secs_f64();
+                let store = Store::open(&local)?;
+                // The first read after the fetch, then the same store as later runs see it (cache filled).
+                let cold = time_store_read(&store, args.seed, args.buffer, args.clips)?;
+                rows.push(StoreRow {
+                    name: format!("{name} (fetch into an empty cache + first read)"),
+                    store: store.clone(),
+                    fetch_s: Some(fetch_s),
+                    reads: vec![cold],
+                });
+                rows.push(StoreRow {
+                    name: format!("{name} (cache filled)"),
+                    store,
+                    fetch_s: None,
+                    reads: Vec::new(),
+                });
+            }
+            None => rows.push(StoreRow {
+                name,
+                store: Store::open(path)?,
+                fetch_s: None,
+                reads: Vec::new(),
+            }),
+        }
+    }
+    for _ in 0..args.rounds {
+        for row in rows.iter_mut().filter(|r| r.fetch_s.is_none()) {
+            row.reads
+                .push(time_store_read(&row.store, args.seed, args.buffer, args.clips)?);
+        }
+    }
+    let rate = |r: &StoreRow| {
+        let secs: Vec<f64> = r.reads.iter().map(|x| x.seconds).collect();
+        let s = median(&secs) + r.fetch_s.unwrap_or(0.0);
+        (r.reads[0].clips as f64 / s, r.reads[0].bytes as f64 / s / 1e6, s)
+    };
+    let reference = rate(&rows[0]).0;
+    println!(
+        "store bench: each store read and decoded in a training epoch's order (buffer {}, seed {}) on one thread; \
+         medians of {} alternating rounds (a fetched store: one)",
+        args.buffer, args.seed, args.rounds
+    );
+    let mut csv = String::from("store,shards,clips,bytes,seconds,clips_per_s,mb_per_s,ratio\n");
+    println!("| store | shards | clips | s | clips/s | MB/s | × first |");
+    println!("|---|---|---|---|---|---|---|");
+    for row in &rows {
+        let (clips_s, mb_s, s) = rate(row);
+        let (clips, bytes) = (row.reads[0].clips, row.reads[0].bytes);
+        let shards = row.store.shard_count();
+        let ratio = clips_s / reference;
+        println!(
+            "| {} | {shards} | {clips} | {s:.3} | {clips_s:.0} | {mb_s:.0} | {ratio:.2} |",
+            row.name
+        );
+        csv.push_str(&format!(
+            "\"{}\",{shards},{clips},{bytes},{s:.4},{clips_s:.1},{mb_s:.1},{ratio:.4}\n",
+            row.name.replace('"', "'")
+        ));
+    }
+    if let Some(path) = &args.csv {
+        any4d_data::io::write_atomic(path, csv.as_bytes())?;
+    }
+    Ok(ExitCode::SUCCESS)
 }
 
 #[derive(Args, Debug)]
@@ -298,5 +414,6 @@ pub fn exec(cmd: BenchCmd) -> anyhow::Result<ExitCode> {
         BenchCmd::Acap(args) => bench_acap(args),
         BenchCmd::Synth(args) => bench_synth(args),
         BenchCmd::Scene(args) => bench_scene(args),
+        BenchCmd::Store(args) => bench_store(args),
     }
 }

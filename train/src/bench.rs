@@ -2,7 +2,8 @@
 //! RF training step at the preset's size on random standardised latents — no VAE run and no store needed — with its
 //! analytic model FLOPs; a VAE preset trains on a store through [`train_vae`], a BD-LSTM preset through
 //! [`train_bdlstm`] (on a VAE's latents or, the ACAP variant, on the store's vertices), and each reads the throughput
-//! from its run's `metrics.csv`.
+//! from its run's `metrics.csv`. `any4d bench store` times the streaming reader: a store read in a training epoch's
+//! order.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -16,7 +17,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use crate::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, train_bdlstm};
+use any4d_data::store::Store;
+
 use crate::config::{Duration, TrainConfig};
+use crate::data_order::DataOrder;
 use crate::error::{Result, TrainError};
 use crate::grad_clip::clip_global_norm;
 use crate::loop_common::{FlushScope, RunOptions, StopFlag, scalar, step_seed};
@@ -361,4 +365,41 @@ mod tests {
             .to_string();
         assert!(err.contains("other.toml") && err.contains("neither an RF"), "{err}");
     }
+}
+
+/// What [`time_store_read`] measured.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoreRead {
+    /// Clips read and decoded.
+    pub clips: usize,
+    /// Bytes of their records.
+    pub bytes: u64,
+    /// Wall seconds.
+    pub seconds: f64,
+}
+
+/// Reads and decodes the first `limit` clips (all with `None`) of `store` in the order a training epoch visits them
+/// on it ([`DataOrder::sharded`]: shard by shard through a shuffle buffer of `buffer` examples, from `seed`), as the
+/// streaming reader of training does: one clip at a time on the calling thread.
+pub fn time_store_read(store: &Store, seed: u64, buffer: usize, limit: Option<usize>) -> Result<StoreRead> {
+    if store.is_empty() {
+        return Err(TrainError::Setup(format!(
+            "store {} holds no clip",
+            store.dir().display()
+        )));
+    }
+    let blocks: Vec<usize> = (0..store.shard_count()).map(|k| store.shard_range(k).len()).collect();
+    let mut order = DataOrder::sharded(seed, &blocks, buffer);
+    let clips = limit.unwrap_or(store.len()).clamp(1, store.len());
+    let start = Instant::now();
+    let mut bytes = 0;
+    for i in order.take(clips) {
+        std::hint::black_box(store.get(i)?);
+        bytes += store.record_bytes(i)?;
+    }
+    Ok(StoreRead {
+        clips,
+        bytes,
+        seconds: start.elapsed().as_secs_f64(),
+    })
 }

@@ -320,6 +320,11 @@ impl Store {
         self.locate(i).map(|(k, _)| k)
     }
 
+    /// Bytes of clip `i`'s record in its `clips.bin`.
+    pub fn record_bytes(&self, i: usize) -> Result<u64> {
+        Ok(self.entry(i)?.len)
+    }
+
     /// The clips of shard `k`, as store indices.
     pub fn shard_range(&self, k: usize) -> std::ops::Range<usize> {
         match self.starts.get(k) {
