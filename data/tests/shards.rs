@@ -349,3 +349,55 @@ fn merges_that_cannot_be_one_store_write_nothing() {
     let e = Store::open(&out).unwrap_err().to_string();
     assert!(e.contains("both"), "{e}");
 }
+
+/// A shard larger than the bound is refused before anything is written, naming it and a shard count that fits; the
+/// size flag's parser takes units and refuses zero, signs, fractions, unknown units and overflow.
+#[test]
+fn shards_over_the_size_bound_are_refused_with_a_count_that_fits() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = tmp.path().join("store");
+    let dirs: Vec<PathBuf> = (0..2).map(|k| store.join(format!("shard-{k}"))).collect();
+    for (k, dir) in dirs.iter().enumerate() {
+        let spec = ShardSpec { index: k, count: 2 };
+        write_synth_shard(&synth_cfg(), dir, P, (16, 1), Some(spec), None).unwrap();
+    }
+    let sizes: Vec<u64> = dirs
+        .iter()
+        .map(|d| std::fs::metadata(d.join("clips.bin")).unwrap().len())
+        .collect();
+    let bound = sizes.iter().min().unwrap() - 1;
+    let e = store::merge_bounded(&store, &dirs, bound).unwrap_err().to_string();
+    let n = ((sizes.iter().sum::<u64>() as f64) * 1.25 / bound as f64).ceil() as u64;
+    assert!(
+        e.contains("shard-0") && e.contains("shard-1") && e.contains(&format!("--shard K/{n}")),
+        "{e}"
+    );
+    assert!(!store.join(MANIFEST_FILE).exists());
+    // At the larger shard's size exactly, the merge goes through.
+    store::merge_bounded(&store, &dirs, *sizes.iter().max().unwrap()).unwrap();
+    assert_eq!(store::DEFAULT_MAX_SHARD_BYTES, 1 << 30);
+
+    for (text, want) in [
+        ("1GiB", 1u64 << 30),
+        ("500M", 500_000_000),
+        ("2kb", 2_000),
+        ("7", 7),
+        (" 3 TiB ", 3 << 40),
+    ] {
+        assert_eq!(store::parse_bytes(text), Ok(want), "{text}");
+    }
+    for (bad, why) in [
+        ("0", "positive"),
+        ("0G", "positive"),
+        ("-1G", "not a size"),
+        ("1.5G", "unknown unit"),
+        ("12XB", "unknown unit"),
+        ("GiB", "not a size"),
+        ("", "not a size"),
+        ("99999999999999999999", "2^64"),
+        ("20000000TiB", "2^64"),
+    ] {
+        let e = store::parse_bytes(bad).unwrap_err();
+        assert!(e.contains(why), "{bad:?}: {e}");
+    }
+}

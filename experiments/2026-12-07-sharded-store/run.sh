@@ -79,7 +79,7 @@ for ((k = 0; k < large_shards; k += 2)); do
   done
   wait
 done
-"$bin" data merge "$big" "$big"/shard-* >/dev/null
+"$bin" data merge --max-shard-bytes 3GB "$big" "$big"/shard-* >/dev/null
 end=$(date +%s.%N)
 row import-large-2proc 2 0 "$big" "$(echo "$end - $start" | bc)" 0
 timed train-large-sharded 1 0 "$big" "$bin" "${train[@]}" --data "$big" --run large-sharded

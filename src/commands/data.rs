@@ -78,6 +78,10 @@ pub struct MergeArgs {
     /// recorded absolute).
     #[arg(required = true)]
     pub shards: Vec<PathBuf>,
+    /// The largest shard (`clips.bin`) taken: a larger one is refused with the shard count that would fit
+    /// (`1GiB`, `500M`, bytes).
+    #[arg(long, default_value = "1GiB", value_parser = store::parse_bytes)]
+    pub max_shard_bytes: u64,
 }
 
 #[derive(Args, Debug)]
@@ -248,7 +252,7 @@ pub fn exec(cmd: DataCmd) -> anyhow::Result<ExitCode> {
         DataCmd::Import(a) => import(a),
         DataCmd::Synth(a) => synth(a),
         DataCmd::Merge(a) => {
-            let manifest = store::merge(&a.store, &a.shards)?;
+            let manifest = store::merge_bounded(&a.store, &a.shards, a.max_shard_bytes)?;
             let clips: usize = manifest.shards.iter().map(|s| s.clips).sum();
             let bytes: u64 = manifest.shards.iter().map(|s| s.bytes).sum();
             emit(&format!(

@@ -83,7 +83,7 @@ pub use import::{
 };
 pub use index::{CHECKSUM_COLUMN, IndexRow, Status, write_index};
 pub use record::decode_clip_bytes;
-pub use shards::{MANIFEST_FILE, Manifest, ShardSpec, merge};
+pub use shards::{DEFAULT_MAX_SHARD_BYTES, MANIFEST_FILE, Manifest, ShardSpec, merge, merge_bounded, parse_bytes};
 pub use verify::{Problem, VerifyReport, check_index, record_len, verify_store};
 
 /// File name of the clip records inside a store folder.

@@ -168,6 +168,77 @@ pub fn shard_key(path: &Path, roots: &[PathBuf]) -> String {
 /// twice, a shard whose `clips.bin` does not match its index, and a store folder that is itself a one-file store.
 /// The manifest is written to a temporary name and renamed into place.
 pub fn merge(store: &Path, shards: &[PathBuf]) -> Result<Manifest> {
+    merge_bounded(store, shards, DEFAULT_MAX_SHARD_BYTES)
+}
+
+/// The largest `clips.bin` [`merge`] takes into a store: 1 GiB, so that a shard is a unit a worker fetches, caches
+/// and checksums in seconds, and a store's shards are many enough to spread over machines (docs/data.md).
+pub const DEFAULT_MAX_SHARD_BYTES: u64 = 1 << 30;
+
+/// Parses a byte size: a whole number with an optional unit, `K`/`M`/`G`/`T` or `KB`…`TB` (powers of 1,000) or
+/// `KiB`…`TiB` (powers of 1,024), case-insensitive: `1GiB`, `500M`, `2000000000`. Zero, fractions, signs and sizes
+/// past 2⁶⁴ are refused.
+pub fn parse_bytes(text: &str) -> std::result::Result<u64, String> {
+    let t = text.trim();
+    let split = t.find(|c: char| !c.is_ascii_digit()).unwrap_or(t.len());
+    let (digits, unit) = t.split_at(split);
+    if digits.is_empty() {
+        return Err(format!("{text:?} is not a size: a whole number with an optional unit (1GiB, 500M, 2000000000)"));
+    }
+    let scale: u64 = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1,
+        "k" | "kb" => 1_000,
+        "m" | "mb" => 1_000_000,
+        "g" | "gb" => 1_000_000_000,
+        "t" | "tb" => 1_000_000_000_000,
+        "kib" => 1 << 10,
+        "mib" => 1 << 20,
+        "gib" => 1 << 30,
+        "tib" => 1 << 40,
+        other => return Err(format!("{text:?}: unknown unit {other:?} (K, M, G, T, KiB, MiB, GiB, TiB)")),
+    };
+    let n: u64 = digits.parse().map_err(|_| format!("{text:?} is larger than 2^64 bytes"))?;
+    match n.checked_mul(scale) {
+        Some(0) => Err(format!("{text:?}: a size must be positive")),
+        Some(b) => Ok(b),
+        None => Err(format!("{text:?} is larger than 2^64 bytes")),
+    }
+}
+
+/// [`merge`] refusing, before anything is read or written, a shard whose `clips.bin` is larger than `max_bytes`,
+/// naming each such shard and a shard count `N` for `--shard K/N` that would keep them under the bound.
+pub fn merge_bounded(store: &Path, shards: &[PathBuf], max_bytes: u64) -> Result<Manifest> {
+    let mut sizes = Vec::with_capacity(shards.len());
+    for dir in shards {
+        // A missing file is left to the checks of the merge itself, which name it.
+        sizes.push(std::fs::metadata(dir.join(CLIPS_FILE)).map_or(0, |m| m.len()));
+    }
+    let over: Vec<String> = shards
+        .iter()
+        .zip(&sizes)
+        .filter(|&(_, &b)| b > max_bytes)
+        .map(|(d, b)| format!("{} ({b} bytes)", d.display()))
+        .collect();
+    if !over.is_empty() {
+        let total: u64 = sizes.iter().sum();
+        // Hash shares vary by a few percent; a quarter of headroom keeps every shard under the bound.
+        let n = (total as f64 * 1.25 / max_bytes as f64).ceil().max(1.0) as u64;
+        return Err(DataError::new(
+            store,
+            "max shard bytes",
+            format!(
+                "{} larger than the bound of {max_bytes} bytes: {}; the {} shards hold {total} bytes together, so \
+                 import them again as --shard K/{n} (or raise --max-shard-bytes)",
+                if over.len() == 1 { "one shard is" } else { "shards are" },
+                over.join(", "),
+                shards.len()
+            ),
+        ));
+    }
+    merge_checked(store, shards)
+}
+
+fn merge_checked(store: &Path, shards: &[PathBuf]) -> Result<Manifest> {
     if shards.is_empty() {
         return Err(DataError::new(store, "shards", "no shard folder given"));
     }
