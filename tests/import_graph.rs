@@ -25,21 +25,6 @@ const CRATES: &[(&str, &str)] = &[
 const KNOWN_CIRCLES: &[(&str, &[&str])] = &[
     ("data", &["formats::bvh", "formats::iqm"]),
     ("model", &["any_vae", "dymesh_vae", "frame_vae", "mesh_vae"]),
-    (
-        "train",
-        &[
-            "bdlstm_acap",
-            "bdlstm_loop",
-            "config",
-            "grad_clip",
-            "loop_common",
-            "multi_device",
-            "plot",
-            "run_folder",
-            "runs",
-            "vae_loop",
-        ],
-    ),
 ];
 
 fn root() -> &'static Path {

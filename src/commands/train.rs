@@ -7,15 +7,17 @@ use std::process::ExitCode;
 use any4d_data::store::DEFAULT_P;
 use any4d_model::bench::median;
 use any4d_train::backend::{self, Backend, Precision};
-use any4d_train::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, BdlstmVariant, resume_bdlstm, train_bdlstm};
+use any4d_train::bdlstm::{resume_bdlstm, train_bdlstm};
+use any4d_train::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, BdlstmVariant};
 use any4d_train::bench::{RfShape, TrainThroughput, rf_step_flops, time_bdlstm_steps, time_rf_steps, time_vae_steps};
-use any4d_train::config::{DeviceConfig, Override, RunConfig, TrainConfig};
+use any4d_train::config::{DeviceConfig, Override, TrainConfig};
+use any4d_train::devices::{Parallel, Strategy};
 use any4d_train::loop_common::{Outcome, RunOptions};
-use any4d_train::multi_device::{Parallel, Strategy};
 use any4d_train::progress::ProgressMode;
 use any4d_train::rf_loop::{
     FileState, RfRunConfig, RfRunOptions, encode_store_latents, resume_rf, shard_file, train_rf,
 };
+use any4d_train::run_config::RunConfig;
 use any4d_train::run_folder::RunFolder;
 use any4d_train::vae_loop::{VaeRunConfig, resume_vae, train_vae};
 use anyhow::{Context, bail};

@@ -138,6 +138,9 @@ impl std::str::FromStr for Precision {
     }
 }
 
+/// Activation bound where the device's memory is not known (GPU backends): 1 TiB, beyond any single device.
+pub const MAX_ACTIVATION_BYTES: u128 = 1 << 40;
+
 /// The inference device (no autodiff) for `backend` at `precision`. Call `.autodiff()` on it for training.
 ///
 /// Precision must be configured before the first tensor exists on the device, so call this once, at start-up.

@@ -20,9 +20,9 @@ use crate::bdlstm_loop::{
     BDLSTM_TERMS, BdlstmRunConfig, BdlstmRunOptions, BdlstmVariant, chain_losses, read_bdlstm_config, validate_chunks,
 };
 use crate::data_order::WholeClips;
+use crate::devices::run_devices;
 use crate::error::{Result, TrainError, io_err, run_err};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, RunOptions};
-use crate::multi_device::run_devices;
 use crate::run_folder::RunFolder;
 use crate::runs;
 

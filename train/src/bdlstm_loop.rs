@@ -18,15 +18,14 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
-use crate::backend;
 use crate::config::resolve;
 use crate::config::{DeviceConfig, OptimConfig, TrainConfig, to_toml};
 use crate::data_order::WholeClips;
+use crate::devices::run_devices;
 use crate::error::{Result, TrainError, io_err, run_err};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, RunOptions};
-use crate::multi_device::run_devices;
 use crate::rf_loop::{LatentDraw, LatentSet, encode_latents_on_workers};
-use crate::run_folder::{CONFIG_FILE, RunFolder, open_for_resume};
+use crate::run_folder::{CONFIG_FILE, RunFolder};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 
 /// Loss terms of a BD-LSTM run (`metrics.csv` columns before `loss`).
@@ -449,17 +448,9 @@ pub struct BdlstmRunOptions {
     pub vae_run: Option<PathBuf>,
 }
 
-/// Starts a new BD-LSTM run with `cfg`: on the frozen VAE of `opts.vae_run` (latent variant) or on the ACAP features
-/// of the store (`model.variant = "acap"`, no VAE).
-pub fn train_bdlstm(cfg: &BdlstmRunConfig, opts: &BdlstmRunOptions) -> Result<(RunFolder, Outcome)> {
-    if opts.run.parallel.is_some() {
-        return Err(TrainError::Setup(
-            "BD-LSTM runs train on one device (no --devices)".into(),
-        ));
-    }
-    if cfg.model.variant == BdlstmVariant::Acap {
-        return crate::bdlstm_acap::train_acap(cfg, opts);
-    }
+/// Starts a new BD-LSTM run of the latent variant with `cfg` on the frozen VAE of `opts.vae_run` (the entry of both
+/// variants is `bdlstm::train_bdlstm`).
+pub(crate) fn train_latent(cfg: &BdlstmRunConfig, opts: &BdlstmRunOptions) -> Result<(RunFolder, Outcome)> {
     let vae_dir = opts
         .vae_run
         .as_deref()
@@ -473,18 +464,17 @@ pub fn train_bdlstm(cfg: &BdlstmRunConfig, opts: &BdlstmRunOptions) -> Result<(R
     Ok((run, outcome))
 }
 
-/// Continues the BD-LSTM run in `run_dir` from its newest checkpoint.
-pub fn resume_bdlstm(run_dir: &Path, backend: Option<backend::Backend>, opts: &BdlstmRunOptions) -> Result<Outcome> {
-    let (run, cfg, ckpt) = open_for_resume(run_dir, BdlstmRunConfig::parse, backend, |c: &mut BdlstmRunConfig| {
-        &mut c.device
-    })?;
-    if cfg.model.variant == BdlstmVariant::Acap {
-        return crate::bdlstm_acap::resume_acap(&cfg, &run, ckpt, opts);
-    }
-    let record = runs::recorded_vae(run_dir, opts.vae_run.as_deref())?;
+/// Continues the latent-variant run `run` (config `cfg`, read by `bdlstm::resume_bdlstm`) from `ckpt`.
+pub(crate) fn resume_latent(
+    cfg: &BdlstmRunConfig,
+    run: &RunFolder,
+    ckpt: PathBuf,
+    opts: &BdlstmRunOptions,
+) -> Result<Outcome> {
+    let record = runs::recorded_vae(run.root(), opts.vae_run.as_deref())?;
     let devices = run_devices(&cfg.device, None)?;
     let vae = record.load(&devices[0])?;
-    run_bdlstm(&cfg, &run, &opts.run, &vae, &devices[0], Some(ckpt))
+    run_bdlstm(cfg, run, &opts.run, &vae, &devices[0], Some(ckpt))
 }
 
 fn run_bdlstm(

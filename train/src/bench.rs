@@ -16,7 +16,8 @@ use burn::tensor::Distribution;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions, train_bdlstm};
+use crate::bdlstm::train_bdlstm;
+use crate::bdlstm_loop::{BdlstmRunConfig, BdlstmRunOptions};
 use any4d_data::store::Store;
 
 use crate::config::{Duration, TrainConfig};
@@ -328,7 +329,7 @@ pub fn untrained_keyframe_method(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::RunConfig;
+    use crate::run_config::RunConfig;
 
     fn root() -> &'static Path {
         Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))

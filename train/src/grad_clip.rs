@@ -5,8 +5,6 @@ use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::GradientsParams;
 use burn::prelude::Tensor;
 
-use crate::loop_common::scalar;
-
 /// Scales `grads` so that their global L2 norm over `model`'s parameters is at most `max_norm` (PyTorch's
 /// `clip_grad_norm_`, docs/method.md §3.5/§4.7 "gradient clip 1.0"); returns the clipped gradients and the norm before.
 pub fn clip_global_norm<M: Module>(model: &M, mut grads: GradientsParams, max_norm: f64) -> (GradientsParams, f64) {
@@ -43,7 +41,7 @@ pub fn clip_global_norm<M: Module>(model: &M, mut grads: GradientsParams, max_no
         sum: None,
     };
     model.visit(&mut norm);
-    let total = norm.sum.map_or(0.0, |s| scalar(s).sqrt());
+    let total = norm.sum.map_or(0.0, |s| f64::from(s.into_scalar::<f32>()).sqrt());
     if total > max_norm {
         let mut scale = Scale {
             grads: &mut grads,

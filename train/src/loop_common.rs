@@ -22,9 +22,9 @@ use any4d_data::rng::{GOLDEN_GAMMA, splitmix64};
 use crate::checkpoint::{self, TrainState};
 use crate::config::{OptimConfig, TrainConfig};
 use crate::data_order::DataOrder;
+use crate::devices::Parallel;
 use crate::error::{Result, TrainError};
 use crate::grad_clip::clip_global_norm;
-use crate::multi_device::Parallel;
 use crate::plot;
 use crate::progress::{Progress, ProgressMode};
 use crate::run_folder::{CHECKPOINTS_DIR, METRICS_FILE, PLOT_FILE, RunFolder, VALID_FILE};
@@ -44,6 +44,11 @@ pub trait Objective {
 
     /// Names of the loss terms (the `metrics.csv` columns before `loss`).
     fn terms(&self) -> Vec<String>;
+
+    /// Those of [`Objective::terms`] that are diagnostics, not losses: left out of the loss plot.
+    fn diagnostic_terms(&self) -> Vec<String> {
+        Vec::new()
+    }
 
     /// Number of training examples.
     fn train_len(&self) -> usize;
@@ -155,7 +160,7 @@ pub(crate) fn materialise<M: Module>(model: &M, device: &Device, seed: u64) {
 }
 
 /// How one step's gradients are computed from its micro-batches: the only part of the loop that differs
-/// between one device ([`OneDevice`]) and several ([`crate::multi_device`]).
+/// between one device ([`OneDevice`]) and several (the `multi_device` module, above this one).
 pub(crate) trait StepGradients<O: Objective> {
     /// The autodiff devices; the first holds the model, the optimiser state and validation. Each is reseeded
     /// from (seed, step) before every step.
@@ -290,7 +295,7 @@ impl Drop for FlushScope {
     }
 }
 
-/// The step loop shared by [`train`] and [`crate::multi_device::train_data_parallel`]; `stepper` computes
+/// The step loop shared by [`train`] and `multi_device::train_data_parallel`; `stepper` computes
 /// each step's gradients, `setup.device` is not used.
 pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
     objective: &O,
@@ -412,7 +417,7 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
                 ckpt.display()
             ))?;
             bar.finish();
-            finish_plot(run)?;
+            finish_plot(run, objective)?;
             return Ok((
                 ema.unwrap_or(model),
                 Outcome::Interrupted {
@@ -477,7 +482,7 @@ pub(crate) fn run_steps<O: Objective, S: StepGradients<O>>(
         _ => save(&ckpt_dir, &model, ema.as_ref(), &optim, &state, cfg)?,
     };
     run.log(&format!("finished {} steps; checkpoint {}", state.step, ckpt.display()))?;
-    finish_plot(run)?;
+    finish_plot(run, objective)?;
     Ok((
         ema.unwrap_or(model),
         Outcome::Finished {
@@ -500,8 +505,13 @@ fn save<M: Module + Clone>(
     Ok(path)
 }
 
-fn finish_plot(run: &RunFolder) -> Result<()> {
-    plot::plot_run(&run.path(METRICS_FILE), &run.path(VALID_FILE), &run.path(PLOT_FILE))
+fn finish_plot<O: Objective + ?Sized>(run: &RunFolder, objective: &O) -> Result<()> {
+    plot::plot_run(
+        &run.path(METRICS_FILE),
+        &run.path(VALID_FILE),
+        &run.path(PLOT_FILE),
+        &objective.diagnostic_terms(),
+    )
 }
 
 /// The averaging decay after optimiser step `step` (1-based) for a configured `decay` (docs/method.md §4.8):

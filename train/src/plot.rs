@@ -9,9 +9,6 @@ use any4d_eval::plot::{Series, line_plot_fit_y};
 use crate::error::Result;
 use crate::run_folder::{METRIC_TAIL, read_table};
 
-/// `metrics.csv` term columns that are diagnostics, not losses: not drawn.
-const NOT_LOSSES: [&str; 1] = [crate::rf_loop::KF_FRAC_TERM];
-
 /// Points (step, log₁₀ value); non-positive and non-finite values cannot sit on a log axis and are skipped.
 fn log_points(points: impl Iterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
     points
@@ -20,9 +17,10 @@ fn log_points(points: impl Iterator<Item = (f64, f64)>) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// Reads `metrics.csv` (and `valid.csv` when it has rows) and writes the plot to `out` (atomically).
-pub fn plot_run(metrics: &Path, valid: &Path, out: &Path) -> Result<()> {
-    let series = loss_series(metrics, valid)?;
+/// Reads `metrics.csv` (and `valid.csv` when it has rows) and writes the plot to `out` (atomically); the term
+/// columns named in `diagnostics` are not losses and are not drawn.
+pub fn plot_run(metrics: &Path, valid: &Path, out: &Path, diagnostics: &[String]) -> Result<()> {
+    let series = loss_series(metrics, valid, diagnostics)?;
     if series.is_empty() {
         return Ok(());
     }
@@ -30,7 +28,7 @@ pub fn plot_run(metrics: &Path, valid: &Path, out: &Path) -> Result<()> {
 }
 
 /// The curves of [`plot_run`]: each loss column, then `valid`; empty curves dropped.
-fn loss_series(metrics: &Path, valid: &Path) -> Result<Vec<Series>> {
+fn loss_series(metrics: &Path, valid: &Path, diagnostics: &[String]) -> Result<Vec<Series>> {
     let table = read_table(metrics)?;
     let n_loss_cols = table.header.len().saturating_sub(1 + METRIC_TAIL.len() - 1);
     let mut series = Vec::new();
@@ -38,12 +36,12 @@ fn loss_series(metrics: &Path, valid: &Path) -> Result<Vec<Series>> {
     // With a single loss term the total equals it: draw the term only.
     let single_term = names
         .iter()
-        .filter(|n| *n != "loss" && !NOT_LOSSES.contains(&n.as_str()))
+        .filter(|n| *n != "loss" && !diagnostics.contains(n))
         .count()
         == 1;
     for col in 0..n_loss_cols {
         let name = names[col].as_str();
-        if NOT_LOSSES.contains(&name) || (single_term && name == "loss") {
+        if diagnostics.iter().any(|d| d == name) || (single_term && name == "loss") {
             continue;
         }
         series.push(Series {
@@ -82,7 +80,8 @@ mod tests {
             run.append_metrics(step, &[0.5, 0.25, 0.5, 1e-4, 1.0, 2.0, 8.0])
                 .unwrap();
         }
-        let labels: Vec<String> = loss_series(&run.path(METRICS_FILE), &run.path(VALID_FILE))
+        let diagnostics = [crate::rf_loop::KF_FRAC_TERM.to_owned()];
+        let labels: Vec<String> = loss_series(&run.path(METRICS_FILE), &run.path(VALID_FILE), &diagnostics)
             .unwrap()
             .into_iter()
             .map(|s| s.label)
@@ -93,7 +92,7 @@ mod tests {
             "the total equals the single term and kf_frac is no loss"
         );
         let out = dir.path().join("loss.png");
-        plot_run(&run.path(METRICS_FILE), &run.path(VALID_FILE), &out).unwrap();
+        plot_run(&run.path(METRICS_FILE), &run.path(VALID_FILE), &out, &diagnostics).unwrap();
         assert!(out.is_file());
     }
 }

@@ -21,9 +21,10 @@ use crate::backend;
 use crate::config::resolve;
 use crate::config::{DeviceConfig, OptimConfig, TrainConfig, to_toml};
 use crate::data_order::WholeClips;
+use crate::devices::{run_strategy, strategy_note, worker_devices};
 use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Losses, Objective, Outcome, RunOptions};
-use crate::multi_device::{run_strategy, strategy_note, train_data_parallel, worker_devices};
+use crate::multi_device::train_data_parallel;
 use crate::run_folder::{RunFolder, open_for_resume};
 
 /// File in the VAE run folder with the docs/method.md §3.4 statistics of its final checkpoint.
@@ -478,7 +479,7 @@ fn check_activations(cfg: &VaeRunConfig, store: &Store) -> Result<()> {
         "a micro-batch of {micro} clips × {frames} frames × up to {n} vertices (P = {p}) at model.body.width {}",
         cfg.model.body().width
     );
-    let limit = host.unwrap_or(crate::rf_loop::MAX_ACTIVATION_BYTES);
+    let limit = host.unwrap_or(backend::MAX_ACTIVATION_BYTES);
     any4d_model::summary::check_activation_estimate(&what, estimate, limit).map_err(TrainError::Setup)
 }
 

@@ -12,11 +12,9 @@ use std::sync::OnceLock;
 use any4d_data::store::{Split, Store, write_synth_with};
 use any4d_data::synth::{ShapeFamily, SynthConfig};
 use any4d_eval::methods::{MethodKind, hide_non_keyframes};
+use any4d_train::bdlstm::{resume_bdlstm, train_bdlstm};
 use any4d_train::bdlstm_acap::{ACAP_FILE, AcapObjective, AcapRecord, load_acap_bdlstm_run};
-use any4d_train::bdlstm_loop::resume_bdlstm;
-use any4d_train::bdlstm_loop::{
-    BDLSTM_TERMS, BdlstmRunConfig, BdlstmRunOptions, BdlstmVariant, load_bdlstm_run, train_bdlstm,
-};
+use any4d_train::bdlstm_loop::{BDLSTM_TERMS, BdlstmRunConfig, BdlstmRunOptions, BdlstmVariant, load_bdlstm_run};
 use any4d_train::config::Duration;
 use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods};
 use any4d_train::loop_common::{Objective, Outcome};

@@ -8,13 +8,13 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use any4d_eval::methods::{MethodKind, hide_non_keyframes};
-use any4d_train::bdlstm_loop::{
-    BDLSTM_TERMS, BdlstmObjective, BdlstmRunConfig, BdlstmRunOptions, load_bdlstm_run, train_bdlstm,
-};
-use any4d_train::config::{Duration, Override, RunConfig};
+use any4d_train::bdlstm::train_bdlstm;
+use any4d_train::bdlstm_loop::{BDLSTM_TERMS, BdlstmObjective, BdlstmRunConfig, BdlstmRunOptions, load_bdlstm_run};
+use any4d_train::config::{Duration, Override};
 use any4d_train::evaluate::{LearnedRuns, SamplingSetup, build_methods};
 use any4d_train::loop_common::{Objective, Outcome, train};
 use any4d_train::pack::{Precision as PackPrecision, pack_run};
+use any4d_train::run_config::RunConfig;
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, VALID_FILE, read_table};
 use any4d_train::runs::load_vae_run;
 use common::{VaeFixture, bdlstm_preset, cpu, params, quiet_setup, root, run_options, serial, vae_fixture};

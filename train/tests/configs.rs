@@ -4,9 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
+use any4d_train::config::Override;
 use any4d_train::config::resolve::{Files, resolve_text};
-use any4d_train::config::{Override, RunConfig};
 use any4d_train::rf_loop::RfRunConfig;
+use any4d_train::run_config::RunConfig;
 use any4d_train::vae_loop::VaeRunConfig;
 
 fn root() -> PathBuf {

@@ -8,8 +8,9 @@ mod common;
 
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::{OptimConfig, TrainConfig};
+use any4d_train::devices::{DeviceSpec, Parallel, Strategy};
 use any4d_train::loop_common::{Outcome, RunOptions, StopFlag, train};
-use any4d_train::multi_device::{DeviceSpec, Parallel, Strategy, train_data_parallel};
+use any4d_train::multi_device::train_data_parallel;
 use any4d_train::progress::ProgressMode;
 use any4d_train::rf_loop::{encode_latents, encode_latents_on_workers};
 use any4d_train::run_folder::{METRICS_FILE, RunFolder, read_table};

@@ -18,8 +18,8 @@ use any4d_model::mmdit::KeyframeConditioning;
 use any4d_model::text::scratch::ScratchTokenizer;
 use any4d_train::backend::{Backend, Precision, device};
 use any4d_train::config::Duration;
+use any4d_train::devices::{Parallel, Strategy};
 use any4d_train::loop_common::{Objective, Outcome, train};
-use any4d_train::multi_device::{Parallel, Strategy};
 use any4d_train::pack::{Precision as PackPrecision, pack_run};
 use any4d_train::rf_loop::{
     INIT_FILE, LatentCache, LatentDraw, RF_TERMS, RfObjective, RfRunConfig, RfRunOptions, SAMPLE_TERMS, Subset,

@@ -60,6 +60,7 @@ mod format;
 mod import;
 mod index;
 mod jobs;
+pub mod merge;
 mod options;
 mod provenance;
 mod record;
@@ -82,8 +83,9 @@ pub use import::{
     import_with_progress, write_synth, write_synth_shard, write_synth_windows, write_synth_with,
 };
 pub use index::{CHECKSUM_COLUMN, IndexRow, Status, write_index};
+pub use merge::{DEFAULT_MAX_SHARD_BYTES, merge, merge_bounded, parse_bytes};
 pub use record::decode_clip_bytes;
-pub use shards::{DEFAULT_MAX_SHARD_BYTES, MANIFEST_FILE, Manifest, ShardSpec, merge, merge_bounded, parse_bytes};
+pub use shards::{MANIFEST_FILE, Manifest, ShardSpec};
 pub use verify::{Problem, VerifyReport, check_index, record_len, verify_store};
 
 /// File name of the clip records inside a store folder.

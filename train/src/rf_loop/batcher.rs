@@ -437,9 +437,6 @@ pub(super) fn open_store(data: &Path) -> Result<Store> {
     Ok(Store::open(data)?)
 }
 
-/// Activation bound where the device's memory is not known (GPU backends): 1 TiB, beyond any single device.
-pub const MAX_ACTIVATION_BYTES: u128 = 1 << 40;
-
 /// docs/method.md §4.1: the RF slots must match the VAE latents and the store windows; on a sequence-wise VAE
 /// (the AnimateAnyMesh reference, §5.5) the RF has one trajectory slot and no keyframes.
 pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae) -> Result<()> {
@@ -469,8 +466,12 @@ pub(super) fn check_compatible(cfg: &RfRunConfig, store: &Store, vae: &LoadedVae
         cfg.model.width,
         cfg.model.blocks
     );
-    any4d_model::summary::check_activation_estimate(&what, estimate, host.unwrap_or(MAX_ACTIVATION_BYTES))
-        .map_err(TrainError::Setup)
+    any4d_model::summary::check_activation_estimate(
+        &what,
+        estimate,
+        host.unwrap_or(crate::backend::MAX_ACTIVATION_BYTES),
+    )
+    .map_err(TrainError::Setup)
 }
 
 /// The RF's latent slots against the VAE kind and the store: T frames on a frame-wise VAE; one trajectory slot and

@@ -20,7 +20,7 @@ use super::batcher::{RfBatcher, Subset, TextDropout};
 use super::config::RfRunConfig;
 use super::network::RfModel;
 use super::validation::{ValidSampleScores, validation_samples};
-use super::{RF_TERMS, SAMPLE_TERMS};
+use super::{KF_FRAC_TERM, RF_TERMS, SAMPLE_TERMS};
 
 /// Training objective of the keyframe RF on a frozen VAE: terms `rf` (R5) and `kf_frac`.
 pub struct RfObjective {
@@ -115,6 +115,10 @@ impl Objective for RfObjective {
 
     fn terms(&self) -> Vec<String> {
         RF_TERMS.iter().map(|s| s.to_string()).collect()
+    }
+
+    fn diagnostic_terms(&self) -> Vec<String> {
+        vec![KF_FRAC_TERM.to_owned()]
     }
 
     fn train_len(&self) -> usize {

@@ -12,9 +12,10 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::backend;
 use crate::checkpoint::MODEL_FILE;
+use crate::devices::{run_strategy, strategy_note, worker_devices};
 use crate::error::{Result, TrainError};
 use crate::loop_common::{self, LoopSetup, Objective, Outcome, RunOptions};
-use crate::multi_device::{run_strategy, strategy_note, train_data_parallel, worker_devices};
+use crate::multi_device::train_data_parallel;
 use crate::run_folder::{RunFolder, open_for_resume};
 use crate::runs::{self, LoadedVae, VaeRunRecord};
 
