@@ -2,9 +2,9 @@
 //! one fixed topology, and every generated frame is turned back into vertex positions by the sparse least-squares
 //! reconstruction. Only the keyframes are read.
 
+use any4d_data::Clip;
 use any4d_data::acap::{ACAP_CHANNELS, AcapFrame, AcapScaling, AcapTopology, Reconstruction, check_topology};
 use any4d_data::rng::{GOLDEN_GAMMA, splitmix64};
-use any4d_data::{Clip, DataError, Result};
 use any4d_model::bdlstm::{
     BdLstm, MergeConfig, MeshConvCodec, MeshGraph, SegmentError, SegmentTry, bbox_diagonal, frame_distance,
     merge_segment,
@@ -13,6 +13,7 @@ use any4d_model::mesh_vae::Posterior;
 use burn::prelude::*;
 use burn::tensor::TensorData;
 
+use crate::error::{EvalError, Result};
 use crate::learned::{SegmentFailure, end_keyframes};
 use crate::methods::WindowSampler;
 
@@ -52,7 +53,7 @@ impl AcapBdlstmSampler {
     pub fn new(model: BdLstm<MeshConvCodec>, space: AcapSpace, merge: MergeConfig, device: &Device) -> Result<Self> {
         let n = space.topology.vertices();
         let graph = MeshGraph::new(&space.topology.edges(), n, device)
-            .map_err(|e| DataError::new(&space.reference, "faces", format!("mesh graph: {e}")))?;
+            .map_err(|e| EvalError::invalid(&space.reference, "faces", format!("mesh graph: {e}")))?;
         Ok(Self {
             model,
             graph,
@@ -68,7 +69,7 @@ impl AcapBdlstmSampler {
         let [_, len, n, c] = chain.dims();
         let flat = chain
             .try_to_vec_as::<f32>()
-            .map_err(|e| DataError::new(&self.space.reference, "acap", format!("cannot read the tensor: {e:?}")))?;
+            .map_err(|e| EvalError::invalid(&self.space.reference, "acap", format!("cannot read the tensor: {e:?}")))?;
         (0..len)
             .map(|i| {
                 let scaled: AcapFrame = flat[i * n * c..(i + 1) * n * c]
@@ -132,7 +133,7 @@ impl AcapBdlstmSampler {
             Ok(SegmentTry::new(vf, vb, distances)?)
         })
         .map_err(|e| match e {
-            SegmentFailure::Rule(e) => DataError::new(&clip.id, "bdlstm_acap", e.to_string()),
+            SegmentFailure::Rule(e) => EvalError::invalid(&clip.id, "bdlstm_acap", e.to_string()),
             SegmentFailure::Data(e) => e,
         })?;
         Ok(merged.frames)

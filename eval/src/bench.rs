@@ -5,14 +5,13 @@
 use std::path::Path;
 use std::time::Instant;
 
-use any4d_data::DataError;
 use any4d_data::rng::{DataRng, Rng, SeedableRng};
 use any4d_model::bench::median;
 use rayon::prelude::*;
 
 use crate::metrics::{ClipMetrics, Motion, Rows, Scoring, average, evaluate_clip_with};
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// Sizes of the benchmark clips.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -29,7 +28,7 @@ impl MetricsBench {
     /// Checks the sizes; the error names the options.
     pub fn check(&self) -> Result<()> {
         if self.frames < 4 || self.vertices == 0 || self.clips == 0 {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 "bench metrics",
                 "sizes",
                 "--frames must be ≥ 4 (jerk), --vertices and --clips ≥ 1",
@@ -69,7 +68,7 @@ impl MetricsBench {
     pub fn score(&self, clips: &[(Rows, Rows)]) -> Result<ClipMetrics> {
         let keys = self.keyframes();
         let scoring = Scoring::default();
-        let err = |e: crate::metrics::EvalError| DataError::new("bench metrics", "clips", e.to_string());
+        let err = |e: crate::metrics::EvalError| EvalError::invalid("bench metrics", "clips", e.to_string());
         let per_clip = clips
             .par_iter()
             .map(|(p, g)| {
@@ -109,7 +108,7 @@ pub fn write_f32_clips(path: &Path, clips: &[(Rows, Rows)]) -> Result<()> {
         .flatten()
         .flat_map(|x| x.to_le_bytes())
         .collect();
-    std::fs::write(path, bytes).map_err(|e| DataError::io(path, e))
+    std::fs::write(path, bytes).map_err(|e| EvalError::io(path, e))
 }
 
 #[cfg(test)]
@@ -142,7 +141,7 @@ mod tests {
         .expect("runs");
         assert_eq!((calls, last), (3, 3));
         assert!(secs >= 0.0);
-        let failing = timed(2, || -> Result<()> { Err(DataError::new("x", "y", "z")) });
+        let failing = timed(2, || -> Result<()> { Err(EvalError::invalid("x", "y", "z")) });
         assert!(failing.is_err());
     }
 }

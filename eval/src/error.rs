@@ -1,8 +1,26 @@
-//! Why an evaluation could not be computed: [`EvalError`], the error of every metric and baseline.
+//! Why an evaluation could not be computed: [`EvalError`], the error of every metric, baseline, method, table and
+//! view of the crate. A clip or store that cannot be read passes through as the data crate's error.
 
-/// Why a metric could not be computed. Every variant names what differs or what is missing.
+use std::path::Path;
+
+use any4d_data::DataError;
+
+/// Why an evaluation could not be computed. Every variant names what differs, what is missing or what is wrong.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EvalError {
+    /// A clip, store or file the evaluation reads (data crate).
+    #[error(transparent)]
+    Data(#[from] DataError),
+    /// An evaluation input, output, run or setting that cannot be used: `what: field: reason`, the data crate's form.
+    #[error("{what}: {field}: {reason}")]
+    Invalid {
+        /// The file, folder, method or clip concerned.
+        what: String,
+        /// The field, key, flag or location.
+        field: String,
+        /// Why.
+        reason: String,
+    },
     /// Prediction and ground truth disagree on a size.
     #[error("{what} differ: prediction has {pred}, ground truth has {gt}")]
     Mismatch { what: &'static str, pred: usize, gt: usize },
@@ -54,6 +72,59 @@ pub enum EvalError {
     /// A parameter outside its domain (e.g. a non-positive frame rate).
     #[error("invalid {name}: {reason}")]
     Parameter { name: &'static str, reason: String },
+}
+
+impl EvalError {
+    /// [`EvalError::Invalid`] of `what` (a path, or a name), `field` and `reason`.
+    pub fn invalid(what: impl AsRef<Path>, field: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::Invalid {
+            what: what.as_ref().display().to_string(),
+            field: field.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// The same error reported against `path` (a manifest checked before its file was known).
+    pub fn at(self, path: impl AsRef<Path>) -> Self {
+        match self {
+            Self::Invalid { field, reason, .. } => Self::Invalid {
+                what: path.as_ref().display().to_string(),
+                field,
+                reason,
+            },
+            Self::Data(e) => Self::Data(e.at(path)),
+            other => other,
+        }
+    }
+
+    /// What an [`EvalError::Invalid`] or a data error names (file, folder, method or clip); empty for the others.
+    pub fn what(&self) -> &str {
+        match self {
+            Self::Invalid { what, .. } | Self::Data(DataError { path: what, .. }) => what,
+            _ => "",
+        }
+    }
+
+    /// The field of an [`EvalError::Invalid`] or of a data error; empty for the others.
+    pub fn field(&self) -> &str {
+        match self {
+            Self::Invalid { field, .. } | Self::Data(DataError { field, .. }) => field,
+            _ => "",
+        }
+    }
+
+    /// The reason of an [`EvalError::Invalid`] or of a data error; empty for the others.
+    pub fn reason(&self) -> &str {
+        match self {
+            Self::Invalid { reason, .. } | Self::Data(DataError { reason, .. }) => reason,
+            _ => "",
+        }
+    }
+
+    /// An I/O failure on `path`.
+    pub fn io(path: impl AsRef<Path>, err: std::io::Error) -> Self {
+        Self::invalid(path, "file", err.to_string())
+    }
 }
 
 pub type Result<T, E = EvalError> = std::result::Result<T, E>;

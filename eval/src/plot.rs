@@ -4,11 +4,10 @@
 use std::io::Cursor;
 use std::path::Path;
 
-use any4d_data::DataError;
 use any4d_data::io::write_atomic;
 use image::{ImageFormat, Rgb, RgbImage};
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// Colours of successive series (colour-blind-safe Okabe–Ito order).
 pub const PALETTE: [[u8; 3]; 7] = [
@@ -175,13 +174,13 @@ impl Canvas {
         let mut buf = Vec::new();
         self.img
             .write_to(&mut Cursor::new(&mut buf), ImageFormat::Png)
-            .map_err(|e| DataError::new(path, "png", e.to_string()))?;
+            .map_err(|e| EvalError::invalid(path, "png", e.to_string()))?;
         Ok(buf)
     }
 
     /// Write as PNG (temp file, then rename).
     pub fn save_png(&self, path: &Path) -> Result<()> {
-        write_atomic(path, &self.png_bytes(path)?)
+        Ok(write_atomic(path, &self.png_bytes(path)?)?)
     }
 }
 
@@ -254,7 +253,7 @@ fn plot_canvas(
         for (i, &(x, y)) in s.points.iter().enumerate() {
             let e = s.errors.as_ref().and_then(|e| e.get(i)).copied().unwrap_or(0.0);
             if !(x.is_finite() && y.is_finite() && e.is_finite()) {
-                return Err(DataError::new(
+                return Err(EvalError::invalid(
                     path,
                     &s.label,
                     format!("point {i} = ({x}, {y} ± {e}) is not finite"),
@@ -265,7 +264,7 @@ fn plot_canvas(
         }
     }
     if xs.is_empty() {
-        return Err(DataError::new(path, "series", "nothing to plot".to_string()));
+        return Err(EvalError::invalid(path, "series", "nothing to plot".to_string()));
     }
     let (w, h) = (720i64, 480i64);
     let (left, right, top, bottom) = (80i64, 200i64, 40i64, 60i64);

@@ -5,11 +5,11 @@
 
 use std::path::Path;
 
+use any4d_data::Clip;
 use any4d_data::io::write_atomic;
 use any4d_data::keyframes::Placement;
 use any4d_data::rng::{GOLDEN_GAMMA, Rng, rng, splitmix64};
 use any4d_data::store::{Split, Status, Store, StoredClip, read_index};
-use any4d_data::{Clip, DataError};
 use serde::{Deserialize, Serialize};
 
 /// Manifest format version written by [`Manifest::save`]; [`Manifest::load`] rejects any other.
@@ -19,7 +19,7 @@ pub const MANIFEST_SEED: u64 = 42;
 /// Stream label for the clip draw, so it never shares draws with the keyframe draws (streams 1 + position).
 const CLIP_STREAM: u64 = 0;
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// A clip of the dataset store: its index there and its id.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -119,7 +119,7 @@ impl Manifest {
     /// Draw `opts.n_clips` items from `candidates` (a seeded shuffle, draw order kept) and their keyframe sets.
     /// The error names `source` (the dataset) when there are too few candidates or the options are invalid.
     pub fn build(candidates: &[Candidate], opts: &ManifestOptions, source: &str) -> Result<Self> {
-        let bad = |field: &str, reason: String| DataError::new(source, field, reason);
+        let bad = |field: &str, reason: String| EvalError::invalid(source, field, reason);
         if candidates.len() < opts.n_clips {
             return Err(bad(
                 "clips",
@@ -166,15 +166,16 @@ impl Manifest {
 
     /// Write the manifest as pretty JSON (temp file, then rename).
     pub fn save(&self, path: &Path) -> Result<()> {
-        let text = serde_json::to_string_pretty(self).map_err(|e| DataError::new(path, "manifest", e.to_string()))?;
-        write_atomic(path, text.as_bytes())
+        let text =
+            serde_json::to_string_pretty(self).map_err(|e| EvalError::invalid(path, "manifest", e.to_string()))?;
+        Ok(write_atomic(path, text.as_bytes())?)
     }
 
     /// Read and validate a manifest; errors name the file, the field (e.g. `clips[3].keyframes[1]`) and the reason.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
+        let text = std::fs::read_to_string(path).map_err(|e| EvalError::io(path, e))?;
         let m: Manifest = serde_json::from_str(&text)
-            .map_err(|e| DataError::new(path, format!("line {}", e.line()), e.to_string()))?;
+            .map_err(|e| EvalError::invalid(path, format!("line {}", e.line()), e.to_string()))?;
         m.validate().map_err(|e| e.at(path))?;
         Ok(m)
     }
@@ -182,7 +183,7 @@ impl Manifest {
     /// Checks version, placement, seeds and every keyframe set (sorted, unique, in range, first and last
     /// frame present, nested with K_x + 2 entries for `Random`).
     pub fn validate(&self) -> Result<()> {
-        let bad = |field: String, reason: String| Err(DataError::new("manifest", field, reason));
+        let bad = |field: String, reason: String| Err(EvalError::invalid("manifest", field, reason));
         if self.version != MANIFEST_VERSION {
             return bad(
                 "version".into(),
@@ -347,7 +348,7 @@ impl StoreSource {
             .filter(|r| r.status == Status::Ok)
             .collect();
         if ok.len() != store.len() {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 dir,
                 "index.parquet",
                 format!("{} ok rows but clips.bin holds {} clips", ok.len(), store.len()),
@@ -415,7 +416,7 @@ impl StoreSource {
 
 fn check_id(clip: &Clip, want: &ClipRef, dir: &Path) -> Result<()> {
     if clip.id != want.id {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             dir,
             format!("clip {}", want.index),
             format!("is {:?}, the manifest names {:?}", clip.id, want.id),
@@ -426,7 +427,7 @@ fn check_id(clip: &Clip, want: &ClipRef, dir: &Path) -> Result<()> {
 
 fn first_frames(clip: &Clip, frames: usize) -> Result<Clip> {
     if clip.frames < frames {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             &clip.id,
             "frames",
             format!("{} frames, the protocol needs {frames}", clip.frames),
@@ -441,6 +442,7 @@ fn first_frames(clip: &Clip, frames: usize) -> Result<Clip> {
         &clip.caption,
         &clip.source,
     )
+    .map_err(EvalError::from)
 }
 
 /// Two consecutive windows sharing a frame → one sequence without the duplicate (docs/method.md §2.7), in absolute
@@ -451,7 +453,7 @@ fn join_shared_frame(a: &StoredClip, b: &StoredClip, dir: &Path) -> Result<Clip>
     b.normalization.invert(&mut b_abs);
     let pair = format!("{} + {}", a_abs.id, b_abs.id);
     if a_abs.n_vertices != b_abs.n_vertices || a_abs.faces != b_abs.faces {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             dir,
             pair,
             "the pair does not share one mesh (vertex count or faces differ)",
@@ -465,7 +467,7 @@ fn join_shared_frame(a: &StoredClip, b: &StoredClip, dir: &Path) -> Result<Clip>
         .map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0f32, f32::max))
         .fold(0.0f32, f32::max);
     if worst > 1e-4 * a.normalization.scale.max(f32::MIN_POSITIVE) {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             dir,
             pair,
             format!("last frame of the first and frame 0 of the second differ by {worst}: not a shared frame"),
@@ -482,4 +484,5 @@ fn join_shared_frame(a: &StoredClip, b: &StoredClip, dir: &Path) -> Result<Clip>
         &a_abs.caption,
         &a_abs.source,
     )
+    .map_err(EvalError::from)
 }

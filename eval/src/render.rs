@@ -4,13 +4,13 @@
 
 use std::path::Path;
 
+use any4d_data::Clip;
 use any4d_data::render::{Camera, View, rasterize_frame};
-use any4d_data::{Clip, DataError};
 use image::imageops::replace;
 
 use crate::plot::{BLACK, Canvas, WHITE, text_width};
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// Keyframe frame colour (orange).
 const KEY_COLOUR: [u8; 3] = [230, 120, 0];
@@ -40,7 +40,7 @@ impl Default for StripOptions {
 /// framed in orange with a `K`. Errors when the two sequences do not share frame and vertex counts.
 pub fn strip_canvas(gt: &Clip, pred: &Clip, keyframes: &[usize], opts: &StripOptions) -> Result<Canvas> {
     if gt.frames != pred.frames || gt.n_vertices != pred.n_vertices {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             &gt.id,
             "prediction",
             format!(
@@ -50,7 +50,7 @@ pub fn strip_canvas(gt: &Clip, pred: &Clip, keyframes: &[usize], opts: &StripOpt
         ));
     }
     if let Some(k) = keyframes.iter().find(|&&k| k >= gt.frames) {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             &gt.id,
             "keyframes",
             format!("frame {k} is outside 0..{}", gt.frames),
@@ -139,7 +139,7 @@ pub fn export_sequence(
     stem: &str,
     formats: &[ExportFormat],
 ) -> Result<Vec<std::path::PathBuf>> {
-    std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))?;
+    std::fs::create_dir_all(dir).map_err(|e| EvalError::io(dir, e))?;
     formats
         .iter()
         .map(|f| {

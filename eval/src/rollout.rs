@@ -3,9 +3,7 @@
 //!
 //! Generic over a window generator, so any completion method (or a test double) drives it.
 
-use any4d_data::DataError;
-
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// Which mesh is the reference (local frame 0) of windows after the first (docs/method.md §7 step 4, §8 A8).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -58,7 +56,7 @@ impl RolloutSpec {
     /// ≥ `window` is covered. 31 frames → [0, 15]; 46 → [0, 15, 30]; 40 → [0, 15, 24].
     pub fn starts(&self, frames: usize) -> Result<Vec<usize>> {
         if self.window < 2 || self.stride == 0 || self.stride >= self.window {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 "rollout",
                 "spec",
                 format!(
@@ -68,7 +66,7 @@ impl RolloutSpec {
             ));
         }
         if frames < self.window {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 "rollout",
                 "frames",
                 format!("{frames} frames, a window needs {}", self.window),
@@ -183,7 +181,7 @@ where
     F: FnMut(&WindowInput<'_>) -> Result<Vec<[f32; 3]>>,
 {
     if n_vertices == 0 || !gt.len().is_multiple_of(n_vertices) {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             "rollout",
             "vertices",
             format!("{} rows are not whole frames of {n_vertices} vertices", gt.len()),
@@ -192,7 +190,7 @@ where
     let total = gt.len() / n_vertices;
     let starts = spec.starts(total)?;
     if captions.len() != 1 && captions.len() != starts.len() {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             "rollout",
             "captions",
             format!(
@@ -203,7 +201,7 @@ where
         ));
     }
     if let Some(&k) = keyframes.iter().find(|&&k| k >= total) {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             "rollout",
             "keyframes",
             format!("frame {k} is outside 0..{total}"),
@@ -251,7 +249,7 @@ where
         };
         let pred = generate(&input)?;
         if pred.len() != spec.window * n_vertices {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 "rollout",
                 format!("window {w}"),
                 format!(
@@ -262,7 +260,7 @@ where
             ));
         }
         if let Some(i) = pred.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 "rollout",
                 format!("window {w}"),
                 format!(

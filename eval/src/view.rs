@@ -10,11 +10,11 @@
 
 use std::path::Path;
 
-use any4d_data::{Clip, DataError};
+use any4d_data::Clip;
 use base64::Engine;
 use base64::engine::general_purpose::STANDARD;
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// The viewer script, inlined into every page.
 const VIEWER_JS: &str = include_str!("view.js");
@@ -119,14 +119,14 @@ fn escape_script(json: &str) -> String {
 pub fn write_page(page: &Page, path: &Path) -> Result<()> {
     let html = page_html(page)?;
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| DataError::io(dir, e))?;
+        std::fs::create_dir_all(dir).map_err(|e| EvalError::io(dir, e))?;
     }
-    std::fs::write(path, html).map_err(|e| DataError::io(path, e))
+    std::fs::write(path, html).map_err(|e| EvalError::io(path, e))
 }
 
 /// The page as HTML text (see [`write_page`]).
 pub fn page_html(page: &Page) -> Result<String> {
-    let bad = |field: &str, reason: String| Err(DataError::new("view page", field, reason));
+    let bad = |field: &str, reason: String| Err(EvalError::invalid("view page", field, reason));
     let Some(first) = page.panels.first() else {
         return bad("panels", "nothing to show: no clip was given".into());
     };
@@ -202,7 +202,7 @@ pub fn page_html(page: &Page) -> Result<String> {
         "panels": panels,
         "scene": scene,
     });
-    let json = serde_json::to_string(&data).map_err(|e| DataError::new("view page", "json", e.to_string()))?;
+    let json = serde_json::to_string(&data).map_err(|e| EvalError::invalid("view page", "json", e.to_string()))?;
     Ok(format!(
         "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n<title>{title}</title>\n<style>{STYLE}</style>\n\
          </head>\n<body data-status=\"loading\">\n<header><h1 id=\"title\"></h1><p id=\"caption\"></p></header>\n\
@@ -310,12 +310,12 @@ mod tests {
     #[test]
     fn pages_that_cannot_play_are_refused() {
         let e = page_html(&page(vec![])).unwrap_err();
-        assert!(e.reason.contains("no clip"), "{e}");
+        assert!(e.reason().contains("no clip"), "{e}");
         let e = page_html(&page(vec![panel("gt", clip(3, 0.0)), panel("long", clip(4, 0.0))])).unwrap_err();
-        assert!(e.reason.contains("same length") && e.reason.contains("long"), "{e}");
+        assert!(e.reason().contains("same length") && e.reason().contains("long"), "{e}");
         let mut p = page(vec![panel("gt", clip(3, 0.0))]);
         p.keyframes = vec![0, 3];
-        assert!(page_html(&p).unwrap_err().reason.contains("frame 3"));
+        assert!(page_html(&p).unwrap_err().reason().contains("frame 3"));
         let mut bad = clip(3, 0.0);
         bad.vertices[5][1] = f32::NAN;
         assert!(page_html(&page(vec![panel("nan", bad)])).is_err());

@@ -2,7 +2,7 @@
 //! removed exactly, a completion that already matches its keyframes is left alone, only keyframe frames are read,
 //! and the `_corrected` labels wrap latent methods only.
 
-use any4d_data::{Clip, DataError};
+use any4d_data::Clip;
 use any4d_eval::baselines::correct_by_keyframes;
 use any4d_eval::methods::{
     CorrectedBase, KeyframeCorrected, Method, MethodKind, complete_and_score, hide_non_keyframes,
@@ -49,7 +49,13 @@ impl Method for Biased {
         self.kind
     }
 
-    fn complete(&self, clip: &Clip, _keys: &[usize], _caption: &str, _seed: u64) -> Result<Vec<[f32; 3]>, DataError> {
+    fn complete(
+        &self,
+        clip: &Clip,
+        _keys: &[usize],
+        _caption: &str,
+        _seed: u64,
+    ) -> Result<Vec<[f32; 3]>, any4d_eval::metrics::EvalError> {
         let n = clip.n_vertices;
         Ok(self
             .truth

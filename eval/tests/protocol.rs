@@ -2,7 +2,6 @@
 //! keyframes.
 
 use any4d_data::Clip;
-use any4d_data::DataError;
 use any4d_data::keyframes::Placement;
 use any4d_eval::baselines::VertexBaseline;
 use any4d_eval::methods::{
@@ -78,8 +77,8 @@ fn manifest_round_trips_and_rejects_broken_files_by_field() {
     broken.clips[3].keyframes[2] = vec![0, 5, 9, 15]; // wrong size for K_x = 2
     std::fs::write(&path, serde_json::to_string(&broken).unwrap()).unwrap();
     let e = Manifest::load(&path).unwrap_err();
-    assert_eq!(e.field, "clips[3].keyframes[2]", "{e}");
-    assert!(e.path.ends_with("manifest.json"), "{e}");
+    assert_eq!(e.field(), "clips[3].keyframes[2]", "{e}");
+    assert!(e.what().ends_with("manifest.json"), "{e}");
 
     let mut unnested = m.clone();
     let k1 = unnested.clips[0].keyframes[1].clone();
@@ -95,18 +94,18 @@ fn manifest_round_trips_and_rejects_broken_files_by_field() {
         s
     };
     let e = unnested.validate().unwrap_err();
-    assert!(e.reason.contains("does not contain"), "{e}");
+    assert!(e.reason().contains("does not contain"), "{e}");
 
     std::fs::write(&path, "{\"version\": 1,").unwrap();
     let e = Manifest::load(&path).unwrap_err();
-    assert!(e.field.starts_with("line"), "{e}");
+    assert!(e.field().starts_with("line"), "{e}");
 }
 
 #[test]
 fn too_few_candidates_is_an_error() {
     let e = Manifest::build(&candidates(5), &opts(100), "data/dir").unwrap_err();
-    assert_eq!((e.path.as_str(), e.field.as_str()), ("data/dir", "clips"));
-    assert!(e.reason.contains("5 candidate"), "{e}");
+    assert_eq!((e.what(), e.field()), ("data/dir", "clips"));
+    assert!(e.reason().contains("5 candidate"), "{e}");
 }
 
 #[test]
@@ -146,7 +145,7 @@ fn other_placements_keep_the_ends() {
         ..opts(3)
     };
     assert_eq!(
-        Manifest::build(&candidates(3), &bad, "s").unwrap_err().field,
+        Manifest::build(&candidates(3), &bad, "s").unwrap_err().field(),
         "placement"
     );
 }
@@ -221,7 +220,13 @@ impl Method for Peek {
     fn kind(&self) -> MethodKind {
         MethodKind::KeyframeRf
     }
-    fn complete(&self, clip: &Clip, _k: &[usize], _c: &str, _s: u64) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
+    fn complete(
+        &self,
+        clip: &Clip,
+        _k: &[usize],
+        _c: &str,
+        _s: u64,
+    ) -> Result<Vec<[f32; 3]>, any4d_eval::metrics::EvalError> {
         Ok(clip.vertices.clone())
     }
 }
@@ -281,7 +286,7 @@ fn method_labels_round_trip() {
     }
     assert!(MethodKind::parse("bd_lstm").is_err());
     assert_eq!(
-        MethodKind::parse("impute_until_1.5").unwrap_err().field,
+        MethodKind::parse("impute_until_1.5").unwrap_err().field(),
         "impute_until_1.5"
     );
 }
@@ -314,7 +319,13 @@ fn keyframe_noise_spares_the_ends_and_has_the_set_scale() {
 struct Drifting;
 use any4d_eval::methods::WindowSampler;
 impl WindowSampler for Drifting {
-    fn sample(&self, clip: &Clip, _k: &[usize], _c: &str, seed: u64) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
+    fn sample(
+        &self,
+        clip: &Clip,
+        _k: &[usize],
+        _c: &str,
+        seed: u64,
+    ) -> Result<Vec<[f32; 3]>, any4d_eval::metrics::EvalError> {
         Ok(clip
             .vertices
             .iter()
@@ -387,7 +398,7 @@ impl Method for SeedEcho {
         _keyframes: &[usize],
         _caption: &str,
         seed: u64,
-    ) -> Result<Vec<[f32; 3]>, DataError> {
+    ) -> Result<Vec<[f32; 3]>, any4d_eval::metrics::EvalError> {
         self.0.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
         Ok(vec![[(seed & 0xff) as f32; 3]; clip.frames * clip.n_vertices])
     }

@@ -3,8 +3,8 @@
 
 use std::cell::RefCell;
 
-use any4d_data::DataError;
 use any4d_eval::baselines::VertexBaseline;
+use any4d_eval::metrics::EvalError;
 use any4d_eval::metrics::Motion;
 use any4d_eval::rollout::{OverlapSource, RolloutSpec, WindowFrame, WindowInput, rollout, seam_jerk};
 
@@ -27,12 +27,12 @@ fn sequence(frames: usize) -> Vec<[f32; 3]> {
         .collect()
 }
 
-fn lerp(w: &WindowInput<'_>) -> Result<Vec<[f32; 3]>, DataError> {
+fn lerp(w: &WindowInput<'_>) -> Result<Vec<[f32; 3]>, EvalError> {
     let frames = w.vertices.len() / N;
     let m = Motion::new(&w.vertices, frames, N).unwrap();
     VertexBaseline::Linear
         .complete(m, &w.keyframes)
-        .map_err(|e| DataError::new("lerp", "window", e.to_string()))
+        .map_err(|e| any4d_eval::metrics::EvalError::invalid("lerp", "window", e.to_string()))
 }
 
 #[test]
@@ -42,7 +42,7 @@ fn window_layout_covers_any_length() {
     assert_eq!(s.starts(31).unwrap(), vec![0, 15]);
     assert_eq!(s.starts(46).unwrap(), vec![0, 15, 30]);
     assert_eq!(s.starts(40).unwrap(), vec![0, 15, 24]);
-    assert_eq!(s.starts(15).unwrap_err().field, "frames");
+    assert_eq!(s.starts(15).unwrap_err().field(), "frames");
     assert!(RolloutSpec { stride: 16, ..s }.starts(31).is_err());
 }
 
@@ -51,7 +51,7 @@ fn thirty_one_frames_stitch_without_duplicating_frame_15() {
     let gt = sequence(31);
     // Each output frame carries the tag (window, local frame) in x; y, z are copied so (H1) stays well defined.
     let calls = RefCell::new(Vec::new());
-    let tagger = |w: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, DataError> {
+    let tagger = |w: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, EvalError> {
         calls
             .borrow_mut()
             .push((w.index, w.start, w.keyframes.clone(), w.caption.to_string()));
@@ -135,7 +135,7 @@ fn h1_falls_back_to_unit_scale() {
 #[test]
 fn overlap_source_picks_the_reference_and_hidden_frames_stay_hidden() {
     let gt = sequence(31);
-    let offset = |w: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, DataError> {
+    let offset = |w: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, EvalError> {
         // Every generated frame is the input shifted by 0.1 in x (keyframes too, as a raw sampler output would be).
         Ok(w.vertices.iter().map(|p| [p[0] + 0.1, p[1], p[2]]).collect())
     };
@@ -181,26 +181,26 @@ fn overlap_source_picks_the_reference_and_hidden_frames_stay_hidden() {
 #[test]
 fn generator_errors_and_bad_inputs_are_reported() {
     let gt = sequence(31);
-    let short = |_: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, DataError> { Ok(vec![[0.0; 3]; 3]) };
+    let short = |_: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, EvalError> { Ok(vec![[0.0; 3]; 3]) };
     let e = rollout(&gt, N, &[0, 15, 30], &["p"], RolloutSpec::paper(), short).unwrap_err();
-    assert_eq!(e.field, "window 0");
-    let nan = |w: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, DataError> { Ok(vec![[f32::NAN; 3]; w.vertices.len()]) };
+    assert_eq!(e.field(), "window 0");
+    let nan = |w: &WindowInput<'_>| -> Result<Vec<[f32; 3]>, EvalError> { Ok(vec![[f32::NAN; 3]; w.vertices.len()]) };
     assert!(
         rollout(&gt, N, &[0, 15, 30], &["p"], RolloutSpec::paper(), nan)
             .unwrap_err()
-            .reason
+            .reason()
             .contains("non-finite")
     );
     assert_eq!(
         rollout(&gt, N, &[0, 15, 30], &["a", "b", "c"], RolloutSpec::paper(), lerp)
             .unwrap_err()
-            .field,
+            .field(),
         "captions"
     );
     assert_eq!(
         rollout(&gt, N, &[0, 31], &["a"], RolloutSpec::paper(), lerp)
             .unwrap_err()
-            .field,
+            .field(),
         "keyframes"
     );
 }

@@ -160,7 +160,7 @@ fn missing_metric_is_named() {
     let mut r = record("lerp", 0, 42, 3, 0.1);
     r.metrics.remove("dtw");
     let e = summarize(&[r], &TABLE1).unwrap_err();
-    assert_eq!((e.path.as_str(), e.field.as_str()), ("c3", "dtw"));
+    assert_eq!((e.what(), e.field()), ("c3", "dtw"));
 }
 
 #[test]
@@ -179,7 +179,7 @@ fn parquet_round_trips_per_clip_records() {
     assert_eq!(any4d_eval::tables::summary::read_clip_parquet(&path).unwrap(), records);
     let mut bad = records.clone();
     bad[1].metrics.insert("extra".into(), 1.0);
-    assert_eq!(write_clip_parquet(&bad, &path).unwrap_err().field, "metrics");
+    assert_eq!(write_clip_parquet(&bad, &path).unwrap_err().field(), "metrics");
 }
 
 #[test]
@@ -238,7 +238,7 @@ fn plot_writes_a_png_with_series_colours() {
         points: vec![(0.0, f64::NAN)],
         errors: None,
     }];
-    assert_eq!(line_plot("t", "x", "y", &nan, &path).unwrap_err().field, "bad");
+    assert_eq!(line_plot("t", "x", "y", &nan, &path).unwrap_err().field(), "bad");
 }
 
 #[test]
@@ -507,7 +507,7 @@ impl any4d_eval::methods::Method for CaptionLog {
         _keyframes: &[usize],
         caption: &str,
         _seed: u64,
-    ) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
+    ) -> Result<Vec<[f32; 3]>, any4d_eval::metrics::EvalError> {
         self.0.lock().unwrap().push(caption.to_string());
         Ok(clip.vertices.clone())
     }
@@ -537,7 +537,7 @@ fn the_caption_ablation_withholds_every_caption_and_says_so() {
             keyframes: &[usize],
             caption: &str,
             seed: u64,
-        ) -> Result<Vec<[f32; 3]>, any4d_data::DataError> {
+        ) -> Result<Vec<[f32; 3]>, any4d_eval::metrics::EvalError> {
             self.0.complete(clip, keyframes, caption, seed)
         }
     }

@@ -2,8 +2,8 @@
 
 use std::sync::Arc;
 
+use any4d_data::Clip;
 use any4d_data::rng::{GOLDEN_GAMMA, splitmix64};
-use any4d_data::{Clip, DataError};
 use any4d_model::bdlstm::{
     BdLstm, LatentCodec, MergeConfig, SegmentError, SegmentTry, bbox_diagonal, frame_distance, merge_segment,
 };
@@ -13,7 +13,7 @@ use burn::prelude::*;
 
 use crate::methods::WindowSampler;
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 use super::*;
 
@@ -32,7 +32,7 @@ pub struct BdlstmSampler {
 /// An error inside one segment's merge of a BD-LSTM row: the rule's own or the decoder's / reconstruction's.
 pub(crate) enum SegmentFailure {
     Rule(SegmentError),
-    Data(DataError),
+    Data(EvalError),
 }
 
 impl From<SegmentError> for SegmentFailure {
@@ -104,7 +104,7 @@ impl BdlstmSampler {
             Ok(SegmentTry::new(frames_of(forward), frames_of(backward), distances)?)
         })
         .map_err(|e| match e {
-            SegmentFailure::Rule(e) => DataError::new(id, "bdlstm", e.to_string()),
+            SegmentFailure::Rule(e) => EvalError::invalid(id, "bdlstm", e.to_string()),
             SegmentFailure::Data(e) => e,
         })?;
         Ok(merged.frames)

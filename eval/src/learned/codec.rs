@@ -1,17 +1,17 @@
 //! The VAE side of a learned method: one normalised window to VAE tensors (FPS on frame 0, edges, padding), its
 //! encoding, and the decoded frames back as the window's real vertices.
 
+use any4d_data::Clip;
 use any4d_data::batch::PadTo;
 use any4d_data::fps::farthest_point_sampling;
 use any4d_data::preprocess::{edges_from_faces, pad_vertices};
 use any4d_data::rng::splitmix64;
-use any4d_data::{Clip, DataError};
 use any4d_model::any_vae::AnyMeshVae;
 use any4d_model::mesh_vae::{EdgeList, MeshVae, VaeEncoding};
 use burn::prelude::*;
 use burn::tensor::TensorData;
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 use super::*;
 
@@ -81,17 +81,17 @@ impl MeshCodec {
     /// that attends to padding. Give the VAE without autodiff (`model.valid()`).
     pub fn new(vae: AnyMeshVae, tokens: usize, padding: PadTo, device: Device) -> Result<Self> {
         if tokens == 0 {
-            return Err(DataError::new("mesh codec", "tokens", "P must be positive"));
+            return Err(EvalError::invalid("mesh codec", "tokens", "P must be positive"));
         }
         if padding == PadTo::Fixed(0) {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 "mesh codec",
                 "padding",
                 "a fixed vertex axis must be positive",
             ));
         }
         if vae.clip_frames() == Some(0) {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 "mesh codec",
                 "frames",
                 "the sequence-wise VAE needs T > 0",
@@ -136,7 +136,7 @@ impl MeshCodec {
     fn input(&self, clip: &Clip, frames: &[usize]) -> Result<VaeInput> {
         clip.validate().map_err(|e| e.at(&clip.id))?;
         if let Some(&f) = frames.iter().find(|&&f| f >= clip.frames) {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 &clip.id,
                 "keyframes",
                 format!("frame {f} is outside the window of {} frames", clip.frames),
@@ -153,8 +153,8 @@ impl MeshCodec {
             .map(i64::from)
             .collect();
         let edges = edges_from_faces(&clip.faces, n_real).map_err(|e| e.at(&clip.id))?;
-        let edges =
-            EdgeList::new(&[edges], n, &self.device).map_err(|e| DataError::new(&clip.id, "faces", e.to_string()))?;
+        let edges = EdgeList::new(&[edges], n, &self.device)
+            .map_err(|e| EvalError::invalid(&clip.id, "faces", e.to_string()))?;
         let (reference, vmask) = pad_vertices(reference_rows, n_real, 1, n).map_err(|e| e.at(&clip.id))?;
         let rows: Vec<[f32; 3]> = frames.iter().flat_map(|&f| clip.frame(f).iter().copied()).collect();
         let (selected, _) = pad_vertices(&rows, n_real, frames.len(), n).map_err(|e| e.at(&clip.id))?;
@@ -176,7 +176,7 @@ impl MeshCodec {
     /// `clip.vertices`: `[T, N_v]` rows; returns `mu` `[1, G, P, C]` with G = `frames.len()` (frame-wise) or 1.
     pub fn encode(&self, clip: &Clip, frames: &[usize]) -> Result<WindowEncoding> {
         if frames.is_empty() {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 &clip.id,
                 "frames",
                 "nothing to encode: no frame was given",
@@ -185,7 +185,7 @@ impl MeshCodec {
         if let Some(t) = self.vae.clip_frames() {
             let all: Vec<usize> = (0..clip.frames).collect();
             if clip.frames != t || frames != all.as_slice() {
-                return Err(DataError::new(
+                return Err(EvalError::invalid(
                     &clip.id,
                     "frames",
                     format!(
@@ -204,7 +204,7 @@ impl MeshCodec {
             .into_data()
             .convert::<i64>()
             .try_into_vec::<i64>()
-            .map_err(|e| DataError::new(&clip.id, "fps", format!("cannot read the FPS indices: {e:?}")))?
+            .map_err(|e| EvalError::invalid(&clip.id, "fps", format!("cannot read the FPS indices: {e:?}")))?
             .into_iter()
             .map(|i| i as u32)
             .collect();
@@ -251,7 +251,7 @@ impl MeshCodec {
         let [_, p, c] = enc.z0.dims();
         let [b, _, pz, cz] = z.dims();
         if b != 1 || pz != p || cz != c {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 &enc.id,
                 "latents",
                 format!("shape {:?} does not match the encoding's [1, G, {p}, {c}]", z.dims()),
@@ -275,7 +275,7 @@ impl MeshCodec {
             return self.encode(clip, &[0]);
         };
         if clip.frames == 0 {
-            return Err(DataError::new(&clip.id, "frames", "the window has no frame 0"));
+            return Err(EvalError::invalid(&clip.id, "frames", "the window has no frame 0"));
         }
         let still = Clip {
             vertices: clip.frame(0).repeat(frames),
@@ -302,7 +302,7 @@ impl MeshCodec {
     pub(crate) fn require_frame_wise(&self, what: &str) -> Result<()> {
         match self.vae {
             AnyMeshVae::Framewise(_) => Ok(()),
-            AnyMeshVae::Sequencewise(_) => Err(DataError::new(
+            AnyMeshVae::Sequencewise(_) => Err(EvalError::invalid(
                 what,
                 "vae",
                 "needs the frame-wise VAE (one latent per frame), got the sequence-wise DyMeshVAE",
@@ -316,10 +316,10 @@ pub(crate) fn real_rows(x: Tensor<4>, n_real: usize, id: &str) -> Result<Vec<[f3
     let [_, g, n, _] = x.dims();
     let flat = x
         .try_to_vec_as::<f32>()
-        .map_err(|e| DataError::new(id, "decoded vertices", format!("cannot read the tensor: {e:?}")))?;
+        .map_err(|e| EvalError::invalid(id, "decoded vertices", format!("cannot read the tensor: {e:?}")))?;
     if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
         let row = i / 3;
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             id,
             "decoded vertices",
             format!("non-finite value {} at frame {}, vertex {}", flat[i], row / n, row % n),
@@ -337,7 +337,7 @@ pub(crate) fn keyframe_list(clip: &Clip, keyframes: &[usize]) -> Result<Vec<usiz
     keys.sort_unstable();
     keys.dedup();
     if let Some(&f) = keys.iter().find(|&&f| f >= clip.frames) {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             &clip.id,
             "keyframes",
             format!("frame {f} is outside the window of {} frames", clip.frames),
@@ -351,7 +351,7 @@ pub(crate) fn end_keyframes(clip: &Clip, keyframes: &[usize]) -> Result<Vec<usiz
     let keys = keyframe_list(clip, keyframes)?;
     let t = clip.frames;
     if keys.first() != Some(&0) || keys.last() != Some(&(t - 1)) {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             &clip.id,
             "keyframes",
             format!(
@@ -377,7 +377,7 @@ pub(crate) fn scatter_keyframes(
     let mu = enc
         .mu
         .try_to_vec_as::<f32>()
-        .map_err(|e| DataError::new(&enc.id, "keyframe latents", format!("cannot read the tensor: {e:?}")))?;
+        .map_err(|e| EvalError::invalid(&enc.id, "keyframe latents", format!("cannot read the tensor: {e:?}")))?;
     let len = p * c;
     let mut out = vec![0.0f32; t * len];
     let mut mask = vec![0.0f32; t];
@@ -387,7 +387,7 @@ pub(crate) fn scatter_keyframes(
             .iter()
             .position(|&e| e == f)
             .filter(|&r| r < k)
-            .ok_or_else(|| DataError::new(&enc.id, "keyframes", format!("keyframe {f} was not encoded")))?;
+            .ok_or_else(|| EvalError::invalid(&enc.id, "keyframes", format!("keyframe {f} was not encoded")))?;
         out[f * len..(f + 1) * len].copy_from_slice(&mu[row * len..(row + 1) * len]);
         mask[f] = 1.0;
     }

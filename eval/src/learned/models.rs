@@ -2,12 +2,11 @@
 
 use std::sync::Arc;
 
-use any4d_data::DataError;
 use any4d_model::latent_stats::LatentStats;
 use any4d_model::mmdit::{KeyframeConditioning, Mmdit, MmditConfig};
 use any4d_model::text::TextEncoder;
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 use super::*;
 
@@ -32,7 +31,7 @@ impl LearnedModels {
         stats: LatentStats,
         text: Box<dyn TextEncoder + Send + Sync>,
     ) -> Result<Self> {
-        let bad = |field: &str, reason: String| Err(DataError::new("learned models", field, reason));
+        let bad = |field: &str, reason: String| Err(EvalError::invalid("learned models", field, reason));
         if codec.vae().clip_frames().is_some()
             && (rf_config.frames != 1 || rf_config.conditioning != KeyframeConditioning::None)
         {

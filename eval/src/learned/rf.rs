@@ -3,9 +3,9 @@
 
 use std::sync::Arc;
 
+use any4d_data::Clip;
 use any4d_data::rng::{GOLDEN_GAMMA, splitmix64};
 use any4d_data::scene::features::clip_scene_features;
-use any4d_data::{Clip, DataError};
 use any4d_model::mmdit::{KeyframeConditioning, SceneInput, replace_keyframes};
 use any4d_model::rectified_flow::{Conditioning, ReplaceNoise, SampleOptions, sample_mmdit};
 use any4d_model::text::caption_keep;
@@ -14,7 +14,7 @@ use burn::tensor::TensorData;
 
 use crate::methods::{MethodKind, Request, WindowSampler};
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 use super::*;
 
@@ -47,7 +47,7 @@ impl RfSampler {
     /// weight w (1.0 in the paper: one conditional branch). ε comes from the seed ([`sampler_noise`]); only
     /// `ReplaceNoise::Fresh` draws from a host stream that each batch seeds from its requests' seeds.
     pub fn new(models: Arc<LearnedModels>, options: SampleOptions, guidance: f64) -> Result<Self> {
-        let bad = |field: &str, reason: String| Err(DataError::new("rf sampler", field, reason));
+        let bad = |field: &str, reason: String| Err(EvalError::invalid("rf sampler", field, reason));
         let net = models.rf_config.conditioning;
         if options.conditioning.has_mask_channels() != net.has_mask_channels() {
             return bad(
@@ -102,7 +102,7 @@ impl RfSampler {
             MethodKind::ImputeUntil { tau_star, .. } => (KeyframeConditioning::ImputeUntil, f64::from(tau_star)),
             MethodKind::Aam => (KeyframeConditioning::None, base.tau_star),
             other => {
-                return Err(DataError::new(
+                return Err(EvalError::invalid(
                     "rf sampler",
                     other.label(),
                     "is not a rectified-flow method",
@@ -111,7 +111,7 @@ impl RfSampler {
         };
         let sequencewise = models.codec.vae().clip_frames().is_some();
         if sequencewise && models.rf_config.scene.any() {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 "rf sampler",
                 "model.scene",
                 "an RF on a sequence-wise VAE has no frames for the scene's features to join",
@@ -125,7 +125,7 @@ impl RfSampler {
                 "needs the AnimateAnyMesh reference, an RF trained on a sequence-wise VAE (configs/rf/aam_*.toml); \
                  this RF was trained on a frame-wise VAE"
             };
-            return Err(DataError::new("rf sampler", kind.label(), reason));
+            return Err(EvalError::invalid("rf sampler", kind.label(), reason));
         }
         let options = SampleOptions {
             conditioning,
@@ -165,6 +165,7 @@ impl RfSampler {
                 r.scene
                     .map(|s| clip_scene_features(r.clip, s, &encoding.anchors, &spec))
                     .transpose()
+                    .map_err(EvalError::from)
             })
             .collect::<Result<Vec<_>>>()?;
         let refs: Vec<_> = features.iter().map(Option::as_ref).collect();
@@ -211,7 +212,7 @@ impl RfSampler {
         for r in requests {
             let clip = r.clip;
             if clip.frames != window {
-                return Err(DataError::new(
+                return Err(EvalError::invalid(
                     &clip.id,
                     "frames",
                     match sequencewise {
@@ -234,7 +235,7 @@ impl RfSampler {
             };
             let c = encoding.z0.dims()[2];
             if c != cfg.channels {
-                return Err(DataError::new(
+                return Err(EvalError::invalid(
                     &clip.id,
                     "latents",
                     format!(
@@ -267,7 +268,7 @@ impl RfSampler {
         let text = m
             .text
             .encode(&[caption.to_string()], &device)
-            .map_err(|e| DataError::new(&first.id, "caption", e.to_string()))?
+            .map_err(|e| EvalError::invalid(&first.id, "caption", e.to_string()))?
             .states;
         let [_, l, d] = text.dims();
         let text = text.expand([b, l, d]);

@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use any4d_data::{Clip, DataError};
+use any4d_data::Clip;
 use burn::prelude::*;
 use burn::tensor::TensorData;
 
@@ -11,7 +11,7 @@ use crate::baselines::lerp_latents;
 use crate::methods::WindowSampler;
 use crate::tables::reconstruction::Reconstructor;
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 use super::*;
 
@@ -39,10 +39,10 @@ impl LatentLerpSampler {
         let [_, t, p, c] = z.dims();
         let flat = z
             .try_to_vec_as::<f32>()
-            .map_err(|e| DataError::new(&clip.id, "keyframe latents", format!("cannot read the tensor: {e:?}")))?;
+            .map_err(|e| EvalError::invalid(&clip.id, "keyframe latents", format!("cannot read the tensor: {e:?}")))?;
         // (L1) on z: ẑ_f = z_a + (f − a)/(b − a) · (z_b − z_a)
-        let filled =
-            lerp_latents(&flat, t, p * c, &keys).map_err(|e| DataError::new(&clip.id, "lerp_latent", e.to_string()))?;
+        let filled = lerp_latents(&flat, t, p * c, &keys)
+            .map_err(|e| EvalError::invalid(&clip.id, "lerp_latent", e.to_string()))?;
         let z = Tensor::from_data(TensorData::new(filled, [1, t, p, c]), self.codec.device());
         Ok((enc, z))
     }

@@ -3,12 +3,11 @@
 
 use std::fmt;
 
-use any4d_data::DataError;
 use serde::{Deserialize, Serialize};
 
 use super::MAX_MEAN_SAMPLES;
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// Which keyframes a method is given (docs/method.md §5.4: evaluate with clean keyframes and noisy ones at l = 1).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -135,7 +134,7 @@ impl MethodKind {
 
     /// Parse a label written by [`MethodKind::label`] (plus `impute_until` = τ* 0.98, clean).
     pub fn parse(s: &str) -> Result<Self> {
-        let bad = |reason: String| DataError::new("method", s, reason);
+        let bad = |reason: String| EvalError::invalid("method", s, reason);
         Ok(match s {
             "keyframe_rf" | "ours" => MethodKind::KeyframeRf,
             "replacement_rf" | "baseline" => MethodKind::ReplacementRf,

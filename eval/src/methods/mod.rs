@@ -6,14 +6,14 @@
 //! interpolation in vertex and latent space ((L1), §5.2), the static nearest keyframe, the BD-LSTM baseline (§5.3,
 //! latent adaptation) and the AnimateAnyMesh reference (§5.5: an RF on the sequence-wise VAE, no keyframes).
 
+use any4d_data::Clip;
 use any4d_data::rng::{GOLDEN_GAMMA, Rng, rng, splitmix64};
 use any4d_data::scene::Scene;
-use any4d_data::{Clip, DataError};
 
 use crate::baselines::VertexBaseline;
 use crate::metrics::{ClipMetrics, Motion, evaluate_clip, replace_keyframes};
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 mod corrected;
 mod kind;
@@ -92,10 +92,10 @@ impl Method for VertexMethod {
     }
 
     fn complete(&self, clip: &Clip, keyframes: &[usize], _caption: &str, _seed: u64) -> Result<Vec<[f32; 3]>> {
-        let gt = Motion::from_clip(clip).map_err(|e| DataError::new(&clip.id, "vertices", e.to_string()))?;
+        let gt = Motion::from_clip(clip).map_err(|e| EvalError::invalid(&clip.id, "vertices", e.to_string()))?;
         self.0
             .complete(gt, keyframes)
-            .map_err(|e| DataError::new(&clip.id, self.kind().label(), e.to_string()))
+            .map_err(|e| EvalError::invalid(&clip.id, self.kind().label(), e.to_string()))
     }
 }
 
@@ -106,7 +106,7 @@ pub fn vertex_methods(kinds: &[MethodKind]) -> Result<Vec<Box<dyn Method>>> {
         .map(|k| match k {
             MethodKind::Lerp => Ok(Box::new(VertexMethod(VertexBaseline::Linear)) as Box<dyn Method>),
             MethodKind::StaticNearest => Ok(Box::new(VertexMethod(VertexBaseline::NearestKeyframe)) as Box<dyn Method>),
-            other => Err(DataError::new(
+            other => Err(EvalError::invalid(
                 "methods",
                 other.label(),
                 "needs trained checkpoints (--rf / --baseline-rf / --vae)",
@@ -154,7 +154,11 @@ impl<S: WindowSampler> RfMethod<S> {
             | MethodKind::Bdlstm
             | MethodKind::BdlstmAcap
             | MethodKind::Aam => Ok(Self { kind, sampler }),
-            other => Err(DataError::new("method", other.label(), "is not a model-based method")),
+            other => Err(EvalError::invalid(
+                "method",
+                other.label(),
+                "is not a model-based method",
+            )),
         }
     }
 }
@@ -187,7 +191,7 @@ impl<S: WindowSampler> Method for RfMethod<S> {
             .collect();
         let outs = self.sampler.sample_batch(&asked, caption)?;
         if outs.len() != requests.len() {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 self.kind.label(),
                 "samples",
                 format!(
@@ -202,7 +206,7 @@ impl<S: WindowSampler> Method for RfMethod<S> {
             .map(|(out, r)| {
                 let (clip, n) = (r.clip, r.clip.n_vertices);
                 if out.len() != clip.frames * n {
-                    return Err(DataError::new(
+                    return Err(EvalError::invalid(
                         &clip.id,
                         self.kind.label(),
                         format!(
@@ -247,7 +251,7 @@ impl SampleMean {
                 inner,
                 samples: usize::from(samples),
             }),
-            other => Err(DataError::new("methods", other.label(), "not a mean of samples")),
+            other => Err(EvalError::invalid("methods", other.label(), "not a mean of samples")),
         }
     }
 }
@@ -379,7 +383,7 @@ pub fn complete_and_score_batch(
         .collect();
     let predictions = method.complete_batch(&requests, caption)?;
     if predictions.len() != asks.len() {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             &gt.id,
             method.kind().label(),
             format!("{} predictions for {} requests", predictions.len(), asks.len()),
@@ -396,9 +400,9 @@ pub fn complete_and_score_batch(
 fn score(kind: MethodKind, gt: &Clip, keyframes: &[usize], prediction: Vec<[f32; 3]>) -> Result<Scored> {
     let label = kind.label();
     let pred = Motion::new(&prediction, gt.frames, gt.n_vertices)
-        .map_err(|e| DataError::new(&gt.id, &label, format!("prediction: {e}")))?;
-    let truth = Motion::from_clip(gt).map_err(|e| DataError::new(&gt.id, "vertices", e.to_string()))?;
-    let err = |e: crate::metrics::EvalError| DataError::new(&gt.id, &label, e.to_string());
+        .map_err(|e| EvalError::invalid(&gt.id, &label, format!("prediction: {e}")))?;
+    let truth = Motion::from_clip(gt).map_err(|e| EvalError::invalid(&gt.id, "vertices", e.to_string()))?;
+    let err = |e: crate::metrics::EvalError| EvalError::invalid(&gt.id, &label, e.to_string());
     let metrics = evaluate_clip(pred, truth, keyframes).map_err(err)?;
     let prediction = replace_keyframes(pred, truth, keyframes).map_err(err)?;
     Ok(Scored { prediction, metrics })

@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 
-use any4d_data::{Clip, DataError};
+use any4d_data::Clip;
 
 use super::summary::{Layout, MetricColumn, col, pooled};
 use super::{Items, TableOptions, TableReport, run_completion};
@@ -12,7 +12,7 @@ use crate::metrics::{Motion, evaluate_clip, replace_keyframes};
 use crate::protocol::ManifestOptions;
 use crate::rollout::{OverlapSource, Rollout, RolloutSpec, rollout, seam_jerk};
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// Title and columns of P-Table 2.
 pub const LAYOUT: Layout = Layout {
@@ -67,7 +67,7 @@ pub(crate) fn long_horizon(
     let n = gt.n_vertices;
     let label = method.kind().label();
     let r = generate_long(method, gt, keyframes, captions, seed, overlap_source)?;
-    let err = |e: crate::metrics::EvalError| DataError::new(&gt.id, &label, e.to_string());
+    let err = |e: crate::metrics::EvalError| EvalError::invalid(&gt.id, &label, e.to_string());
     let pred = Motion::new(&r.vertices, gt.frames, n).map_err(err)?;
     let truth = Motion::from_clip(gt).map_err(err)?;
     let mut metrics = metrics_map(&evaluate_clip(pred, truth, keyframes).map_err(err)?);

@@ -9,10 +9,10 @@
 
 use std::path::{Path, PathBuf};
 
+use any4d_data::Clip;
 use any4d_data::io::write_atomic;
 use any4d_data::keyframes::Placement;
 use any4d_data::scene::Scene;
-use any4d_data::{Clip, DataError};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::methods::{Method, complete_and_score_batch, metrics_map};
@@ -36,7 +36,7 @@ use summary::{
 };
 use timing::Timing;
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// Which paper table to reproduce, with the options that belong to it (each `Default` is the paper's protocol).
 #[derive(Debug, Clone, PartialEq)]
@@ -155,7 +155,7 @@ pub struct TableReport {
 
 /// `any4d eval run`: the table of `protocol` over `opts`, written to `opts.out`.
 pub fn run_protocol(protocol: &Protocol, opts: &TableOptions) -> Result<TableReport> {
-    std::fs::create_dir_all(&opts.out).map_err(|e| DataError::io(&opts.out, e))?;
+    std::fs::create_dir_all(&opts.out).map_err(|e| EvalError::io(&opts.out, e))?;
     match protocol {
         Protocol::ShortHorizon(p) => p.run(opts),
         Protocol::LongHorizon(p) => p.run(opts),
@@ -179,7 +179,7 @@ pub(crate) fn progress_bar(show: bool, len: usize, what: &str) -> Result<Progres
         return Ok(ProgressBar::hidden());
     }
     let style = ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} clips, {per_sec}, ETA {eta}")
-        .map_err(|e| DataError::new("progress bar", "template", e.to_string()))?;
+        .map_err(|e| EvalError::invalid("progress bar", "template", e.to_string()))?;
     let bar = ProgressBar::new(len as u64);
     bar.set_style(style.progress_chars("=> "));
     bar.set_message(what.to_string());
@@ -194,7 +194,7 @@ pub(crate) fn refuse_oracle(methods: &[Box<dyn Method>], where_: &str) -> Result
         .iter()
         .any(|m| m.kind() == crate::methods::MethodKind::VaeOracle)
     {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             "eval run",
             "vae_oracle",
             format!("runs only on a short-horizon table 1 manifest, not on {where_}"),
@@ -321,7 +321,7 @@ pub(crate) fn run_completion(
     plot: bool,
 ) -> Result<TableReport> {
     if opts.methods.is_empty() {
-        return Err(DataError::new("eval run", "methods", "no methods to evaluate"));
+        return Err(EvalError::invalid("eval run", "methods", "no methods to evaluate"));
     }
     let source = StoreSource::open(&opts.data, opts.split)?;
     let manifest_path = opts.out.join("manifest.json");
@@ -385,7 +385,7 @@ pub(crate) fn run_completion(
 /// `item<i>_<method>_k<K_x>_seed<s>`.
 fn write_item_outputs(gt: &Clip, scene: Option<&Scene>, preds: &[&Prediction], out: &Path) -> Result<Vec<PathBuf>> {
     let strips = out.join("strips");
-    std::fs::create_dir_all(&strips).map_err(|e| DataError::io(&strips, e))?;
+    std::fs::create_dir_all(&strips).map_err(|e| EvalError::io(&strips, e))?;
     let mut files = Vec::new();
     for p in preds {
         let stem = prediction_stem(p.item, &p.method, p.keyframes.len().saturating_sub(2), p.seed);
@@ -444,7 +444,7 @@ fn write_item_views(gt: &Clip, scene: Option<&Scene>, preds: &[&Prediction], out
             let scored = crate::metrics::Motion::from_clip(&clip).and_then(|pred| {
                 crate::metrics::evaluate_clip(pred, crate::metrics::Motion::from_clip(gt)?, keyframes)
             });
-            let m = scored.map_err(|e| DataError::new(&gt.id, "view metrics", e.to_string()))?;
+            let m = scored.map_err(|e| EvalError::invalid(&gt.id, "view metrics", e.to_string()))?;
             panels.push(view::Panel {
                 label: p.method.clone(),
                 clip,
@@ -522,23 +522,23 @@ pub fn render_results(out: &Path, data: &Path) -> Result<Vec<PathBuf>> {
     }
     let source = StoreSource::open(data, EvalSplit::All)?;
     let mut bins: Vec<PathBuf> = std::fs::read_dir(&pred_dir)
-        .map_err(|e| DataError::io(&pred_dir, e))?
-        .map(|e| e.map(|e| e.path()).map_err(|err| DataError::io(&pred_dir, err)))
+        .map_err(|e| EvalError::io(&pred_dir, e))?
+        .map(|e| e.map(|e| e.path()).map_err(|err| EvalError::io(&pred_dir, err)))
         .collect::<Result<Vec<_>>>()?;
     bins.retain(|p| p.extension().is_some_and(|e| e == "bin"));
     bins.sort();
     let strips = out.join("strips");
-    std::fs::create_dir_all(&strips).map_err(|e| DataError::io(&strips, e))?;
+    std::fs::create_dir_all(&strips).map_err(|e| EvalError::io(&strips, e))?;
     for bin in bins {
         let stem = bin
             .file_stem()
             .and_then(|s| s.to_str())
             .map(str::to_owned)
-            .ok_or_else(|| DataError::new(&bin, "file name", "is not UTF-8"))?;
+            .ok_or_else(|| EvalError::invalid(&bin, "file name", "is not UTF-8"))?;
         let (item, method, k_extra) = parse_stem(&stem)
-            .ok_or_else(|| DataError::new(&bin, "file name", "expected item<i>_<method>_k<K_x>_seed<s>.bin"))?;
+            .ok_or_else(|| EvalError::invalid(&bin, "file name", "expected item<i>_<method>_k<K_x>_seed<s>.bin"))?;
         let entry = manifest.clips.get(item).ok_or_else(|| {
-            DataError::new(
+            EvalError::invalid(
                 &bin,
                 "item",
                 format!("{item} is past the manifest's {} items", manifest.clips.len()),
@@ -549,7 +549,7 @@ pub fn render_results(out: &Path, data: &Path) -> Result<Vec<PathBuf>> {
             .iter()
             .find(|set| set.len() == k_extra + 2)
             .ok_or_else(|| {
-                DataError::new(
+                EvalError::invalid(
                     &bin,
                     "k",
                     format!("the manifest has no set with K_x = {k_extra} for item {item}"),

@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use any4d_data::{Clip, DataError};
+use any4d_data::Clip;
 
 use super::PAPER_CLIPS;
 use super::summary::{ClipRecord, Layout, MetricColumn, col, csv, markdown, pooled, summarize, write_clip_parquet};
@@ -12,7 +12,7 @@ use super::{TableOptions, TableReport, header_for, progress_bar, write_text};
 use crate::metrics::{Motion, vae_reconstruction};
 use crate::protocol::{Manifest, ManifestOptions, StoreSource};
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// Title and columns of P-Table 5.
 pub const LAYOUT: Layout = Layout {
@@ -60,7 +60,7 @@ impl Reconstruction {
     /// Runs the table: every VAE of `opts.vaes` reconstructs every manifest item.
     pub fn run(&self, opts: &TableOptions) -> Result<TableReport> {
         if opts.vaes.is_empty() {
-            return Err(DataError::new("eval run", "vaes", "table5 needs at least one VAE"));
+            return Err(EvalError::invalid("eval run", "vaes", "table5 needs at least one VAE"));
         }
         let source = StoreSource::open(&opts.data, opts.split)?;
         let manifest_path = opts.out.join("manifest.json");
@@ -83,7 +83,7 @@ impl Reconstruction {
             let (gt, _) = source.item(item, manifest.frames)?;
             for vae in &opts.vaes {
                 let rec = vae.reconstruct(&gt)?;
-                let err = |e: crate::metrics::EvalError| DataError::new(&gt.id, vae.label(), e.to_string());
+                let err = |e: crate::metrics::EvalError| EvalError::invalid(&gt.id, vae.label(), e.to_string());
                 let decoded = Motion::new(&rec, gt.frames, gt.n_vertices).map_err(err)?;
                 let r = vae_reconstruction(decoded, Motion::from_clip(&gt).map_err(err)?).map_err(err)?; // (E4)
                 let metrics = [

@@ -1,7 +1,7 @@
 //! P-Table 1 (docs/method.md §6.1): short-horizon completion of 16-frame windows from first + last + K_x = 0..3
 //! keyframes (or another placement, §8 X4), RMSE / Chamfer / DTW × 100 per method and K_x.
 
-use any4d_data::DataError;
+use crate::error::EvalError;
 use any4d_data::keyframes::Placement;
 
 use super::summary::{Layout, MetricColumn, col, pooled, pooled_scaled};
@@ -95,7 +95,7 @@ pub struct ShortHorizon {
 
 impl ShortHorizon {
     /// Runs the table.
-    pub fn run(&self, opts: &TableOptions) -> Result<TableReport, DataError> {
+    pub fn run(&self, opts: &TableOptions) -> Result<TableReport, EvalError> {
         let draw = ManifestOptions {
             placement: self.placement,
             ..ManifestOptions::table1(opts.data.display().to_string())
@@ -114,14 +114,14 @@ pub(crate) fn scene_columns(
     scene: Option<&any4d_data::scene::Scene>,
     prediction: &[[f32; 3]],
     gt: &any4d_data::Clip,
-) -> Result<std::collections::BTreeMap<String, f64>, DataError> {
+) -> Result<std::collections::BTreeMap<String, f64>, EvalError> {
     use crate::scene_metrics::{ContactThresholds, scene_metrics};
     let values = match scene {
         Some(scene) => {
             let motion = crate::metrics::Motion::new(prediction, gt.frames, gt.n_vertices)
-                .map_err(|e| DataError::new(&gt.id, "scene metrics", e.to_string()))?;
+                .map_err(|e| EvalError::invalid(&gt.id, "scene metrics", e.to_string()))?;
             let m = scene_metrics(motion, scene, ContactThresholds::default())
-                .map_err(|e| DataError::new(&gt.id, "scene metrics", e.to_string()))?;
+                .map_err(|e| EvalError::invalid(&gt.id, "scene metrics", e.to_string()))?;
             [
                 1.0,
                 m.collision_frames,

@@ -6,12 +6,11 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-use any4d_data::DataError;
 use any4d_data::io::write_atomic;
 use polars::prelude::{Column, DataFrame, ParquetReader, ParquetWriter, SerReader};
 use serde::{Deserialize, Serialize};
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// How a table is laid out: its title, its metric columns and whether rows carry their own K_x.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -182,7 +181,7 @@ pub fn summarize(records: &[ClipRecord], layout: &Layout) -> Result<Vec<SummaryR
             .or_insert_with(|| (vec![(0.0, 0.0); columns.len()], 0));
         let get = |key: &str| {
             r.metrics.get(key).copied().ok_or_else(|| {
-                DataError::new(
+                EvalError::invalid(
                     &r.clip_id,
                     key,
                     format!("missing from the record of method {}", r.method),
@@ -239,7 +238,7 @@ pub fn write_clip_parquet(records: &[ClipRecord], path: &Path) -> Result<()> {
     let names: Vec<&String> = records.first().map_or_else(Vec::new, |r| r.metrics.keys().collect());
     for r in records {
         if r.metrics.len() != names.len() || !names.iter().all(|n| r.metrics.contains_key(*n)) {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 path,
                 "metrics",
                 format!(
@@ -277,21 +276,22 @@ pub fn write_clip_parquet(records: &[ClipRecord], path: &Path) -> Result<()> {
             records.iter().map(|r| r.metrics[*name]).collect::<Vec<_>>(),
         ));
     }
-    let mut df = DataFrame::new(records.len(), cols).map_err(|e| DataError::new(path, "dataframe", e.to_string()))?;
+    let mut df =
+        DataFrame::new(records.len(), cols).map_err(|e| EvalError::invalid(path, "dataframe", e.to_string()))?;
     let mut buf = Vec::new();
     ParquetWriter::new(&mut buf)
         .finish(&mut df)
-        .map_err(|e| DataError::new(path, "parquet", e.to_string()))?;
-    write_atomic(path, &buf)
+        .map_err(|e| EvalError::invalid(path, "parquet", e.to_string()))?;
+    Ok(write_atomic(path, &buf)?)
 }
 
 /// Read records written by [`write_clip_parquet`]; every column after `clip_id` is a metric.
 pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
-    let file = std::fs::File::open(path).map_err(|e| DataError::io(path, e))?;
+    let file = std::fs::File::open(path).map_err(|e| EvalError::io(path, e))?;
     let df = ParquetReader::new(file)
         .finish()
-        .map_err(|e| DataError::new(path, "parquet", e.to_string()))?;
-    let perr = |field: &str, e: polars::prelude::PolarsError| DataError::new(path, field, e.to_string());
+        .map_err(|e| EvalError::invalid(path, "parquet", e.to_string()))?;
+    let perr = |field: &str, e: polars::prelude::PolarsError| EvalError::invalid(path, field, e.to_string());
     let col = |name: &str| df.column(name).map_err(|e| perr(name, e));
     let strs = |name: &str| -> Result<Vec<String>> {
         let c = col(name)?;
@@ -300,7 +300,7 @@ pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
             .enumerate()
             .map(|(i, v)| {
                 v.map(str::to_owned)
-                    .ok_or_else(|| DataError::new(path, format!("{name} row {i}"), "null"))
+                    .ok_or_else(|| EvalError::invalid(path, format!("{name} row {i}"), "null"))
             })
             .collect()
     };
@@ -310,7 +310,7 @@ pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
         let ca = c.u32().map_err(|e| perr(name, e))?;
         ca.iter()
             .enumerate()
-            .map(|(i, v)| v.ok_or_else(|| DataError::new(path, format!("{name} row {i}"), "null")))
+            .map(|(i, v)| v.ok_or_else(|| EvalError::invalid(path, format!("{name} row {i}"), "null")))
             .collect()
     };
     let (k_extra, item) = (u32s("k_extra")?, u32s("item")?);
@@ -319,7 +319,7 @@ pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
         let ca = c.u64().map_err(|e| perr("seed", e))?;
         ca.iter()
             .enumerate()
-            .map(|(i, v)| v.ok_or_else(|| DataError::new(path, format!("seed row {i}"), "null")))
+            .map(|(i, v)| v.ok_or_else(|| EvalError::invalid(path, format!("seed row {i}"), "null")))
             .collect::<Result<_>>()?
     };
     let fixed = ["method", "placement", "k_extra", "seed", "item", "clip_id"];
@@ -333,7 +333,7 @@ pub fn read_clip_parquet(path: &Path) -> Result<Vec<ClipRecord>> {
         let values = ca
             .iter()
             .enumerate()
-            .map(|(i, v)| v.ok_or_else(|| DataError::new(path, format!("{name} row {i}"), "null")))
+            .map(|(i, v)| v.ok_or_else(|| EvalError::invalid(path, format!("{name} row {i}"), "null")))
             .collect::<Result<Vec<f64>>>()?;
         metrics.push((name.to_string(), values));
     }

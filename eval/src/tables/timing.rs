@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 
-use any4d_data::{Clip, DataError};
+use any4d_data::Clip;
 use any4d_model::bench::median;
 
 use super::long_horizon::generate_long;
@@ -14,7 +14,7 @@ use super::summary::{Layout, TableHeader, csv_field, header_lines};
 use super::{TableOptions, TableReport, header_for, progress_bar, write_text};
 use crate::rollout::{OverlapSource, RolloutSpec};
 
-type Result<T, E = DataError> = std::result::Result<T, E>;
+use crate::error::{EvalError, Result};
 
 /// Title of P-Table 4 (its columns are vertex counts, not metrics).
 pub const LAYOUT: Layout = Layout {
@@ -67,7 +67,7 @@ pub fn timing_clip(n: usize, frames: usize) -> Result<Clip> {
         .unwrap_or(1);
     let rows = n / cols;
     if rows < 2 || cols < 2 {
-        return Err(DataError::new(
+        return Err(EvalError::invalid(
             "timing",
             "vertices",
             format!("{n} vertices do not form a grid of at least 2 × 2"),
@@ -102,6 +102,7 @@ pub fn timing_clip(n: usize, frames: usize) -> Result<Clip> {
         "a waving sheet",
         "timing",
     )
+    .map_err(EvalError::from)
 }
 
 impl Timing {
@@ -109,7 +110,7 @@ impl Timing {
     pub fn run(&self, opts: &TableOptions) -> Result<TableReport> {
         super::refuse_oracle(&opts.methods, "table 4 (timing)")?;
         if opts.methods.is_empty() || self.reps == 0 {
-            return Err(DataError::new(
+            return Err(EvalError::invalid(
                 "eval run",
                 "methods",
                 "table4 needs at least one method and one timed repetition",
