@@ -208,6 +208,16 @@ fn a_run_keeps_its_latent_files_and_its_resume_reuses_them() {
     let log = std::fs::read_to_string(run.path(LOG_FILE)).unwrap();
     assert!(log.contains("0 shard(s) reused, 2 encoded"), "{log}");
     // Resuming the finished run builds its objective again: the files are current.
+    // --latents with another cache would be ignored: refused, before a run folder is claimed.
+    let mut memory = tiny_rf(LatentCache::Memory);
+    memory.train.checkpoint_every = 1;
+    let with_dir = RfRunOptions {
+        latents: Some(f.dir.join("somewhere")),
+        ..opts("memory")
+    };
+    let err = train_rf(&memory, &with_dir).err().unwrap().to_string();
+    assert!(err.contains("--latents") && err.contains("latent_cache"), "{err}");
+    assert!(!f.dir.join("runs/memory-1").exists());
     let resumed = resume_rf(run.root(), None, &opts("disk")).unwrap();
     assert!(matches!(resumed, Outcome::Finished { steps: 2, .. }), "{resumed:?}");
     let log = std::fs::read_to_string(run.path(LOG_FILE)).unwrap();

@@ -21,7 +21,7 @@ use crate::runs::{self, LoadedVae, VaeRunRecord};
 
 use super::RF_TERMS;
 use super::batcher::{check_compatible, open_store};
-use super::config::RfRunConfig;
+use super::config::{LatentCache, RfRunConfig};
 use super::objective::RfObjective;
 
 /// Options of `any4d train rf` besides the config: those of every run, and the frozen VAE.
@@ -117,8 +117,9 @@ fn differing_keys<T: serde::Serialize>(a: &T, b: &T) -> String {
 /// The run folder gets `vae_run.json` (which VAE run and checkpoint step) and `tokenizer.json`.
 /// With `opts.init` the run starts from that run's parameters, tokenizer and VAE instead.
 pub fn train_rf(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<(RunFolder, Outcome)> {
-    // Fail before claiming a run folder when the backend, the store, the VAE run or the run to start from is
-    // unusable.
+    // Fail before claiming a run folder when the options, the backend, the store, the VAE run or the run to start
+    // from are unusable.
+    check_latents_option(cfg, opts)?;
     let devices = worker_devices(&cfg.device, &cfg.train, opts.run.parallel.as_ref())?;
     let store = open_store(&opts.run.data)?;
     let init = opts
@@ -197,11 +198,24 @@ pub fn resume_rf(run_dir: &Path, backend: Option<backend::Backend>, opts: &RfRun
     let (run, cfg, ckpt) = open_for_resume(run_dir, RfRunConfig::parse, backend, |c: &mut RfRunConfig| {
         &mut c.device
     })?;
+    check_latents_option(&cfg, opts)?;
     let record = runs::recorded_vae(run_dir, opts.vae_run.as_deref())?;
     let devices = worker_devices(&cfg.device, &cfg.train, opts.run.parallel.as_ref())?;
     let vae = record.load(&devices[0])?;
     let tokenizer = ScratchTokenizer::load(run_dir)?;
     run_rf(&cfg, &run, opts, &vae, tokenizer, &devices, Start::Resume(ckpt))
+}
+
+/// `--latents` names the folder of the latent files: with another cache it would be ignored, so it is refused.
+fn check_latents_option(cfg: &RfRunConfig, opts: &RfRunOptions) -> Result<()> {
+    match (&opts.latents, cfg.rf.latent_cache) {
+        (Some(dir), cache) if cache != LatentCache::Disk => Err(TrainError::Setup(format!(
+            "--latents {} holds latent files, read only with rf.latent_cache = \"disk\" (this run's is {cache:?}): \
+             add --set rf.latent_cache=\"disk\" or drop --latents",
+            dir.display()
+        ))),
+        _ => Ok(()),
+    }
 }
 
 fn train_captions(store: &Store) -> Result<Vec<String>> {
