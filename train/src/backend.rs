@@ -76,6 +76,12 @@ impl Backend {
     pub fn is_cpu(self) -> bool {
         matches!(self, Backend::Flex | Backend::Ndarray)
     }
+
+    /// Workers that encode clips with a frozen VAE on this backend: one per core on a CPU (each on its share of the
+    /// cores; the latents are the same as one worker's), one on a GPU.
+    pub fn encoding_workers(self) -> usize {
+        if self.is_cpu() { rayon::current_num_threads() } else { 1 }
+    }
 }
 
 impl fmt::Display for Backend {

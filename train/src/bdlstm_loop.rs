@@ -270,12 +270,7 @@ impl BdlstmObjective {
     pub fn new(cfg: &BdlstmRunConfig, data: &Path, vae: &LoadedVae, device: &Device) -> Result<Self> {
         let store = open_store(data, cfg, vae)?;
         vae.frame_vae()?;
-        // On a CPU, one encoding worker per core (the latents are the same as one worker's).
-        let workers = if cfg.device.backend.is_cpu() {
-            rayon::current_num_threads()
-        } else {
-            1
-        };
+        let workers = cfg.device.backend.encoding_workers();
         let encode = |split: Split| {
             let indices = store.indices(split);
             encode_latents_on_workers(

@@ -15,7 +15,6 @@
 //! `$XDG_CACHE_HOME/any4d`, else `$HOME/.cache/any4d`, under `stores/`, one folder per URL. A remote store's
 //! shards must lie inside it (relative paths without `..`).
 
-use std::fs::File;
 use std::io::Write;
 use std::path::{Component, Path, PathBuf};
 
@@ -86,7 +85,7 @@ pub fn fetch(url: &str, options: &[(String, String)], cache: &Path) -> Result<Pa
         .build()
         .map_err(|e| err("runtime", e.to_string()))?;
     let dir = cache.join(cache_name(url));
-    runtime.block_on(fetch_into(store.as_ref(), &base, url, &dir))?;
+    fetch_into(&runtime, store.as_ref(), &base, url, &dir)?;
     Ok(dir)
 }
 
@@ -108,11 +107,22 @@ fn cache_name(url: &str) -> String {
     format!("{readable}-{:016x}", xxhash_rust::xxh3::xxh3_64(url.as_bytes()))
 }
 
-async fn fetch_into(store: &dyn ObjectStore, base: &ObjectPath, url: &str, dir: &Path) -> Result<()> {
+fn fetch_into(
+    runtime: &tokio::runtime::Runtime,
+    store: &dyn ObjectStore,
+    base: &ObjectPath,
+    url: &str,
+    dir: &Path,
+) -> Result<()> {
     let at = |rel: &str| -> ObjectPath { rel.split('/').fold(base.clone(), |p, part| p.clone().join(part)) };
     let manifest_url = format!("{}/{MANIFEST_FILE}", url.trim_end_matches('/'));
-    let text = fetch_small(store, &at(MANIFEST_FILE), &manifest_url, MAX_MANIFEST_BYTES)
-        .await
+    let text = runtime
+        .block_on(fetch_small(
+            store,
+            &at(MANIFEST_FILE),
+            &manifest_url,
+            MAX_MANIFEST_BYTES,
+        ))
         .map_err(|mut e| {
             e.reason += " (a store in object storage is a sharded store: `data merge` writes its manifest.json)";
             e
@@ -143,25 +153,28 @@ async fn fetch_into(store: &dyn ObjectStore, base: &ObjectPath, url: &str, dir: 
             continue;
         }
         std::fs::create_dir_all(&local).map_err(|e| DataError::io(&local, e))?;
-        let _ = std::fs::remove_file(&marker);
+        // The marker goes first, so a fetch cut short never leaves one that vouches for a half-replaced shard.
+        match std::fs::remove_file(&marker) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(DataError::io(&marker, e)),
+            _ => {}
+        }
         let shard_url = format!("{}/{}", url.trim_end_matches('/'), entry.path);
         let label = format!("{MANIFEST_FILE} shards[{k}] ({})", entry.path);
         fetch_clips(
+            runtime,
             store,
             &at(&format!("{}/{CLIPS_FILE}", entry.path)),
             &shard_url,
             &label,
             entry,
             &local,
-        )
-        .await?;
-        let index = fetch_small(
+        )?;
+        let index = runtime.block_on(fetch_small(
             store,
             &at(&format!("{}/{INDEX_FILE}", entry.path)),
             &shard_url,
             MAX_INDEX_BYTES,
-        )
-        .await?;
+        ))?;
         crate::io::write_atomic(&local.join(INDEX_FILE), &index)?;
         crate::io::write_atomic(&marker, entry.checksum.as_bytes())?;
     }
@@ -188,9 +201,10 @@ async fn fetch_small(store: &dyn ObjectStore, path: &ObjectPath, url: &str, limi
     Ok(out)
 }
 
-/// Stream a shard's `clips.bin` to a temporary file beside its place, checking size and checksum against the
-/// manifest line before renaming it into place.
-async fn fetch_clips(
+/// Stream a shard's `clips.bin` into place through [`crate::io::write_atomic_with`], checking its size and checksum
+/// against the manifest line before the temporary file is renamed over the cached copy.
+fn fetch_clips(
+    runtime: &tokio::runtime::Runtime,
     store: &dyn ObjectStore,
     path: &ObjectPath,
     url: &str,
@@ -199,46 +213,39 @@ async fn fetch_clips(
     local: &Path,
 ) -> Result<()> {
     let err = |reason: String| DataError::new(format!("{url}/{CLIPS_FILE}"), label, reason);
-    let dest = local.join(CLIPS_FILE);
-    let tmp = local.join(format!(".{CLIPS_FILE}.part"));
-    let written = async {
-        let got = store.get(path).await.map_err(|e| err(format!("cannot be read: {e}")))?;
-        if got.meta.size != entry.bytes {
-            return Err(err(format!(
-                "{} bytes, the manifest records {}: the shard changed after the merge",
-                got.meta.size, entry.bytes
-            )));
-        }
-        let mut file = std::io::BufWriter::new(File::create(&tmp).map_err(|e| DataError::io(&tmp, e))?);
-        let mut hasher = xxhash_rust::xxh3::Xxh3::new();
-        let mut bytes = 0u64;
-        let mut stream = got.into_stream();
-        while let Some(chunk) = stream.next().await {
-            let chunk = chunk.map_err(|e| err(format!("the transfer failed after {bytes} bytes: {e}")))?;
-            bytes += chunk.len() as u64;
-            if bytes > entry.bytes {
-                return Err(err(format!("more than the {} bytes the manifest records", entry.bytes)));
+    let got = runtime
+        .block_on(store.get(path))
+        .map_err(|e| err(format!("cannot be read: {e}")))?;
+    if got.meta.size != entry.bytes {
+        return Err(err(format!(
+            "{} bytes, the manifest records {}: the shard changed after the merge",
+            got.meta.size, entry.bytes
+        )));
+    }
+    crate::io::write_atomic_with(&local.join(CLIPS_FILE), |out, tmp| {
+        runtime.block_on(async {
+            let mut hasher = xxhash_rust::xxh3::Xxh3::new();
+            let mut bytes = 0u64;
+            let mut stream = got.into_stream();
+            while let Some(chunk) = stream.next().await {
+                let chunk = chunk.map_err(|e| err(format!("the transfer failed after {bytes} bytes: {e}")))?;
+                bytes += chunk.len() as u64;
+                if bytes > entry.bytes {
+                    return Err(err(format!("more than the {} bytes the manifest records", entry.bytes)));
+                }
+                hasher.update(&chunk);
+                out.write_all(&chunk).map_err(|e| DataError::io(tmp, e))?;
             }
-            hasher.update(&chunk);
-            file.write_all(&chunk).map_err(|e| DataError::io(&tmp, e))?;
-        }
-        let sum = format!("{:016x}", hasher.digest());
-        if bytes != entry.bytes || sum != entry.checksum {
-            return Err(err(format!(
-                "{bytes} bytes with checksum {sum} arrived; the manifest records {} bytes with checksum {}",
-                entry.bytes, entry.checksum
-            )));
-        }
-        let file = file.into_inner().map_err(|e| DataError::io(&tmp, e.into_error()))?;
-        file.sync_all().map_err(|e| DataError::io(&tmp, e))?;
-        std::fs::rename(&tmp, &dest).map_err(|e| DataError::io(&dest, e))
-    }
-    .await;
-    if written.is_err() {
-        // Best effort: the error that matters is the one above.
-        let _ = std::fs::remove_file(&tmp);
-    }
-    written
+            let sum = format!("{:016x}", hasher.digest());
+            if bytes != entry.bytes || sum != entry.checksum {
+                return Err(err(format!(
+                    "{bytes} bytes with checksum {sum} arrived; the manifest records {} bytes with checksum {}",
+                    entry.bytes, entry.checksum
+                )));
+            }
+            Ok(())
+        })
+    })
 }
 
 #[cfg(test)]

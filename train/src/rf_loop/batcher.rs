@@ -111,12 +111,7 @@ impl RfBatcher {
         let store = open_store(data)?;
         check_compatible(cfg, &store, vae)?;
         let frozen = vae.model.clone();
-        // On a CPU, one encoding worker per core (the latents are the same as one worker's).
-        let workers = if cfg.device.backend.is_cpu() {
-            rayon::current_num_threads()
-        } else {
-            1
-        };
+        let workers = cfg.device.backend.encoding_workers();
         let scene_grid = cfg.model.scene.any().then(|| cfg.model.scene.grid_spec());
         let split = |split: Split| -> Result<SplitLatents> {
             let store_indices = store.indices(split);
@@ -235,21 +230,22 @@ impl RfBatcher {
 
     /// The root mean square of Z − A over the generated slots of the first `clips` TRAIN windows (docs/method.md
     /// §4.10: the size the anchor's scale s should have), on standardized posterior means with training keyframe masks
-    /// from `rng`; `None` without cached latents or TRAIN clips.
-    pub fn anchor_residual_rms(&self, clips: usize, rng: &mut ChaCha8Rng, device: &Device) -> Option<f64> {
+    /// from `rng`; `None` without cached latents (in memory or on disk) or TRAIN clips; an error when the latent
+    /// files cannot be read.
+    pub fn anchor_residual_rms(&self, clips: usize, rng: &mut ChaCha8Rng, device: &Device) -> Result<Option<f64>> {
         let read;
         let set = match (&self.train.cached, &self.disk) {
             (Some(set), _) => set,
             (None, Some((disk, _))) => {
                 let ids = &self.train.store_indices[..clips.min(self.train.store_indices.len())];
-                read = disk.read(&self.store, ids).ok()?;
+                read = disk.read(&self.store, ids)?;
                 &read
             }
-            (None, None) => return None,
+            (None, None) => return Ok(None),
         };
         let n = clips.min(set.clips.len());
         if n == 0 {
-            return None;
+            return Ok(None);
         }
         let (t, p, c) = (set.frames, set.tokens, set.channels);
         let mu: Vec<f32> = set.clips[..n].iter().flat_map(|clip| clip.mu.iter().copied()).collect();
@@ -265,7 +261,7 @@ impl RfBatcher {
         let residual = z.clone() - keyframe_lerp(z, mask.clone());
         let free = mask.neg().add_scalar(1.0).reshape([n, 1, t, 1]);
         let sum = f64::from((residual.powi_scalar(2) * free).sum().into_scalar::<f32>());
-        (generated > 0).then(|| (sum / generated as f64).sqrt())
+        Ok((generated > 0).then(|| (sum / generated as f64).sqrt()))
     }
 
     /// Builds the batch of positions `indices` of `subset`: z = μ + σξ or μ (`rf.latent`), standardized (docs/method.md

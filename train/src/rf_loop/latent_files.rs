@@ -368,7 +368,7 @@ impl DiskLatents {
                     .and_then(|_| file.read_exact(&mut bytes))
                     .map_err(|e| DataError::new(path, format!("clip {local} at byte {offset}"), e.to_string()))?;
             }
-            let values: Vec<f32> = bytes
+            let mut values: Vec<f32> = bytes
                 .chunks_exact(4)
                 .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
                 .collect();
@@ -385,14 +385,15 @@ impl DiskLatents {
                 )
                 .into());
             }
-            let (z0, rest) = values.split_at(p * c);
-            let (mu, logvar) = rest.split_at(s * p * c);
+            // The record is z₀ | μ | log σ²: split in place, no copy.
+            let logvar = values.split_off(p * c * (1 + s));
+            let mu = values.split_off(p * c);
             clips.push(ClipLatents {
                 store_index: id,
                 caption,
-                z0: z0.to_vec(),
-                mu: mu.to_vec(),
-                logvar: logvar.to_vec(),
+                z0: values,
+                mu,
+                logvar,
                 scene: None,
             });
         }
@@ -433,11 +434,7 @@ pub fn encode_store_latents(
         }
         None => 0..store.shard_count(),
     };
-    let workers = if backend.is_cpu() {
-        rayon::current_num_threads()
-    } else {
-        1
-    };
+    let workers = backend.encoding_workers();
     let encoder = Encoder::new(&vae, micro_batch, workers, &device)?;
     for k in shards {
         let (_, state) = encoder.prepare_shard(dir, &store, k)?;

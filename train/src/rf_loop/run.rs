@@ -246,7 +246,7 @@ fn run_rf(
     if let Anchor::KeyframeLerp { scale } = cfg.model.anchor {
         let mut rng = ChaCha8Rng::seed_from_u64(cfg.train.seed);
         let clips = cfg.train.batch_size;
-        if let Some(rms) = objective.batcher().anchor_residual_rms(clips, &mut rng, &devices[0]) {
+        if let Some(rms) = objective.batcher().anchor_residual_rms(clips, &mut rng, &devices[0])? {
             run.log(&format!(
                 "anchor: Z − A has RMS {rms:.4} on the generated slots of the first {clips} TRAIN windows \
                  (standardized posterior means); model.anchor scale s = {scale}"
