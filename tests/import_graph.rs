@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 /// The crates whose graphs are checked: (name, source folder).
 const CRATES: &[(&str, &str)] = &[
     ("any4d", "src"),
+    ("formats", "formats/src"),
     ("data", "data/src"),
     ("model", "model/src"),
     ("eval", "eval/src"),
@@ -22,10 +23,7 @@ const CRATES: &[(&str, &str)] = &[
 
 /// The circles there are today, by crate, each as its files' module paths (`""` is the crate root). The list only
 /// shrinks: breaking a circle means deleting its entry.
-const KNOWN_CIRCLES: &[(&str, &[&str])] = &[
-    ("data", &["formats::bvh", "formats::iqm"]),
-    ("model", &["any_vae", "dymesh_vae", "frame_vae", "mesh_vae"]),
-];
+const KNOWN_CIRCLES: &[(&str, &[&str])] = &[("model", &["any_vae", "dymesh_vae", "frame_vae", "mesh_vae"])];
 
 fn root() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))

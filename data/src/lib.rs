@@ -1,7 +1,7 @@
-//! Clips in and out, preprocessing, the dataset store and burn batches (docs/method.md §2).
+//! Preprocessing, the dataset store, procedural clips and burn batches (docs/method.md §2), on the clips that
+//! `any4d-formats` reads and writes (re-exported here as [`formats`], with its [`clip`], [`error`], [`io`],
+//! [`limits`] and [`mat3`], so that every crate above reaches clips through this one).
 //!
-//! Formats: DyMesh `.bin` (restricted unpickler, never executes), OBJ sequences, glTF/GLB, and the animated game
-//! and capture formats IQM, MD5, MD2, MD3, 0 A.D. PMD/PSA and DeformingThings4D `.anime` (takes, skinning bake).
 //! Preprocessing: welding, frame-0 normalisation (D1)–(D3), vertex filter, windows, FPS, padding.
 
 pub mod acap;
@@ -10,15 +10,9 @@ pub mod augment;
 pub mod batch;
 pub mod bench;
 pub mod caption;
-pub mod clip;
-pub mod error;
-pub mod formats;
 pub mod fps;
 pub mod inspect;
-pub mod io;
 pub mod keyframes;
-pub mod limits;
-pub mod mat3;
 pub mod preprocess;
 pub mod real_corpus;
 pub mod reference;
@@ -28,5 +22,6 @@ pub mod scene;
 pub mod store;
 pub mod synth;
 
+pub use any4d_formats::{self as formats, clip, error, io, limits, mat3};
 pub use clip::Clip;
 pub use error::{DataError, Result};

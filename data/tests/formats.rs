@@ -509,3 +509,46 @@ fn system_gltf_samples_when_installed() {
         assert!(clip.frames > 10 && max_move > 0.1, "{f}");
     }
 }
+
+#[test]
+fn a_quake_player_imports_as_one_object_from_its_lower_body() {
+    let dir = tempfile::tempdir().unwrap();
+    let sarge = dir.path().join("sarge");
+    std::fs::create_dir(&sarge).unwrap();
+    formats::md3::testing::write_test_player(&sarge);
+    let store = dir.path().join("store");
+    let report = any4d_data::store::import(
+        std::slice::from_ref(&sarge),
+        &store,
+        &any4d_data::store::ImportOptions {
+            filter: any4d_data::preprocess::VertexFilter { min: 3, max: 1024 },
+            frames: 2,
+            p: 3,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert_eq!((report.rejected.len(), report.sources), (0, 2), "{report}");
+    // The cfg's one-frame poses are listed as such, not dropped unseen.
+    assert!(
+        report.poses.iter().any(|p| p.ends_with("lower.md3#TORSO_STAND")),
+        "{report}"
+    );
+    assert!(
+        report.to_string().contains("one-frame animations not read as takes"),
+        "{report}"
+    );
+    assert_eq!(
+        formats::md3::one_frame_takes(&sarge.join("lower.md3")).unwrap().len(),
+        report.poses.len()
+    );
+    let store = any4d_data::store::Store::open(&store).unwrap();
+    let mut captions: Vec<String> = (0..store.len())
+        .map(|i| store.get(i).unwrap().clip)
+        .filter(|c| c.source.contains("lower.md3"))
+        .map(|c| c.caption)
+        .collect();
+    captions.dedup();
+    assert!(captions.contains(&"a sarge walking".to_owned()), "{captions:?}");
+    assert!(captions.iter().all(|c| c.starts_with("a sarge")), "{captions:?}");
+}

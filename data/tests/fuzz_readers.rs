@@ -271,7 +271,7 @@ fn cases() -> Vec<Case> {
             "bvh",
             "m.iqm",
             "walk.bvh",
-            vec![("m.iqm", bvh::write_test_rig(bvh::TEST_RIG))],
+            vec![("m.iqm", iqm::write_test_rig(bvh::TEST_RIG))],
             vec![bvh_text.into()],
             true,
         ),

@@ -12,8 +12,7 @@ use crate::error::{DataError, Result};
 pub mod features;
 pub mod geometry;
 
-/// Most triangles a scene may have.
-pub const MAX_SCENE_TRIANGLES: usize = 1 << 16;
+pub use crate::limits::MAX_SCENE_TRIANGLES;
 
 pub use crate::formats::obj::{SCENE_SUFFIX, is_scene_file};
 
@@ -73,6 +72,14 @@ impl Scene {
             );
         }
         Ok(Scene { vertices, faces })
+    }
+
+    /// The scene of a `.gltf` / `.glb`: its still meshes ([`crate::formats::gltf::static_scene`]) checked as any
+    /// scene; `None` when it has none.
+    pub fn read_gltf(path: &Path) -> Result<Option<Self>> {
+        crate::formats::gltf::static_scene(path)?
+            .map(|m| Scene::new(m.vertices, m.faces, path))
+            .transpose()
     }
 
     /// A scene from one `.obj` file (its `v` and `f` lines; polygons are split into fans).

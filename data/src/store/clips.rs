@@ -263,14 +263,14 @@ pub(super) fn preprocess_windows(
 }
 
 /// The scene of the import source `source`: the `.scene.obj` beside it ([`crate::scene::scene_beside`]), else, for a glTF file,
-/// its still meshes ([`crate::formats::gltf::static_scene`]); `None` when it has neither.
+/// its still meshes ([`crate::scene::Scene::read_gltf`]); `None` when it has neither.
 pub(super) fn scene_of(source: &Path) -> Result<Option<crate::scene::Scene>> {
     if let Some(obj) = crate::scene::scene_beside(source) {
         return crate::scene::Scene::read_obj(&obj).map(Some);
     }
     let ext = source.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
     match ext.as_deref() {
-        Some("gltf" | "glb") if source.is_file() => crate::formats::gltf::static_scene(source),
+        Some("gltf" | "glb") if source.is_file() => crate::scene::Scene::read_gltf(source),
         _ => Ok(None),
     }
 }

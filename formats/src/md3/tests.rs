@@ -3,8 +3,9 @@
 
 use std::path::Path;
 
+use super::testing::{player_cfg, write_test_player as write_player};
 use super::*;
-use crate::formats::skeletal::TakeSel;
+use crate::skeletal::TakeSel;
 
 #[test]
 fn reads_frames_and_refuses_bad_files() {
@@ -115,59 +116,6 @@ fn an_animation_at_0_fps_plays_at_1_and_huge_first_frames_are_refused_without_ov
     assert!(e.field == "LEGS_WALK" && e.reason.contains("frames -9..-7"), "{e}");
 }
 
-/// Axis rows of a quarter turn about z: the part's x points along the parent's y.
-const QUARTER_Z: [[f32; 3]; 3] = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
-const STILL: [[f32; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-/// Axis rows of a quarter turn about x: the part's y points along the parent's z.
-const QUARTER_X: [[f32; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]];
-
-/// A player's cfg: `BOTH_DEATH1` on frames 0-1 of both parts, `TORSO_GESTURE` on upper frames 2-4,
-/// `TORSO_STAND` one pose (upper frame 5), `LEGS_WALKCR` at 6 (so the legs skip 4 frames), `LEGS_WALK` lower
-/// frames 2-5 at 20 fps and `LEGS_IDLE` lower frames 4-5 looping at 5 fps; every other animation one frame.
-fn player_cfg() -> String {
-    let mut lines = vec!["sex m".to_owned(), "0 2 0 10 // BOTH_DEATH1".to_owned()];
-    lines.extend(["1 1 0 10"; 5].map(str::to_owned));
-    lines.push("2 3 0 10 // TORSO_GESTURE".into());
-    lines.extend(["5 1 0 10"; 5].map(str::to_owned)); // TORSO_ATTACK .. TORSO_STAND (5)
-    lines.push("5 1 0 10 // TORSO_STAND2".into());
-    lines.push("6 1 0 10 // LEGS_WALKCR".into());
-    lines.push("6 4 4 20 // LEGS_WALK".into());
-    lines.extend(["6 1 0 10"; 7].map(str::to_owned)); // LEGS_RUN .. LEGS_LANDB
-    lines.push("8 2 2 5 // LEGS_IDLE".into());
-    lines.join("\n") + "\n"
-}
-
-/// Writes a player into `dir`: legs whose vertex 0 sits at height = frame and whose `tag_torso` rises from 100
-/// (a quarter turn at frame 3); a torso whose vertex 2 sits at height = frame and whose `tag_head` is at (5, 0, 10)
-/// turned a quarter about x; a one-frame head. Coarser copies and an unrelated flag lie beside them.
-fn write_player(dir: &Path) {
-    let part = |frames: usize, tags: &[TestTag]| {
-        let f: Vec<Vec<[i16; 3]>> = (0..frames as i16)
-            .map(|f| vec![[0, 0, 64 * f], [64, 0, 0], [0, 64, 64 * f]])
-            .collect();
-        write_test_md3_tags(&f, &[[0, 1, 2]], tags)
-    };
-    let torso: Vec<_> = (0..6)
-        .map(|f| ([0.0, 0.0, 100.0 + f as f32], if f == 3 { QUARTER_Z } else { STILL }))
-        .collect();
-    let head = vec![([5.0, 0.0, 10.0], QUARTER_X); 6];
-    let flag: Vec<Vec<[i16; 3]>> = (0..3).map(|f| vec![[0, 0, 0], [64, 0, 0], [0, 64, 64 * f]]).collect();
-    for (name, bytes) in [
-        ("lower.md3", part(6, &[("tag_torso", torso)])),
-        (
-            "upper.md3",
-            part(6, &[("tag_weapon", head.clone()), ("tag_head", head)]),
-        ),
-        ("head.md3", part(1, &[])),
-        ("lower_1.md3", part(6, &[])),
-        ("head_2.md3", part(1, &[])),
-        ("flag.md3", write_test_md3(&flag, &[[0, 1, 2]])),
-    ] {
-        std::fs::write(dir.join(name), bytes).unwrap();
-    }
-    std::fs::write(dir.join("animation.cfg"), player_cfg()).unwrap();
-}
-
 #[test]
 fn a_player_is_assembled_through_its_tags_and_each_part_plays_its_own_animation() {
     let dir = tempfile::tempdir().unwrap();
@@ -239,7 +187,7 @@ fn a_player_is_assembled_through_its_tags_and_each_part_plays_its_own_animation(
 }
 
 #[test]
-fn only_the_lower_body_of_a_player_is_an_import_source_and_the_character_is_one_object() {
+fn only_the_lower_body_of_a_player_is_an_import_source() {
     let dir = tempfile::tempdir().unwrap();
     let sarge = dir.path().join("sarge");
     std::fs::create_dir(&sarge).unwrap();
@@ -256,41 +204,6 @@ fn only_the_lower_body_of_a_player_is_an_import_source_and_the_character_is_one_
     .filter(|n| is_source(&sarge.join(n)))
     .collect();
     assert_eq!(sources, ["lower.md3", "flag.md3"]);
-    let store = dir.path().join("store");
-    let report = crate::store::import(
-        std::slice::from_ref(&sarge),
-        &store,
-        &crate::store::ImportOptions {
-            filter: crate::preprocess::VertexFilter { min: 3, max: 1024 },
-            frames: 2,
-            p: 3,
-            ..Default::default()
-        },
-    )
-    .unwrap();
-    assert_eq!((report.rejected.len(), report.sources), (0, 2), "{report}");
-    // The cfg's one-frame poses are listed as such, not dropped unseen.
-    assert!(
-        report.poses.iter().any(|p| p.ends_with("lower.md3#TORSO_STAND")),
-        "{report}"
-    );
-    assert!(
-        report.to_string().contains("one-frame animations not read as takes"),
-        "{report}"
-    );
-    assert_eq!(
-        one_frame_takes(&sarge.join("lower.md3")).unwrap().len(),
-        report.poses.len()
-    );
-    let store = crate::store::Store::open(&store).unwrap();
-    let mut captions: Vec<String> = (0..store.len())
-        .map(|i| store.get(i).unwrap().clip)
-        .filter(|c| c.source.contains("lower.md3"))
-        .map(|c| c.caption)
-        .collect();
-    captions.dedup();
-    assert!(captions.contains(&"a sarge walking".to_owned()), "{captions:?}");
-    assert!(captions.iter().all(|c| c.starts_with("a sarge")), "{captions:?}");
 }
 
 #[test]

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use super::{Md3File, Place};
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
-use crate::formats::skeletal::{self, ReadOptions, SkinStats, TakeInfo, z_up_to_y_up};
+use crate::skeletal::{self, ReadOptions, SkinStats, TakeInfo, z_up_to_y_up};
 
 /// Names of the animations of a Quake III player's `animation.cfg`, in the order of its numeric lines (Quake III
 /// Arena's 25, then Team Arena's 6).
@@ -199,7 +199,7 @@ fn animations(cfg: &Path, text: &str) -> Result<Vec<Anim>> {
 
 /// Read and parse the `animation.cfg` at `cfg`.
 fn read_animations(cfg: &Path) -> Result<Vec<Anim>> {
-    let text = String::from_utf8_lossy(&crate::formats::read_file(cfg, MAX_CFG_BYTES)?).into_owned();
+    let text = String::from_utf8_lossy(&crate::read_file(cfg, MAX_CFG_BYTES)?).into_owned();
     animations(cfg, &text)
 }
 

@@ -14,10 +14,10 @@ use super::bake::{self, IDENTITY, Interpolation, Mat, Property, RestNode, Scene,
 use super::source::{self, Document};
 use super::{Ctx, ExternalBuffers, GltfReadOptions};
 use crate::clip::Clip;
+use crate::dymesh_bin::MISSING_CAPTION;
 use crate::error::Result;
-use crate::formats::dymesh_bin::MISSING_CAPTION;
-use crate::formats::skeletal::TakeInfo;
 use crate::limits::{CLIP_VERTICES, FRAMES};
+use crate::skeletal::TakeInfo;
 
 /// The takes of a glTF file, each a name and the animations baked together: one take of every animation when no
 /// two target the same channel (node and property) — exporters such as COLLADA2GLTF write one animation per

@@ -19,6 +19,8 @@ pub const MAX_SYNTH_VERTICES: usize = 1 << 16;
 pub const MAX_SYNTH_CLIPS: usize = 1 << 24;
 /// Most FPS tokens P per clip: the method uses 512; 2^16 bounds the index arrays and the O(P · N) sampling.
 pub const MAX_P: usize = 1 << 16;
+/// Most triangles a clip's static scene may have (every scene metric visits every triangle for every vertex).
+pub const MAX_SCENE_TRIANGLES: usize = 1 << 16;
 
 /// Default of [`FILE_BYTES`]: no clip file format we read needs more than 4 GiB for one clip.
 pub const MAX_FILE_BYTES: u64 = 1 << 32;

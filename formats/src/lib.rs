@@ -1,4 +1,8 @@
-//! Clip file formats (docs/method.md §2.1), one module each, and dispatch by extension.
+//! Clip files in and out (docs/method.md §2.1): the clip itself ([`clip::Clip`]), one module per file format,
+//! dispatch by extension, the byte and size limits every reader checks before it allocates ([`limits`]), one
+//! fsyncing file writer ([`io`]) and the error every reader returns ([`error::DataError`]: file, field, reason).
+//! Preprocessing, the dataset store and everything built on clips live in `any4d-data`, which re-exports this crate
+//! as `any4d_data::formats`.
 //!
 //! Readers return the file's coordinates, vertex order and faces unchanged (glTF: the world-space positions a
 //! viewer shows; the Z-up game formats turned Y-up, see [`skeletal`]); normalisation is preprocessing's job.
@@ -12,11 +16,16 @@ pub mod anime;
 pub mod b3d;
 pub mod bvh;
 pub mod bytes;
+pub mod clip;
 pub mod dae;
 pub mod dymesh_bin;
+pub mod error;
 pub mod fbx;
 pub mod gltf;
+pub mod io;
 pub mod iqm;
+pub mod limits;
+pub mod mat3;
 pub mod md2;
 pub mod md3;
 pub mod md5;

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use super::MAX_DEPTH;
 use crate::error::{DataError, Result};
-use crate::formats::skeletal::Mat;
+use crate::skeletal::Mat;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum Tok<'a> {

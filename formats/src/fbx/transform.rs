@@ -4,7 +4,7 @@
 use super::binary::Prop;
 use super::scene::Scene;
 use crate::error::Result;
-use crate::formats::skeletal::{IDENTITY, Mat, axis_rotation, inverse, mul};
+use crate::skeletal::{IDENTITY, Mat, axis_rotation, inverse, mul};
 
 /// Euler rotation of `deg` in FBX rotation order `order` (0 `XYZ` … 5 `ZYX`; the first letter turns first).
 pub(super) fn euler(deg: [f64; 3], order: i64) -> Mat {

@@ -547,7 +547,7 @@ pub fn retarget(path: &Path, bvh: &Bvh, rig: &Rig) -> Result<Vec<Vec<Mat>>> {
             "joints",
             format!(
                 "{count} body parts map (the hips {}, at least {MIN_PARTS} needed): BVH joints [{}] vs rig joints \
-                 [{}]; see the mapping table in data/src/formats/bvh.rs",
+                 [{}]; see the mapping table in formats/src/bvh.rs",
                 if mapped[0] { "among them" } else { "not" },
                 list(&bvh_names),
                 list(rig.names)
@@ -684,25 +684,6 @@ pub fn write_test_bvh(rows: &[Vec<f64>], dt: f64) -> String {
     s
 }
 
-/// Bytes of an `.iqm` rig for tests and fuzzing, in IQM's Z-up axes: the chain of [`skeleton`] with the arm
-/// hanging down (an A-pose), hips at height 10, joints named `names`; vertex 0 sits on the hand, vertices 1 and 2
-/// on the hips.
-#[doc(hidden)]
-pub fn write_test_rig(names: [&str; 8]) -> Vec<u8> {
-    let joints = [
-        (names[0], -1, [0.0, 0.0, 10.0]),
-        (names[1], 0, [0.0, 0.0, 2.0]),
-        (names[2], 1, [0.0, 0.0, 2.0]),
-        (names[3], 2, [0.0, 0.0, 2.0]),
-        (names[4], 3, [0.0, 0.0, 1.0]),
-        (names[5], 2, [1.0, 0.0, 0.0]),
-        (names[6], 5, [0.0, 0.0, -3.0]),
-        (names[7], 6, [0.0, 0.0, -3.0]),
-    ];
-    let pos = [[1.0, 0.0, 8.0], [0.0, 0.0, 10.0], [0.0, 1.0, 10.0]];
-    super::iqm::write_test_iqm(&pos, &[[0, 1, 2]], &[7, 0, 0], &joints, "", &[], true)
-}
-
 /// Joint names of a Rigify-style rig that [`write_test_bvh`]'s skeleton maps onto.
 #[doc(hidden)]
 pub const TEST_RIG: [&str; 8] = [
@@ -719,8 +700,8 @@ pub const TEST_RIG: [&str; 8] = [
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::formats::iqm;
-    use crate::formats::skeletal::{ReadOptions, TakeSel};
+    use crate::iqm;
+    use crate::skeletal::{ReadOptions, TakeSel};
 
     fn still() -> Vec<f64> {
         vec![0.0; 27]
@@ -771,7 +752,7 @@ mod tests {
     fn retargets_by_name_across_rest_poses() {
         let dir = tempfile::tempdir().unwrap();
         let mesh = dir.path().join("body.iqm");
-        std::fs::write(&mesh, write_test_rig(TEST_RIG)).unwrap();
+        std::fs::write(&mesh, iqm::write_test_rig(TEST_RIG)).unwrap();
         // Frame 2: the performer moved 1 along x and turned 90° about the vertical.
         let mut turn = still();
         turn[0] = 1.0;
@@ -846,7 +827,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mesh = dir.path().join("body.iqm");
         let rig = ["root", "b1", "b2", "b3", "b4", "b5", "b6", "b7"];
-        std::fs::write(&mesh, write_test_rig(rig)).unwrap();
+        std::fs::write(&mesh, iqm::write_test_rig(rig)).unwrap();
         std::fs::write(
             dir.path().join("walk.bvh"),
             write_test_bvh(&[still(), still()], 1.0 / 30.0),

@@ -5,7 +5,7 @@
 
 use super::{Ctx, MAX_BAKE_STEPS};
 use crate::error::Result;
-use crate::formats::skeletal;
+use crate::skeletal;
 
 pub(super) type Mat = [[f64; 4]; 4]; // column-major, m[col][row], as glTF stores it
 

@@ -678,6 +678,25 @@ pub fn write_test_iqm(
     out
 }
 
+/// Bytes of an `.iqm` rig for tests and fuzzing, in IQM's Z-up axes: the chain of [`super::bvh::write_test_bvh`]'s skeleton with the arm
+/// hanging down (an A-pose), hips at height 10, joints named `names`; vertex 0 sits on the hand, vertices 1 and 2
+/// on the hips.
+#[doc(hidden)]
+pub fn write_test_rig(names: [&str; 8]) -> Vec<u8> {
+    let joints = [
+        (names[0], -1, [0.0, 0.0, 10.0]),
+        (names[1], 0, [0.0, 0.0, 2.0]),
+        (names[2], 1, [0.0, 0.0, 2.0]),
+        (names[3], 2, [0.0, 0.0, 2.0]),
+        (names[4], 3, [0.0, 0.0, 1.0]),
+        (names[5], 2, [1.0, 0.0, 0.0]),
+        (names[6], 5, [0.0, 0.0, -3.0]),
+        (names[7], 6, [0.0, 0.0, -3.0]),
+    ];
+    let pos = [[1.0, 0.0, 8.0], [0.0, 0.0, 10.0], [0.0, 1.0, 10.0]];
+    write_test_iqm(&pos, &[[0, 1, 2]], &[7, 0, 0], &joints, "", &[], true)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

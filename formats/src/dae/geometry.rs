@@ -4,7 +4,7 @@ use roxmltree::Node;
 
 use super::{Doc, child, children};
 use crate::error::Result;
-use crate::formats::skeletal::{IDENTITY, Mat};
+use crate::skeletal::{IDENTITY, Mat};
 
 /// One instanced mesh.
 pub(super) struct Mesh {

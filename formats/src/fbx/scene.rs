@@ -6,7 +6,7 @@ use std::path::Path;
 
 use super::binary::{self, Node, Prop};
 use crate::error::{DataError, Result};
-use crate::formats::skeletal::Mat;
+use crate::skeletal::Mat;
 
 /// One object of the `Objects` section.
 pub(super) struct Object<'a> {

@@ -2,10 +2,8 @@
 //!
 //! A node's meshes belong to the scene when no animation channel targets the node or one of its ancestors, the node
 //! has no skin and is not the clip's mesh node (the first node with a mesh, as [`super::read`] takes it). Every
-//! triangle primitive of such a mesh is placed by the node's rest world matrix. The result goes through
-//! [`Scene::new`] (finite coordinates, faces in range, at most [`MAX_SCENE_TRIANGLES`] triangles).
-//!
-//! [`MAX_SCENE_TRIANGLES`]: crate::scene::MAX_SCENE_TRIANGLES
+//! triangle primitive of such a mesh is placed by the node's rest world matrix, with faces in range and at most
+//! [`MAX_SCENE_TRIANGLES`] triangles; the data crate's scene type checks the rest.
 
 use std::path::Path;
 
@@ -13,16 +11,17 @@ use gltf::json::accessor::Type;
 use gltf::json::mesh::{Mode, Semantic};
 use gltf::json::validation::Checked;
 
+use super::StillMeshes;
 use super::accessor::{FLOAT, INDICES};
 use super::bake::{IDENTITY, Mat, apply, mul};
 use super::read::{Reader, rows3};
 use super::source;
 use super::{Ctx, ExternalBuffers};
 use crate::error::Result;
-use crate::scene::{MAX_SCENE_TRIANGLES, Scene};
+use crate::limits::MAX_SCENE_TRIANGLES;
 
 /// The still meshes of the file in `bytes` as one scene; `None` when there are none.
-pub(super) fn static_scene(bytes: &[u8], path: &Path, external: &ExternalBuffers) -> Result<Option<Scene>> {
+pub(super) fn static_scene(bytes: &[u8], path: &Path, external: &ExternalBuffers) -> Result<Option<StillMeshes>> {
     let ctx = Ctx { path };
     let doc = source::load(ctx, bytes, external)?;
     let (r, root) = (Reader::of(ctx, &doc), &doc.root);
@@ -91,5 +90,5 @@ pub(super) fn static_scene(bytes: &[u8], path: &Path, external: &ExternalBuffers
     if faces.is_empty() {
         return Ok(None);
     }
-    Scene::new(vertices, faces, path).map(Some)
+    Ok(Some(StillMeshes { vertices, faces }))
 }

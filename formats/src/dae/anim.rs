@@ -6,7 +6,7 @@ use roxmltree::Node;
 
 use super::{DEFAULT_FPS, Doc, SceneNode, children};
 use crate::error::Result;
-use crate::formats::skeletal::{IDENTITY, Mat, TakeInfo, mul};
+use crate::skeletal::{IDENTITY, Mat, TakeInfo, mul};
 
 /// Keys of one transform element of one node: the whole element or one of its values.
 #[derive(Clone)]
@@ -203,7 +203,7 @@ fn take(name: String, list: Vec<(usize, Channel)>, span: Option<(f64, f64)>) -> 
             } else {
                 usize::MAX
             },
-            fps: crate::formats::skeletal::fps_or_unknown(fps),
+            fps: crate::skeletal::fps_or_unknown(fps),
             file: None,
         },
         channels,

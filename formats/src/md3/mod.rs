@@ -15,6 +15,8 @@
 //! (`i16 x, y, z, u16 normal` per vertex per frame) and the surface's end.
 
 pub mod player;
+#[doc(hidden)]
+pub mod testing;
 
 use std::path::Path;
 

@@ -30,7 +30,7 @@ use std::path::{Path, PathBuf};
 
 use crate::clip::Clip;
 use crate::error::{DataError, Result};
-use crate::formats::skeletal::{self, ReadOptions, SkinStats, TakeInfo};
+use crate::skeletal::{self, ReadOptions, SkinStats, TakeInfo};
 
 pub use write::{MAX_WRITE_FRAMES, write_gltf};
 
@@ -87,9 +87,17 @@ pub fn read_gltf(path: &Path, opts: &GltfReadOptions) -> Result<Clip> {
     })
 }
 
+/// The still meshes of a glTF file as one triangle mesh in its world coordinates (unchecked beyond the indices and
+/// the triangle count).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StillMeshes {
+    pub vertices: Vec<[f32; 3]>,
+    pub faces: Vec<[u32; 3]>,
+}
+
 /// The static scene of a `.gltf` / `.glb` (its still meshes beside the animated one, docs/method.md §6.5), or
 /// `None` when it has none.
-pub fn static_scene(path: &Path) -> Result<Option<crate::scene::Scene>> {
+pub fn static_scene(path: &Path) -> Result<Option<StillMeshes>> {
     super::guard(path, || {
         let bytes = super::read_clip_file(path)?;
         scene::static_scene(&bytes, path, &ExternalBuffers::Folder(folder_of(path)))

@@ -13,8 +13,8 @@
 
 use std::io::Read as _;
 
+use crate::bytes::Bytes;
 use crate::error::{DataError, Result};
-use crate::formats::bytes::Bytes;
 
 /// The first 23 bytes of every binary FBX file.
 pub const MAGIC: &[u8; 23] = b"Kaydara FBX Binary  \0\x1a\0";
