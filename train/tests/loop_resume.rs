@@ -127,6 +127,8 @@ fn a_half_written_checkpoint_is_ignored_on_resume() {
 
 #[test]
 fn the_average_follows_its_formula() {
+    // Mlp::new seeds and draws from burn's process-wide RNG: without the lock it races the other tests' draws.
+    let _g = serial();
     let dev = Device::flex();
     let start = Mlp::new(&dev);
     let later = start.clone().map(&mut common::Shift(0.5));
