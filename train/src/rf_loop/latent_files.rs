@@ -385,7 +385,7 @@ impl DiskLatents {
                 )
                 .into());
             }
-            // The record is z₀ | μ | log σ²: split in place, no copy.
+            // The record is z₀ | μ | log σ²: z₀ keeps the decoded buffer, μ and log σ² are split off (one copy each).
             let logvar = values.split_off(p * c * (1 + s));
             let mu = values.split_off(p * c);
             clips.push(ClipLatents {
