@@ -7,6 +7,7 @@ use std::process::Output;
 
 use any4d_data::Clip;
 use any4d_data::formats::write_clip;
+use polars::prelude::{ParquetReader, SerReader};
 
 mod common;
 use common::any4d;
@@ -279,6 +280,15 @@ fn eval_scene_scores_a_clip_sinking_into_a_floor() {
     assert!(!bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("reading the scene"));
 }
 
+/// A procedural store of small meshes (at most 768 vertices, P = 16) at `store`, made by `data synth` with `args`.
+fn synth_store(store: &Path, args: &[&str]) {
+    let out = store.to_str().unwrap();
+    let mut all = vec!["data", "synth", "--max-vertices", "768", "--p", "16", "--out", out];
+    all.extend_from_slice(args);
+    let synth = any4d(&all);
+    assert!(synth.status.success(), "{}", text(&synth.stderr));
+}
+
 /// P-Table 2 by default feeds every row its own generated overlap frame, and its summary says which reference stage
 /// 2 had; the ground-truth variant is asked for and labelled.
 #[test]
@@ -286,27 +296,12 @@ fn table2_defaults_to_each_rows_generated_overlap_and_names_it() {
     let dir = tempfile::tempdir().unwrap();
     let store = dir.path().join("store");
     let s = |p: &Path| p.to_str().unwrap().to_string();
-    let synth = any4d(&[
-        "data",
-        "synth",
-        "--clips",
-        "6",
-        "--seed",
-        "3",
-        "--frames",
-        "31",
-        "--window",
-        "16",
-        "--stride",
-        "15",
-        "--max-vertices",
-        "768",
-        "--p",
-        "16",
-        "--out",
-        &s(&store),
-    ]);
-    assert!(synth.status.success(), "{}", text(&synth.stderr));
+    synth_store(
+        &store,
+        &[
+            "--clips", "6", "--seed", "3", "--frames", "31", "--window", "16", "--stride", "15",
+        ],
+    );
     for (extra, want) in [
         (None, "each row's own generated overlap frame"),
         (Some("gt"), "the ground-truth overlap frame where it is a keyframe"),
@@ -340,4 +335,91 @@ fn table2_defaults_to_each_rows_generated_overlap_and_names_it() {
         let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
         assert!(md.contains(want), "{extra:?}: {md}");
     }
+}
+
+#[test]
+fn table5_per_vertex_writes_one_row_per_vertex_and_only_for_table5() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("store");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    synth_store(&store, &["--clips", "3", "--seed", "5"]);
+    let vae = Path::new(env!("CARGO_MANIFEST_DIR")).join("weights/small/vae");
+    let run = |protocol: &str, out: &Path| {
+        any4d(&[
+            "eval",
+            "run",
+            "--protocol",
+            protocol,
+            "--data",
+            &s(&store),
+            "--split",
+            "all",
+            "--clips",
+            "2",
+            "--vae",
+            &s(&vae),
+            "--methods",
+            "lerp",
+            "--per-vertex",
+            "--no-progress",
+            "--out",
+            &s(out),
+        ])
+    };
+    let out = dir.path().join("t5");
+    let o = run("table5", &out);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let df = ParquetReader::new(std::fs::File::open(out.join("vertices.parquet")).unwrap())
+        .finish()
+        .unwrap();
+    let records = any4d_eval::tables::summary::read_clip_parquet(&out.join("clips.parquet")).unwrap();
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("manifest.json")).unwrap()).unwrap();
+    let opened = any4d_data::store::Store::open(&store).unwrap();
+    let vertices: usize = manifest["clips"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| {
+            opened
+                .get(c["clip"]["index"].as_u64().unwrap() as usize)
+                .unwrap()
+                .clip
+                .n_vertices
+        })
+        .sum();
+    assert_eq!(records.len(), 2);
+    assert_eq!(df.height(), vertices, "one row per vertex of each reconstructed window");
+    assert_eq!(
+        df.column("token_distance").unwrap().null_count(),
+        0,
+        "the VAE names its tokens"
+    );
+    let rmse: Vec<f32> = df.column("rmse").unwrap().f32().unwrap().into_no_null_iter().collect();
+    // The per-vertex errors square-average to each window's RMSE (E4) (equal vertex counts per frame).
+    let mean_sq = |item: u32| {
+        let items = df.column("item").unwrap().u32().unwrap();
+        let sq: Vec<f64> = items
+            .into_no_null_iter()
+            .zip(&rmse)
+            .filter(|(i, _)| *i == item)
+            .map(|(_, r)| f64::from(*r).powi(2))
+            .collect();
+        (sq.iter().sum::<f64>() / sq.len() as f64).sqrt()
+    };
+    for r in &records {
+        let want = r.metrics["rmse"];
+        assert!(
+            (mean_sq(r.item as u32) - want).abs() < 1e-4 * want.max(1.0),
+            "item {}: {want}",
+            r.item
+        );
+    }
+    let o = run("table1", &dir.path().join("t1"));
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("--per-vertex: table 5 only"),
+        "{}",
+        text(&o.stderr)
+    );
 }

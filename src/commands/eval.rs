@@ -266,6 +266,9 @@ pub struct RunArgs {
     /// are refused beside it; edit its `seeds` list to run other seeds on the same windows).
     #[arg(long)]
     pub manifest: Option<PathBuf>,
+    /// Table 5 only: also write `vertices.parquet`, every vertex's error and features (docs/evaluation.md).
+    #[arg(long)]
+    pub per_vertex: bool,
     /// Stage-2 reference of table 2 (docs/method.md §7, A8): each row's own generated frame, or the ground truth.
     #[arg(long, value_enum, default_value_t = OverlapArg::Generated)]
     pub overlap_source: OverlapArg,
@@ -361,6 +364,7 @@ impl RunArgs {
             ProtocolArg::Table5 => Protocol::Reconstruction(Reconstruction {
                 clips: self.clips,
                 manifest: self.manifest.clone(),
+                per_vertex: self.per_vertex,
             }),
         }
     }
@@ -373,6 +377,8 @@ fn run(args: RunArgs) -> anyhow::Result<ExitCode> {
         .iter()
         .map(|m| MethodKind::parse(m).map_err(anyhow::Error::from))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let table5 = matches!(args.protocol, ProtocolArg::Table5);
+    anyhow::ensure!(table5 || !args.per_vertex, "--per-vertex: table 5 only");
     let protocol = args.protocol();
     let device = backend::device(args.backend, Precision::F32)?;
     let runs = LearnedRuns {

@@ -132,6 +132,11 @@ impl MeshCodec {
         &self.device
     }
 
+    /// The P vertices of `clip`'s frame 0 that become its latent tokens (FPS, docs/method.md §2.5).
+    pub fn anchors(&self, clip: &Clip) -> Vec<u32> {
+        farthest_point_sampling(clip.frame(0), self.tokens)
+    }
+
     /// Builds the batch-1 VAE input of `frames` of `clip`.
     fn input(&self, clip: &Clip, frames: &[usize]) -> Result<VaeInput> {
         clip.validate().map_err(|e| e.at(&clip.id))?;
@@ -148,10 +153,7 @@ impl MeshCodec {
             PadTo::Fixed(n) => n,
         };
         let reference_rows = clip.frame(0);
-        let fps: Vec<i64> = farthest_point_sampling(reference_rows, self.tokens)
-            .into_iter()
-            .map(i64::from)
-            .collect();
+        let fps: Vec<i64> = self.anchors(clip).into_iter().map(i64::from).collect();
         let edges = edges_from_faces(&clip.faces, n_real).map_err(|e| e.at(&clip.id))?;
         let edges = EdgeList::new(&[edges], n, &self.device)
             .map_err(|e| EvalError::invalid(&clip.id, "faces", e.to_string()))?;

@@ -99,4 +99,8 @@ impl Reconstructor for VaeReconstructor {
     fn reconstruct(&self, clip: &Clip) -> Result<Vec<[f32; 3]>> {
         self.codec.reconstruct(clip)
     }
+
+    fn anchors(&self, clip: &Clip) -> Option<Vec<u32>> {
+        Some(self.codec.anchors(clip))
+    }
 }

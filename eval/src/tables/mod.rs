@@ -27,6 +27,7 @@ pub mod reconstruction;
 pub mod short_horizon;
 pub mod summary;
 pub mod timing;
+pub mod vertex_errors;
 
 use long_horizon::{LongHorizon, Scored, long_horizon};
 use reconstruction::{Reconstruction, Reconstructor};

@@ -1,6 +1,7 @@
 //! P-Table 5 (docs/method.md §6.2 (E4)): VAE reconstruction of validation clips, every frame encoded and decoded
 //! (posterior mean), RMSE and Chamfer unscaled, one row per VAE; and the decoded sequences' (E5) jerk against the
-//! input's, pooled over the clips: the frame-to-frame noise the VAE alone adds.
+//! input's, pooled over the clips: the frame-to-frame noise the VAE alone adds. With [`Reconstruction::per_vertex`]
+//! it also writes where on each mesh the error lies ([`super::vertex_errors`]).
 
 use std::path::PathBuf;
 
@@ -8,6 +9,7 @@ use any4d_data::Clip;
 
 use super::PAPER_CLIPS;
 use super::summary::{ClipRecord, Layout, MetricColumn, col, csv, markdown, pooled, summarize, write_clip_parquet};
+use super::vertex_errors::{VertexRecord, vertex_errors, write_vertex_parquet};
 use super::{TableOptions, TableReport, header_for, progress_bar, write_text};
 use crate::metrics::{Motion, vae_reconstruction};
 use crate::protocol::{Manifest, ManifestOptions, StoreSource};
@@ -36,6 +38,11 @@ pub trait Reconstructor {
     /// # Shapes
     /// `clip.vertices`: `[T, N]` rows; returns `[T, N]` rows.
     fn reconstruct(&self, clip: &Clip) -> Result<Vec<[f32; 3]>>;
+
+    /// The vertices of `clip`'s frame 0 whose features become the latent tokens, when the VAE has such anchors.
+    fn anchors(&self, _clip: &Clip) -> Option<Vec<u32>> {
+        None
+    }
 }
 
 /// The options of P-Table 5.
@@ -45,6 +52,8 @@ pub struct Reconstruction {
     pub clips: usize,
     /// Reuse this manifest instead of drawing one.
     pub manifest: Option<PathBuf>,
+    /// Also write `vertices.parquet`: every vertex's error and features ([`super::vertex_errors`]).
+    pub per_vertex: bool,
 }
 
 impl Default for Reconstruction {
@@ -52,6 +61,7 @@ impl Default for Reconstruction {
         Self {
             clips: PAPER_CLIPS,
             manifest: None,
+            per_vertex: false,
         }
     }
 }
@@ -79,6 +89,7 @@ impl Reconstruction {
         manifest.save(&manifest_path)?;
         let bar = progress_bar(opts.progress, manifest.clips.len(), "reconstructing")?;
         let mut records = Vec::new();
+        let mut vertex_records = Vec::new();
         for (i, item) in manifest.clips.iter().enumerate() {
             let (gt, _) = source.item(item, manifest.frames)?;
             for vae in &opts.vaes {
@@ -86,6 +97,14 @@ impl Reconstruction {
                 let err = |e: crate::metrics::EvalError| EvalError::invalid(&gt.id, vae.label(), e.to_string());
                 let decoded = Motion::new(&rec, gt.frames, gt.n_vertices).map_err(err)?;
                 let r = vae_reconstruction(decoded, Motion::from_clip(&gt).map_err(err)?).map_err(err)?; // (E4)
+                if self.per_vertex {
+                    vertex_records.push(VertexRecord {
+                        method: vae.label(),
+                        item: i,
+                        clip_id: item.clip.id.clone(),
+                        errors: vertex_errors(&gt, &rec, vae.anchors(&gt).as_deref())?,
+                    });
+                }
                 let metrics = [
                     ("rmse".to_string(), r.rmse),
                     ("chamfer".to_string(), r.chamfer),
@@ -111,6 +130,11 @@ impl Reconstruction {
         let parquet = opts.out.join("clips.parquet");
         write_clip_parquet(&records, &parquet)?;
         files.push(parquet);
+        if self.per_vertex {
+            let path = opts.out.join("vertices.parquet");
+            write_vertex_parquet(&vertex_records, &path)?;
+            files.push(path);
+        }
         let rows = summarize(&records, &LAYOUT)?;
         let header = header_for(opts, &manifest_path);
         let md = markdown(&LAYOUT, &rows, &header);
