@@ -1,5 +1,5 @@
-//! Training-time augmentation of stored clips (docs/method.md §2.9): slower playback, time reversal, mirror,
-//! anisotropic scale and a random turn about the up axis, drawn per example from the caller's generator and
+//! Training-time augmentation of stored clips (docs/method.md §2.9): slower playback, time reversal, larger or
+//! smaller motion about frame 0, mirror, anisotropic scale and a random turn about the up axis, drawn per example from the caller's generator and
 //! re-normalised by (D1)–(D3). Off unless a config asks for it; the paper presets never do.
 
 use serde::{Deserialize, Serialize};
@@ -10,6 +10,9 @@ use crate::store::StoredClip;
 
 /// Largest anisotropic scale factor a config may ask for.
 pub const MAX_SCALE: f32 = 10.0;
+
+/// Largest factor a config may scale motion about frame 0 by.
+pub const MAX_MOTION: f32 = 4.0;
 
 /// Which augmentations apply, and how strongly. The default does nothing.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -27,6 +30,10 @@ pub struct Augment {
     /// `i · speed`, interpolated linearly between stored frames (a window holds no frames past its end, so faster
     /// playback would need the source's next frames); `[1, 1]` = off.
     pub speed: [f32; 2],
+    /// Motion about frame 0 scaled by a factor drawn uniformly in `[motion[0], motion[1]]`: every vertex of frame f
+    /// moves to x₀ + a (x_f − x₀), frame 0 kept (larger displacements than the store holds when a > 1);
+    /// `[1, 1]` = off.
+    pub motion: [f32; 2],
 }
 
 impl Default for Augment {
@@ -37,6 +44,7 @@ impl Default for Augment {
             scale: [1.0, 1.0],
             reverse: 0.0,
             speed: [1.0, 1.0],
+            motion: [1.0, 1.0],
         }
     }
 }
@@ -48,7 +56,8 @@ impl Augment {
     }
 
     /// Refuses values that are not finite, negative or empty ranges, probabilities outside [0, 1], a turn past 180
-    /// degrees, scales outside (0, [`MAX_SCALE`]] and speeds outside (0, 1]; the error names the key (under
+    /// degrees, scales outside (0, [`MAX_SCALE`]], speeds outside (0, 1] and motion factors outside
+    /// (0, [`MAX_MOTION`]]; the error names the key (under
     /// `prefix`, e.g. `vae.augment`).
     pub fn validate(&self, prefix: &str) -> Result<(), String> {
         let bad = |key: &str, why: String| Err(format!("{prefix}.{key}: {why}"));
@@ -60,6 +69,8 @@ impl Augment {
             self.scale[1],
             self.speed[0],
             self.speed[1],
+            self.motion[0],
+            self.motion[1],
         ];
         if all.iter().any(|x| !x.is_finite()) {
             return bad("*", format!("every value must be finite, got {self:?}"));
@@ -79,7 +90,8 @@ impl Augment {
             Ok(())
         };
         range("scale", self.scale, MAX_SCALE)?;
-        range("speed", self.speed, 1.0)
+        range("speed", self.speed, 1.0)?;
+        range("motion", self.motion, MAX_MOTION)
     }
 
     /// Augments one stored clip in place, drawing from `rng` only for the augmentations that are on, and
@@ -109,6 +121,15 @@ impl Augment {
             // In place: reversing every row, then each frame's rows back, reverses the frame order only.
             clip.vertices.reverse();
             clip.vertices.chunks_exact_mut(n).for_each(<[_]>::reverse);
+        }
+        if self.motion != [1.0, 1.0] {
+            let a = rng.random_range(self.motion[0]..=self.motion[1]);
+            let (first, rest) = clip.vertices.split_at_mut(n);
+            for frame in rest.chunks_exact_mut(n) {
+                for (p, x0) in frame.iter_mut().zip(&*first) {
+                    *p = [0, 1, 2].map(|c| x0[c] + a * (p[c] - x0[c]));
+                }
+            }
         }
         let mirror = self.mirror > 0.0 && rng.random_bool(f64::from(self.mirror));
         let s: [f32; 3] = if self.scale == [1.0, 1.0] {
@@ -246,6 +267,7 @@ mod tests {
             scale: [0.8, 1.2],
             reverse: 0.5,
             speed: [0.5, 1.0],
+            motion: [0.8, 1.5],
         };
         aug.validate("vae.augment").unwrap();
         let (mut a, mut b, mut c) = (item(), item(), item());
@@ -374,6 +396,51 @@ mod tests {
     }
 
     #[test]
+    fn motion_scales_every_frame_about_frame_0_after_reversal() {
+        let aug = Augment {
+            motion: [2.0, 2.0],
+            ..Augment::default()
+        };
+        let (mut a, b) = (item(), item());
+        aug.apply(&mut a, &mut rng(2, 0));
+        // Frame 0 is unchanged, so is the normalisation: every offset from it doubles.
+        assert!(close(a.clip.frame(0), b.clip.frame(0)));
+        for f in 1..5 {
+            let want: Vec<[f32; 3]> = b
+                .clip
+                .frame(0)
+                .iter()
+                .zip(b.clip.frame(f))
+                .map(|(p, q)| [0, 1, 2].map(|k| p[k] + 2.0 * (q[k] - p[k])))
+                .collect();
+            assert!(close(a.clip.frame(f), &want), "frame {f}");
+        }
+        // After a reversal the motion is scaled about the new frame 0 (stored frame 4), which stays put.
+        let both = Augment {
+            reverse: 1.0,
+            motion: [0.5, 0.5],
+            ..Augment::default()
+        };
+        let (mut r, mut only_reversed) = (item(), item());
+        both.apply(&mut r, &mut rng(2, 0));
+        Augment {
+            reverse: 1.0,
+            ..Augment::default()
+        }
+        .apply(&mut only_reversed, &mut rng(2, 0));
+        assert!(close(r.clip.frame(0), only_reversed.clip.frame(0)));
+        let p = (
+            r.clip.frame(4)[0],
+            only_reversed.clip.frame(4)[0],
+            only_reversed.clip.frame(0)[0],
+        );
+        assert!(
+            (0..3).all(|k| (p.0[k] - (p.2[k] + 0.5 * (p.1[k] - p.2[k]))).abs() < 1e-5),
+            "{p:?}"
+        );
+    }
+
+    #[test]
     fn empty_negative_and_non_finite_ranges_are_refused_naming_the_key() {
         let cases = [
             (
@@ -452,6 +519,27 @@ mod tests {
                     ..Augment::default()
                 },
                 "speed",
+            ),
+            (
+                Augment {
+                    motion: [1.5, 1.2],
+                    ..Augment::default()
+                },
+                "motion",
+            ),
+            (
+                Augment {
+                    motion: [0.0, 1.5],
+                    ..Augment::default()
+                },
+                "motion",
+            ),
+            (
+                Augment {
+                    motion: [1.0, 5.0],
+                    ..Augment::default()
+                },
+                "motion",
             ),
         ];
         for (aug, key) in cases {

@@ -476,6 +476,7 @@ fn augmentation_keys_are_off_in_the_presets_set_by_override_and_checked_at_load(
         ("vae.augment.mirror=2.0", "vae.augment.mirror"),
         ("vae.augment.yaw_degrees=nan", "finite"),
         ("vae.augment.speed=[0.5, 2.0]", "vae.augment.speed"),
+        ("vae.augment.motion=[1.0, 5.0]", "vae.augment.motion"),
         ("vae.augment.sped=[0.5, 1.0]", "sped"),
     ] {
         let err = VaeRunConfig::load(&vae, &set(&[bad])).unwrap_err().to_string();

@@ -129,6 +129,7 @@ fn tiny_vae_resume_is_bitwise_equal_to_straight_training() {
         scale: [0.8, 1.25],
         reverse: 0.5,
         speed: [0.5, 1.0],
+        motion: [0.8, 1.5],
     };
     let go_with =
         |augment: &any4d_data::augment::Augment, run: &RunFolder, steps: u64, resume: Option<std::path::PathBuf>| {
