@@ -14,6 +14,7 @@ use any4d_data::io::write_atomic;
 use polars::prelude::{Column, DataFrame, ParquetWriter};
 
 use crate::error::{EvalError, Result};
+use crate::nearest::{norm, sub};
 
 /// Surface distance (along mesh edges, normalised units) within which another vertex counts as the same part of
 /// the surface for [`VertexErrors::gap`]: a tenth of frame 0's longest side.
@@ -39,8 +40,9 @@ pub struct VertexErrors {
     pub position: Vec<[f32; 3]>,
 }
 
+/// Euclidean distance by the metrics' formula ([`norm`] of [`sub`], in f64), as the f32 a feature stores.
 fn dist(a: [f32; 3], b: [f32; 3]) -> f32 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+    norm(sub(a, b)) as f32
 }
 
 /// The errors of `rec` against `gt` and `gt`'s features; `anchors` are the VAE's token vertices when known.
@@ -64,13 +66,14 @@ pub fn vertex_errors(gt: &Clip, rec: &[[f32; 3]], anchors: Option<&[u32]>) -> Re
         ));
     }
     let x0 = gt.frame(0);
-    let rms = |d: &dyn Fn(usize, usize) -> f32| -> Vec<f32> {
+    // Summed in f64 as (E1) sums.
+    let rms = |d: &dyn Fn(usize, usize) -> f64, per: f64| -> Vec<f32> {
         (0..n)
-            .map(|v| ((0..t).map(|f| d(f, v).powi(2)).sum::<f32>() / t.max(1) as f32).sqrt())
+            .map(|v| ((0..t).map(|f| d(f, v).powi(2)).sum::<f64>() / (per * t.max(1) as f64)).sqrt() as f32)
             .collect()
     };
-    let rmse = rms(&|f, v| dist(rec[f * n + v], gt.vertices[f * n + v]) / 3f32.sqrt());
-    let displacement = rms(&|f, v| dist(gt.vertices[f * n + v], x0[v]));
+    let rmse = rms(&|f, v| norm(sub(rec[f * n + v], gt.vertices[f * n + v])), 3.0);
+    let displacement = rms(&|f, v| norm(sub(gt.vertices[f * n + v], x0[v])), 1.0);
     let mut c = [0.0f32; 3];
     for p in x0 {
         for (ck, pk) in c.iter_mut().zip(p) {
